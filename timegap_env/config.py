@@ -1,0 +1,290 @@
+"""Default parameters of the platoon, its leader and the monitor: the one source of truth.
+
+Every config is a frozen dataclass. Its fields carry units in comments, its
+``__post_init__`` validates them, and ``with_overrides`` builds a copy from a
+dict of overrides, raising ``ValueError`` that names the field and the value
+for an unknown key or a bad value.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Mapping
+from typing import Any, Self
+
+import numpy as np
+
+MPH = 0.44704  # [m/s per mph]
+
+
+class ConfigMixin:
+    """``with_overrides`` and field checks shared by the config dataclasses."""
+
+    def with_overrides(self, overrides: Mapping[str, Any] | None = None) -> Self:
+        """Copy of this config with ``overrides`` applied; unknown keys raise ``ValueError``."""
+        overrides = dict(overrides or {})
+        known = {f.name for f in dataclasses.fields(self)}  # type: ignore[arg-type]
+        unknown = sorted(set(overrides) - known)
+        if unknown:
+            raise ValueError(
+                f"unknown {type(self).__name__} field(s) {unknown}; known fields: {sorted(known)}"
+            )
+        return dataclasses.replace(self, **overrides)  # type: ignore[type-var]
+
+    def _fail(self, field: str, value: Any, rule: str) -> None:
+        raise ValueError(f"{type(self).__name__}.{field} = {value!r}: {rule}")
+
+    def _finite(self, field: str) -> float:
+        value = getattr(self, field)
+        if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)):
+            self._fail(field, value, "must be a number")
+        if not math.isfinite(value):
+            self._fail(field, value, "must be finite")
+        return float(value)
+
+    def _positive(self, *fields: str) -> None:
+        for field in fields:
+            if self._finite(field) <= 0:
+                self._fail(field, getattr(self, field), "must be > 0")
+
+    def _band(self, field: str, low_min: float = 0.0) -> None:
+        band = getattr(self, field)
+        try:
+            low, high = (float(b) for b in band)
+        except (TypeError, ValueError):
+            self._fail(field, band, "must be a pair (low, high)")
+        if not (math.isfinite(low) and math.isfinite(high)):
+            self._fail(field, band, "must be finite")
+        if low < low_min:
+            self._fail(field, band, f"low end must be >= {low_min}")
+        if low >= high:
+            self._fail(field, band, "must satisfy low < high (the band is reversed or empty)")
+
+
+@dataclasses.dataclass(frozen=True)
+class PlatoonConfig(ConfigMixin):
+    """A human leader and ``n_followers`` automated followers (GLVD + CTH controller)."""
+
+    n_followers: int = 5  # automated followers behind the leader [-]
+    dt: float = 0.1  # simulator tick [s] (10 Hz)
+    actuation_lag: float | tuple[float, ...] = 0.45  # GLVD lag T, one value or one per follower [s]
+    actuation_gain: float | tuple[float, ...] = 1.0  # GLVD gain K, one value or one per follower [-]
+    time_gap: float = 1.6  # initial time gap setting tau* [s]
+    time_gap_ramp_rate: float = 0.2  # rate at which the applied tau* follows a new setting [s/s]
+    standstill_spacing: float = 5.0  # s0 of the CTH policy [m]
+    vehicle_length: float = 5.0  # bumper to bumper length of every vehicle [m]
+    k_s: float = 0.2  # gain on the spacing error [1/s^2]
+    k_v: float = 0.7  # gain on the speed difference to the predecessor [1/s]
+    k_a: float = -0.3  # gain on own acceleration [-]
+    k_f: float = 0.6  # feed-forward gain on the predecessor's acceleration over V2V [-]
+    v2v_delay: float = 0.1  # V2V delay theta of the feed-forward, a multiple of dt [s]
+    v2v: bool = True  # followers start in CACC (True) or ACC, k_f = 0 (False)
+    accel_min: float = -8.0  # lowest commanded acceleration (hard braking, ~0.8 g) [m/s^2]
+    accel_max: float = 4.0  # highest commanded acceleration [m/s^2]
+
+    def __post_init__(self) -> None:
+        if isinstance(self.n_followers, bool) or not isinstance(self.n_followers, (int, np.integer)):
+            self._fail("n_followers", self.n_followers, "must be an integer")
+        if self.n_followers < 1:
+            self._fail("n_followers", self.n_followers, "must be >= 1")
+        self._positive("dt", "time_gap", "time_gap_ramp_rate", "vehicle_length")
+        for field in ("standstill_spacing", "v2v_delay"):
+            if self._finite(field) < 0:
+                self._fail(field, getattr(self, field), "must be >= 0")
+        for field in ("k_s", "k_v", "k_a", "k_f", "accel_min", "accel_max"):
+            self._finite(field)
+        if not self.accel_min < 0 < self.accel_max:
+            self._fail("accel_min", (self.accel_min, self.accel_max), "need accel_min < 0 < accel_max")
+        if not isinstance(self.v2v, (bool, np.bool_)):
+            self._fail("v2v", self.v2v, "must be True or False")
+        delay_ticks = self.v2v_delay / self.dt
+        if abs(delay_ticks - round(delay_ticks)) > 1e-9:
+            self._fail("v2v_delay", self.v2v_delay, f"must be a multiple of dt = {self.dt}")
+        for field in ("actuation_lag", "actuation_gain"):
+            self.per_follower(field)
+
+    @property
+    def v2v_delay_ticks(self) -> int:
+        """V2V delay theta in ticks [-]."""
+        return int(round(self.v2v_delay / self.dt))
+
+    def per_follower(self, field: str) -> np.ndarray:
+        """``actuation_lag`` or ``actuation_gain`` as an array of shape (n_followers,), validated."""
+        raw = getattr(self, field)
+        values = np.atleast_1d(np.asarray(raw, dtype=float))
+        if values.ndim != 1 or values.size not in (1, self.n_followers):
+            self._fail(field, raw, f"must be one number or {self.n_followers} numbers (one per follower)")
+        if not np.all(np.isfinite(values)) or np.any(values <= 0):
+            self._fail(field, raw, "every value must be finite and > 0")
+        return np.broadcast_to(values, (self.n_followers,)).copy()
+
+
+@dataclasses.dataclass(frozen=True)
+class LeaderConfig(ConfigMixin):
+    """What every leader profile shares: its tick, length and speed band."""
+
+    dt: float = 0.1  # sample period of the profile [s]
+    duration: float = 250.0  # length of a synthetic profile [s]
+    speed_band: tuple[float, float] = (20 * MPH, 80 * MPH)  # speeds a profile is kept within [m/s]
+    initial_speed: float = 22.0  # speed at t = 0 of an integrated profile [m/s]
+    ngsim_min_duration: float = 30.0  # shortest NGSIM vehicle record drawn as a leader [s]
+
+    def __post_init__(self) -> None:
+        self._positive("dt", "duration", "ngsim_min_duration")
+        self._band("speed_band")
+        speed = self._finite("initial_speed")
+        low, high = self.speed_band
+        if not low <= speed <= high:
+            self._fail("initial_speed", speed, f"must lie in speed_band {self.speed_band}")
+
+    @property
+    def n_samples(self) -> int:
+        """Samples in a synthetic profile, t = 0 included [-]."""
+        return int(round(self.duration / self.dt)) + 1
+
+
+@dataclasses.dataclass(frozen=True)
+class AggressiveCyclesConfig(ConfigMixin):
+    """The paper's leader: alternating hard acceleration and deceleration phases."""
+
+    accel_range: tuple[float, float] = (1.5, 3.5)  # magnitude of each phase's acceleration [m/s^2]
+    phase_duration_range: tuple[float, float] = (3.0, 9.0)  # length of each phase [s]
+    cruise_probability: float = 0.25  # chance that a phase is a cruise (a = 0) instead [-]
+    max_jerk: float = 5.0  # how fast the leader moves between phase accelerations [m/s^3]
+
+    def __post_init__(self) -> None:
+        self._band("accel_range", low_min=1e-9)
+        self._band("phase_duration_range", low_min=1e-9)
+        self._positive("max_jerk")
+        if not 0 <= self._finite("cruise_probability") < 1:
+            self._fail("cruise_probability", self.cruise_probability, "must be in [0, 1)")
+
+
+@dataclasses.dataclass(frozen=True)
+class SinusoidConfig(ConfigMixin):
+    """Speed oscillation v = mean + amplitude sin(2 pi t / period + phase), all drawn per seed."""
+
+    amplitude_range: tuple[float, float] = (2.0, 6.0)  # speed amplitude [m/s]
+    period_range: tuple[float, float] = (10.0, 40.0)  # oscillation period [s]
+
+    def __post_init__(self) -> None:
+        self._band("amplitude_range", low_min=1e-9)
+        self._band("period_range", low_min=1e-9)
+
+
+@dataclasses.dataclass(frozen=True)
+class HardBrakingConfig(ConfigMixin):
+    """Cruising interrupted by hard braking events, each followed by a gentler recovery."""
+
+    n_events: int = 3  # braking events per profile [-]
+    decel_range: tuple[float, float] = (4.0, 7.0)  # magnitude of the braking deceleration [m/s^2]
+    speed_drop_range: tuple[float, float] = (5.0, 12.0)  # speed lost in one event [m/s]
+    recovery_accel: float = 1.5  # acceleration back to the cruise speed [m/s^2]
+
+    def __post_init__(self) -> None:
+        if isinstance(self.n_events, bool) or not isinstance(self.n_events, (int, np.integer)) or self.n_events < 1:
+            self._fail("n_events", self.n_events, "must be an integer >= 1")
+        self._band("decel_range", low_min=1e-9)
+        self._band("speed_drop_range", low_min=1e-9)
+        self._positive("recovery_accel")
+
+
+@dataclasses.dataclass(frozen=True)
+class StochasticHumanConfig(ConfigMixin):
+    """Human-like speed: acceleration is an Ornstein-Uhlenbeck process pulled to a wandering target speed."""
+
+    accel_std: float = 0.6  # stationary std of the acceleration noise [m/s^2]
+    accel_correlation_time: float = 2.0  # correlation time of the acceleration noise [s]
+    speed_gain: float = 0.1  # pull of the speed towards the target speed [1/s]
+    target_change_interval: float = 30.0  # mean time between changes of the target speed [s]
+
+    def __post_init__(self) -> None:
+        self._positive("accel_std", "accel_correlation_time", "speed_gain", "target_change_interval")
+
+
+@dataclasses.dataclass(frozen=True)
+class MonitorConfig(ConfigMixin):
+    """Bayesian monitor of [s0, tau] from spacing and speed measurements (the paper's spacing model).
+
+    The default prior's standstill spacing and tick follow ``PlatoonConfig``'s defaults;
+    ``MONITOR_PRESETS["paper"]`` keeps the paper's printed numbers. The paper leaves open
+    how old data are forgotten: ``window`` and ``forgetting`` both count age in ticks, so a
+    skipped (invalid) measurement still ages the data, and the window always spans
+    ``window`` seconds of time.
+    """
+
+    noise_variance: float = 0.01  # sigma^2 of the spacing model S = s0 + tau V + eps [m^2]
+    prior_standstill_spacing: float = PlatoonConfig.standstill_spacing  # prior mean of s0 [m]; the prior mean of tau is tau*
+    prior_cov: tuple[tuple[float, float], tuple[float, float]] = ((1e-4, -1e-5), (-1e-5, 0.125))  # Sigma_b of [s0 [m], tau [s]]
+    window: float | None = 10.0  # sliding window over the measurements, a multiple of dt [s]; None keeps all
+    forgetting: float = 1.0  # exponential forgetting factor per tick, 1 = none [-]
+    dt: float = PlatoonConfig.dt  # measurement period [s]
+    max_speed: float = 100.0  # speeds above this are implausible and skipped [m/s]
+    max_spacing: float = 1000.0  # spacings above this are implausible and skipped [m]
+
+    def __post_init__(self) -> None:
+        self._positive("noise_variance", "dt", "max_speed", "max_spacing")
+        self._finite("prior_standstill_spacing")
+        cov = np.asarray(self.prior_cov, dtype=float)
+        if cov.shape != (2, 2) or not np.all(np.isfinite(cov)):
+            self._fail("prior_cov", self.prior_cov, "must be a finite 2x2 matrix")
+        if not np.allclose(cov, cov.T) or np.any(np.linalg.eigvalsh(cov) <= 0):
+            self._fail("prior_cov", self.prior_cov, "must be symmetric positive definite")
+        if self.window is not None:
+            ticks = self._finite("window") / self.dt
+            if ticks < 1 - 1e-9 or abs(ticks - round(ticks)) > 1e-9:
+                self._fail("window", self.window, f"must be None or a positive multiple of dt = {self.dt}")
+        if not 0 < self._finite("forgetting") <= 1:
+            self._fail("forgetting", self.forgetting, "must be in (0, 1]")
+
+    @property
+    def window_ticks(self) -> int | None:
+        """Length of the sliding window in ticks, None when all data are kept [-]."""
+        return None if self.window is None else int(round(self.window / self.dt))
+
+
+@dataclasses.dataclass(frozen=True)
+class ChartConfig(ConfigMixin):
+    """Control chart on the posterior mean of tau (Shewhart, EWMA or CUSUM), and the paper's switching rule."""
+
+    kind: str = "shewhart"  # chart used by make_chart: "shewhart", "ewma" or "cusum"
+    baseline_std: float = 0.125  # sigma_desired of the baseline N(tau*, sigma_desired^2) [s]
+    limit_width: float = 2.0  # L: Shewhart limits at tau* -/+ L sigma_desired [-]
+    ewma_lambda: float = 0.2  # EWMA weight of the newest estimate [-]
+    ewma_width: float = 3.0  # EWMA limits at tau* -/+ width sigma_desired sqrt(lambda / (2 - lambda)) [-]
+    cusum_k: float = 0.5  # CUSUM reference value (allowance) [sigma_desired]
+    cusum_h: float = 5.0  # CUSUM decision interval [sigma_desired]
+    exceedance_window: float = 35.0  # trailing window in which exceedances are counted, a multiple of dt [s]
+    switch_exceedances: int = 3  # paper's rule: this many exceedances within the window ... [-]
+    switch_to: float = 1.0  # ... switch the setting to this time gap [s]
+    dt: float = PlatoonConfig.dt  # chart tick, one estimate per tick [s]
+
+    def __post_init__(self) -> None:
+        if self.kind not in ("shewhart", "ewma", "cusum"):
+            self._fail("kind", self.kind, 'must be "shewhart", "ewma" or "cusum"')
+        self._positive("baseline_std", "limit_width", "ewma_width", "cusum_h", "exceedance_window", "switch_to", "dt")
+        if not 0 < self._finite("ewma_lambda") <= 1:
+            self._fail("ewma_lambda", self.ewma_lambda, "must be in (0, 1]")
+        if self._finite("cusum_k") < 0:
+            self._fail("cusum_k", self.cusum_k, "must be >= 0")
+        ticks = self.exceedance_window / self.dt
+        if ticks < 1 - 1e-9 or abs(ticks - round(ticks)) > 1e-9:
+            self._fail("exceedance_window", self.exceedance_window, f"must be a positive multiple of dt = {self.dt}")
+        if isinstance(self.switch_exceedances, bool) or not isinstance(self.switch_exceedances, (int, np.integer)) or self.switch_exceedances < 1:
+            self._fail("switch_exceedances", self.switch_exceedances, "must be an integer >= 1")
+
+    @property
+    def exceedance_window_ticks(self) -> int:
+        """Length of the exceedance-counting window in ticks [-]."""
+        return int(round(self.exceedance_window / self.dt))
+
+
+MONITOR_PRESETS: dict[str, MonitorConfig] = {
+    "default": MonitorConfig(),
+    "paper": MonitorConfig(  # the paper's printed prior and noise, s0 = 1 m although its simulator uses 5 m
+        noise_variance=0.01,
+        prior_standstill_spacing=1.0,
+        prior_cov=((1e-4, -1e-5), (-1e-5, 0.125)),
+    ),
+}

@@ -1,0 +1,142 @@
+"""Run a whole scenario without the Gymnasium environment: ``simulate(...) -> Trajectory``."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from timegap_env.config import PlatoonConfig
+from timegap_env.leaders import LeaderProfile
+from timegap_env.platoon import Platoon
+from timegap_env.scenarios import get_scenario, make_leader
+
+# Below this speed the time gap (s - s0) / v is not meaningful and is reported as NaN [m/s].
+TIME_GAP_MIN_SPEED = 1.0
+
+
+@dataclasses.dataclass(frozen=True)
+class Collision:
+    """The first gap <= 0 of a run."""
+
+    time: float  # [s]
+    follower: int  # 1 = the first follower (behind the leader) [-]
+    gap: float  # bumper-to-bumper gap when detected [m]
+
+
+@dataclasses.dataclass(frozen=True)
+class Trajectory:
+    """A simulated run; vehicle arrays are (n_ticks, n_vehicles) with column 0 the leader."""
+
+    t: np.ndarray  # (n_ticks,) [s]
+    x: np.ndarray  # front-bumper position [m]
+    v: np.ndarray  # speed [m/s]
+    a: np.ndarray  # acceleration [m/s^2]
+    u: np.ndarray  # commanded acceleration [m/s^2]; the leader's is its acceleration
+    time_gap_setting: np.ndarray  # (n_ticks, n_followers) setting asked for [s]
+    time_gap_applied: np.ndarray  # (n_ticks, n_followers) ramped setting the controller used [s]
+    v2v: np.ndarray  # (n_ticks, n_followers) CACC on [bool]
+    config: PlatoonConfig
+    leader_name: str
+    collision: Collision | None  # the run stops at the first collision
+
+    @property
+    def spacing(self) -> np.ndarray:
+        """Bumper-to-bumper gap of each follower, (n_ticks, n_followers) [m]."""
+        return self.x[:, :-1] - self.x[:, 1:] - self.config.vehicle_length
+
+    @property
+    def time_gap(self) -> np.ndarray:
+        """Actual time gap (s - s0) / v of each follower, NaN below ``TIME_GAP_MIN_SPEED`` [s]."""
+        speed = self.v[:, 1:]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            gap = (self.spacing - self.config.standstill_spacing) / speed
+        return np.where(speed >= TIME_GAP_MIN_SPEED, gap, np.nan)
+
+    @property
+    def spacing_error(self) -> np.ndarray:
+        """Controller spacing error s - s0 - tau* v of each follower, (n_ticks, n_followers) [m]."""
+        return self.spacing - self.config.standstill_spacing - self.time_gap_applied * self.v[:, 1:]
+
+
+def _schedule(name: str, value: object, n_ticks: int, n_followers: int, dtype: type) -> np.ndarray:
+    """``value`` (scalar, per follower, or per tick and follower) as an (n_ticks, n_followers) array."""
+    array = np.asarray(value, dtype=dtype)
+    if array.ndim == 0 or array.shape == (n_followers,):
+        return np.broadcast_to(array, (n_ticks, n_followers))
+    if array.shape == (n_ticks, n_followers):
+        return array
+    raise ValueError(
+        f"{name} has shape {array.shape}: must be a scalar, ({n_followers},) or ({n_ticks}, {n_followers})"
+    )
+
+
+def simulate(
+    scenario: str | LeaderProfile | np.ndarray = "paper",
+    config: PlatoonConfig | None = None,
+    *,
+    seed: int | None = 0,
+    time_gap_setting: float | np.ndarray | None = None,
+    v2v: bool | np.ndarray | None = None,
+) -> Trajectory:
+    """Simulate one platoon behind a leader and return its trajectory.
+
+    ``scenario``: a scenario name (see ``timegap_env.scenarios.SCENARIOS``), a
+    :class:`LeaderProfile`, or a leader speed series [m/s] at ``config.dt``.
+    ``config``: the platoon; default the scenario's (``PlatoonConfig()`` for a profile).
+    ``time_gap_setting`` [s] and ``v2v`` may be a scalar, one value per
+    follower, or an (n_ticks, n_followers) schedule, so that a setting can
+    change (it is ramped) and V2V can drop out during the run.
+    The run stops at the first collision, which ``Trajectory.collision`` reports.
+    """
+    if isinstance(scenario, str):
+        config = config or get_scenario(scenario).platoon
+        leader = make_leader(scenario, seed)
+    elif isinstance(scenario, LeaderProfile):
+        config = config or PlatoonConfig()
+        leader = scenario
+    else:
+        config = config or PlatoonConfig()
+        leader = LeaderProfile.from_speed(scenario, dt=config.dt)
+    if not np.isclose(leader.dt, config.dt):
+        raise ValueError(f"leader dt = {leader.dt} s differs from PlatoonConfig.dt = {config.dt} s")
+
+    n_ticks, n_followers = leader.speed.size, config.n_followers
+    settings = _schedule("time_gap_setting", config.time_gap if time_gap_setting is None else time_gap_setting,
+                         n_ticks, n_followers, float)
+    if not np.all(np.isfinite(settings)) or np.any(settings <= 0):
+        raise ValueError(f"time_gap_setting = {time_gap_setting!r}: every value must be finite and > 0")
+    v2v_schedule = _schedule("v2v", config.v2v if v2v is None else v2v, n_ticks, n_followers, bool)
+
+    platoon = Platoon(config)
+    platoon.reset(leader.speed[0], leader.accel[0], time_gap=settings[0])
+    shape = (n_ticks, n_followers + 1)
+    record = {name: np.empty(shape) for name in ("x", "v", "a", "u")}
+    applied = np.empty((n_ticks, n_followers))
+    collision = None
+    last = n_ticks - 1
+    for k in range(n_ticks):
+        for name, array in record.items():
+            array[k] = getattr(platoon, name)[0]
+        applied[k] = platoon.time_gap[0]
+        if k == last:
+            break
+        platoon.set_time_gap(settings[k])  # row k is in force from t_k to t_{k+1}
+        platoon.set_v2v(v2v_schedule[k])
+        collided = platoon.step(leader.speed[k + 1], leader.accel[k + 1])[0]
+        if collided.any():
+            follower = int(np.flatnonzero(collided)[0])
+            collision = Collision(time=(k + 1) * config.dt, follower=follower + 1,
+                                  gap=float(platoon.spacing[0, follower]))
+            last = k + 1
+    n = last + 1
+    return Trajectory(
+        t=np.arange(n) * config.dt,
+        **{name: array[:n] for name, array in record.items()},
+        time_gap_setting=np.array(settings[:n]),
+        time_gap_applied=applied[:n],
+        v2v=np.array(v2v_schedule[:n]),
+        config=config,
+        leader_name=leader.name,
+        collision=collision,
+    )

@@ -1,0 +1,109 @@
+"""Analytic string stability of the CTH controller on GLVD followers.
+
+The transfer function from the predecessor's acceleration to the follower's is
+
+    G(s) = K (k_f s^2 e^{-theta s} + k_v s + k_s)
+           / (T s^3 + (1 - K k_a) s^2 + K (k_v + k_s tau*) s + K k_s).
+
+A platoon is string stable iff max_w |G(jw)| <= 1 (disturbances do not grow
+down the platoon), and locally stable iff the denominator is Hurwitz:
+1 - K k_a > 0, K k_s > 0, K (k_v + k_s tau*) > 0 and
+(1 - K k_a) K (k_v + k_s tau*) > T K k_s.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from timegap_env.config import PlatoonConfig
+
+# |G(0)| = 1 exactly, so "<= 1" is judged with this round-off allowance [-].
+PEAK_GAIN_TOLERANCE = 1e-9
+FREQUENCY_GRID = np.concatenate([[0.0], np.logspace(-4, 3, 8000)])  # [rad/s]
+
+
+@dataclasses.dataclass(frozen=True)
+class StabilityReport:
+    """Result of :func:`string_stability`."""
+
+    peak_gain: float  # max_w |G(jw)| [-]
+    peak_frequency: float  # w at the peak [rad/s]
+    string_stable: bool  # peak_gain <= 1
+    locally_stable: bool  # closed loop of one follower is Hurwitz
+
+
+def transfer_gain(
+    frequency: np.ndarray,
+    *,
+    k_s: float,
+    k_v: float,
+    k_a: float,
+    k_f: float,
+    time_gap: float,
+    lag: float,
+    gain: float,
+    delay: float,
+) -> np.ndarray:
+    """|G(jw)| at each ``frequency`` w [rad/s]; ``time_gap`` tau* [s], ``lag`` T [s], ``gain`` K, ``delay`` theta [s]."""
+    s = 1j * np.asarray(frequency, dtype=float)
+    numerator = gain * (k_f * s**2 * np.exp(-delay * s) + k_v * s + k_s)
+    denominator = lag * s**3 + (1 - gain * k_a) * s**2 + gain * (k_v + k_s * time_gap) * s + gain * k_s
+    return np.abs(numerator / denominator)
+
+
+def string_stability(
+    *,
+    k_s: float,
+    k_v: float,
+    k_a: float,
+    k_f: float,
+    time_gap: float,
+    lag: float,
+    gain: float,
+    delay: float,
+) -> StabilityReport:
+    """Peak gain of G and the string and local stability verdicts for one follower.
+
+    ``k_f = 0`` is ACC (no V2V); the other arguments are as in :func:`transfer_gain`.
+    """
+    for name, value in (("time_gap", time_gap), ("lag", lag), ("gain", gain)):
+        if not np.isfinite(value) or value <= 0:
+            raise ValueError(f"{name} = {value!r}: must be finite and > 0")
+    if not np.isfinite(delay) or delay < 0:
+        raise ValueError(f"delay = {delay!r}: must be finite and >= 0")
+    gains = transfer_gain(
+        FREQUENCY_GRID, k_s=k_s, k_v=k_v, k_a=k_a, k_f=k_f, time_gap=time_gap, lag=lag, gain=gain, delay=delay
+    )
+    peak = int(np.argmax(gains))
+    damping = 1 - gain * k_a
+    velocity_term = gain * (k_v + k_s * time_gap)
+    locally_stable = bool(
+        damping > 0 and gain * k_s > 0 and velocity_term > 0 and damping * velocity_term > lag * gain * k_s
+    )
+    return StabilityReport(
+        peak_gain=float(gains[peak]),
+        peak_frequency=float(FREQUENCY_GRID[peak]),
+        string_stable=bool(gains[peak] <= 1 + PEAK_GAIN_TOLERANCE),
+        locally_stable=locally_stable,
+    )
+
+
+def platoon_string_stability(config: PlatoonConfig, *, time_gap: float | None = None, v2v: bool | None = None) -> list[StabilityReport]:
+    """One :class:`StabilityReport` per follower of ``config`` (its own T and K), at ``time_gap`` [s] and V2V state."""
+    time_gap = config.time_gap if time_gap is None else time_gap
+    v2v = config.v2v if v2v is None else v2v
+    return [
+        string_stability(
+            k_s=config.k_s,
+            k_v=config.k_v,
+            k_a=config.k_a,
+            k_f=config.k_f if v2v else 0.0,
+            time_gap=time_gap,
+            lag=float(lag),
+            gain=float(gain),
+            delay=config.v2v_delay,
+        )
+        for lag, gain in zip(config.per_follower("actuation_lag"), config.per_follower("actuation_gain"))
+    ]
