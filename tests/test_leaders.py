@@ -132,3 +132,12 @@ def test_ngsim_families_draw_real_vehicles_by_seed(family):
     if family == "ngsim_in_band":
         low, high = LeaderConfig().speed_band
         assert low - 1e-9 <= first.speed.min() and first.speed.max() <= high + 1e-9
+
+
+def test_idm_family_is_a_human_driver_behind_scripted_braking():
+    first, again = make_leader("idm", 2), make_leader("idm", 2)
+    np.testing.assert_array_equal(first.speed, again.speed)
+    disturbance = make_leader("hard_braking", 2)
+    assert first.name == "idm" and first.speed.size == disturbance.speed.size
+    assert first.accel.min() < -1.0  # it brakes in answer to the disturbance ...
+    assert first.accel.min() > disturbance.accel.min()  # ... more gently than the scripted braking

@@ -204,6 +204,21 @@ class StochasticHumanConfig(ConfigMixin):
 
 
 @dataclasses.dataclass(frozen=True)
+class HumanLeaderConfig(ConfigMixin):
+    """highway-env's IDM driver as a human leader behind a scripted disturbance (``timegap_env.human_leader``)."""
+
+    desired_speed_factor: float = 1.2  # driver's desired speed over the disturbance's top speed [-]
+    time_wanted_range: tuple[float, float] = (1.0, 2.0)  # desired time gap of a seeded driver (highway-env: 1.5) [s]
+    comfort_accel_range: tuple[float, float] = (2.0, 4.0)  # desired acceleration of a seeded driver (highway-env: 3) [m/s^2]
+    max_initial_gap: float = 500.0  # longest accepted initial bumper-to-bumper gap [m]
+
+    def __post_init__(self) -> None:
+        self._positive("desired_speed_factor", "max_initial_gap")
+        self._band("time_wanted_range", low_min=1e-9)
+        self._band("comfort_accel_range", low_min=1e-9)
+
+
+@dataclasses.dataclass(frozen=True)
 class MonitorConfig(ConfigMixin):
     """Bayesian monitor of [s0, tau] from spacing and speed measurements (the paper's spacing model).
 

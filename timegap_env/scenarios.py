@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from timegap_env import leaders, ngsim
+from timegap_env import human_leader, leaders, ngsim
 from timegap_env.config import LeaderConfig, PlatoonConfig
 from timegap_env.leaders import LeaderProfile
 
@@ -47,6 +47,8 @@ LEADER_FAMILIES: dict[str, LeaderFamily] = {
     "stochastic_human": lambda seed, leader: leaders.stochastic_human(seed, leader=leader),
     "ngsim": lambda seed, leader: ngsim_leader(seed, leader, within_band=False),
     "ngsim_in_band": lambda seed, leader: ngsim_leader(seed, leader, within_band=True),
+    # highway-env's IDM driver reacting to scripted hard braking ahead of it
+    "idm": lambda seed, leader: human_leader.idm_leader(leaders.hard_braking(seed, leader=leader), seed=seed),
 }
 
 
