@@ -1,0 +1,247 @@
+"""Control charts on the monitor's estimate of tau, and the paper's switching rule.
+
+Every chart takes one estimate per tick (the posterior mean of tau, (n_envs, n_vehicles) [s])
+and keeps, per vehicle:
+
+- ``alarm``: the charted statistic is outside its control limits now;
+- ``exceedance``: an excursion started this tick. An excursion is a contiguous run of alarm
+  ticks on one side, so it counts once however long it lasts; jumping straight from above
+  the upper limit to below the lower one starts a new excursion;
+- ``exceedances_in_window``: excursions started within the trailing ``exceedance_window``
+  seconds, this tick included (a ring buffer of start flags, O(1) per tick);
+- ``run_length``: ticks since the last alarm tick (0 on an alarm tick) or since the chart was
+  last (re)started [ticks].
+
+Charts: :class:`ShewhartChart` (the paper's), and the two standard SPC alternatives on the same
+estimate, :class:`EwmaChart` and :class:`CusumChart`. :func:`switch_rule` is the paper's rule
+(3 exceedances within 35 s -> switch to 1.0 s) as a pure function of a chart's state.
+
+Caveat: at 10 Hz the estimate is a sliding-window posterior mean, strongly autocorrelated
+from tick to tick (consecutive windows share all but one measurement), and the chart's
+baseline sigma_desired is a design choice rather than the estimate's in-control spread.
+Textbook in-control ARLs (22 ticks for the paper's 2-sigma Shewhart, 370 for 3-sigma, ~465
+for CUSUM k = 0.5, h = 5) assume independent samples and do not apply; calibrate the limits
+by simulation if false-alarm rates matter.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from timegap_env.config import ChartConfig
+from timegap_env.monitor import batch_array, batch_shape, env_mask, time_gap_array, vehicle_mask
+
+__all__ = [
+    "ChartState", "ControlChart", "ShewhartChart", "EwmaChart", "CusumChart", "CHARTS", "make_chart", "switch_rule",
+]
+
+
+@dataclasses.dataclass(frozen=True)
+class ChartState:
+    """A chart after a tick: copies of its arrays, each (n_envs, n_vehicles)."""
+
+    center: np.ndarray  # tau* the chart is centred on [s]
+    alarm: np.ndarray  # charted statistic outside its limits now [bool]
+    side: np.ndarray  # -1 below the lower limit, +1 above the upper, 0 inside [-]
+    exceedance: np.ndarray  # an excursion started this tick [bool]
+    exceedances_in_window: np.ndarray  # excursions started within the trailing exceedance_window [-]
+    run_length: np.ndarray  # ticks since the last alarm or (re)start [ticks]
+
+
+class ControlChart:
+    """What every chart shares: excursions, their windowed count, run length, re-centring.
+
+    A subclass defines ``_side(estimate)``: update its statistic and say on which side of its
+    limits it lies (-1, 0, +1); ``_restart(mask)``: restart its statistic for those vehicles;
+    and, if it has a statistic, ``_allocate()`` to create it.
+    """
+
+    def __init__(
+        self, n_envs: int, n_vehicles: int, time_gap: ArrayLike, config: ChartConfig = ChartConfig()
+    ) -> None:
+        self.config = config
+        self.shape = batch_shape(n_envs, n_vehicles)
+        self.center = np.empty(self.shape)  # tau* [s]
+        self.side = np.zeros(self.shape, dtype=np.int8)
+        self.exceedance = np.zeros(self.shape, dtype=bool)
+        self.exceedances_in_window = np.zeros(self.shape, dtype=np.int64)
+        self.run_length = np.zeros(self.shape, dtype=np.int64)  # [ticks]
+        self._starts = np.zeros((config.exceedance_window_ticks,) + self.shape, dtype=bool)  # ring of start flags
+        self._slot = 0  # ring slot of this tick
+        self._allocate()
+        self.reset(None, time_gap)
+
+    @property
+    def alarm(self) -> np.ndarray:
+        """Charted statistic outside its limits now (n_envs, n_vehicles)."""
+        return self.side != 0
+
+    @property
+    def state(self) -> ChartState:
+        """Snapshot of the chart (copies)."""
+        return ChartState(
+            center=self.center.copy(),
+            alarm=self.alarm,
+            side=self.side.copy(),
+            exceedance=self.exceedance.copy(),
+            exceedances_in_window=self.exceedances_in_window.copy(),
+            run_length=self.run_length.copy(),
+        )
+
+    def update(self, tau_estimate: ArrayLike) -> ChartState:
+        """Chart one tick's estimate of tau (n_envs, n_vehicles) [s]; return the new state."""
+        estimate = batch_array("tau_estimate", tau_estimate, self.shape)
+        bad = np.argwhere(~np.isfinite(estimate))
+        if bad.size:
+            index = tuple(int(i) for i in bad[0])
+            raise ValueError(f"tau_estimate{list(index)} = {estimate[index]}: must be finite [s]")
+        side = self._side(estimate)
+        self.exceedance = (side != 0) & (side != self.side)
+        self.side = side
+        self.exceedances_in_window += self.exceedance.astype(np.int64) - self._starts[self._slot]
+        self._starts[self._slot] = self.exceedance
+        self._slot = (self._slot + 1) % len(self._starts)
+        self.run_length = np.where(side != 0, 0, self.run_length + 1)
+        return self.state
+
+    def recenter(self, time_gap: ArrayLike, mask: ArrayLike | None = None) -> None:
+        """Centre the chart on a new tau* ``time_gap`` [s] for the vehicles in ``mask``.
+
+        ``mask``: bool, broadcastable to (n_envs, n_vehicles), None = all. Their excursion
+        history is cleared (it was measured against the old limits), their statistic restarts
+        and ``run_length`` restarts at 0.
+        """
+        vehicles = vehicle_mask(mask, self.shape)
+        self.center[vehicles] = time_gap_array(time_gap, self.shape)[vehicles]
+        self.side[vehicles] = 0
+        self.exceedance[vehicles] = False
+        self.exceedances_in_window[vehicles] = 0
+        self.run_length[vehicles] = 0
+        self._starts[:, vehicles] = False
+        self._restart(vehicles)
+
+    def reset(self, mask: ArrayLike | None, time_gap: ArrayLike) -> None:
+        """Restart the envs in ``mask`` ((n_envs,) bool, None = all), centred on ``time_gap`` [s]."""
+        vehicles = np.broadcast_to(env_mask(mask, self.shape[0])[:, None], self.shape)
+        self.recenter(time_gap, vehicles)
+
+    def _allocate(self) -> None:
+        """Create the chart's own statistic arrays (none by default)."""
+
+    def _side(self, estimate: np.ndarray) -> np.ndarray:
+        raise NotImplementedError
+
+    def _restart(self, mask: np.ndarray) -> None:
+        raise NotImplementedError
+
+
+def _outside(value: np.ndarray, low: np.ndarray, high: np.ndarray) -> np.ndarray:
+    """-1 where value < low, +1 where value > high, else 0 (int8)."""
+    return (value > high).astype(np.int8) - (value < low).astype(np.int8)
+
+
+class ShewhartChart(ControlChart):
+    """The paper's chart: alarm when the estimate leaves [tau* - L sigma_desired, tau* + L sigma_desired].
+
+    Paper: N(1.6, 0.125), L = 2 -> LCL / CL / UCL = 1.35 / 1.6 / 1.85 s; at tau* = 1.0: 0.75 / 1.0 / 1.25 s.
+    """
+
+    @property
+    def lcl(self) -> np.ndarray:
+        """Lower control limit (n_envs, n_vehicles) [s]."""
+        return self.center - self.config.limit_width * self.config.baseline_std
+
+    @property
+    def ucl(self) -> np.ndarray:
+        """Upper control limit (n_envs, n_vehicles) [s]."""
+        return self.center + self.config.limit_width * self.config.baseline_std
+
+    def _side(self, estimate: np.ndarray) -> np.ndarray:
+        return _outside(estimate, self.lcl, self.ucl)
+
+    def _restart(self, mask: np.ndarray) -> None:
+        """Memoryless: nothing to restart."""
+
+
+class EwmaChart(ControlChart):
+    """EWMA z_t = lambda x_t + (1 - lambda) z_{t-1}, starting at z = tau*.
+
+    Asymptotic limits tau* -/+ width sigma_desired sqrt(lambda / (2 - lambda))
+    (defaults lambda = 0.2, width = 3). Note that x_t is already a smoothed estimate.
+    """
+
+    def _allocate(self) -> None:
+        self.ewma = np.zeros(self.shape)  # z [s]
+
+    @property
+    def half_width(self) -> float:
+        """Distance from the centre line to either limit [s]."""
+        lam = self.config.ewma_lambda
+        return self.config.ewma_width * self.config.baseline_std * np.sqrt(lam / (2.0 - lam))
+
+    @property
+    def lcl(self) -> np.ndarray:
+        """Lower control limit of the EWMA (n_envs, n_vehicles) [s]."""
+        return self.center - self.half_width
+
+    @property
+    def ucl(self) -> np.ndarray:
+        """Upper control limit of the EWMA (n_envs, n_vehicles) [s]."""
+        return self.center + self.half_width
+
+    def _side(self, estimate: np.ndarray) -> np.ndarray:
+        lam = self.config.ewma_lambda
+        self.ewma = lam * estimate + (1.0 - lam) * self.ewma
+        return _outside(self.ewma, self.lcl, self.ucl)
+
+    def _restart(self, mask: np.ndarray) -> None:
+        self.ewma[mask] = self.center[mask]
+
+
+class CusumChart(ControlChart):
+    """Two-sided tabular CUSUM of the standardised deviation y = (x - tau*) / sigma_desired.
+
+    C+ = max(0, C+ + y - k), C- = max(0, C- - y - k), both starting at 0; alarm above when
+    C+ > h, below when C- > h (defaults k = 0.5, h = 5). The sums are not restarted after an
+    alarm: a sustained shift stays one contiguous excursion until the sums fall back below h.
+    """
+
+    def _allocate(self) -> None:
+        self.upper_sum = np.zeros(self.shape)  # C+ [sigma_desired]
+        self.lower_sum = np.zeros(self.shape)  # C- [sigma_desired]
+
+    def _side(self, estimate: np.ndarray) -> np.ndarray:
+        cfg = self.config
+        y = (estimate - self.center) / cfg.baseline_std
+        self.upper_sum = np.maximum(0.0, self.upper_sum + y - cfg.cusum_k)
+        self.lower_sum = np.maximum(0.0, self.lower_sum - y - cfg.cusum_k)
+        above = (self.upper_sum > cfg.cusum_h) & (self.upper_sum >= self.lower_sum)
+        below = (self.lower_sum > cfg.cusum_h) & ~above
+        return above.astype(np.int8) - below.astype(np.int8)
+
+    def _restart(self, mask: np.ndarray) -> None:
+        self.upper_sum[mask] = 0.0
+        self.lower_sum[mask] = 0.0
+
+
+CHARTS: dict[str, type[ControlChart]] = {"shewhart": ShewhartChart, "ewma": EwmaChart, "cusum": CusumChart}
+
+
+def make_chart(n_envs: int, n_vehicles: int, time_gap: ArrayLike, config: ChartConfig = ChartConfig()) -> ControlChart:
+    """The chart named by ``config.kind``."""
+    return CHARTS[config.kind](n_envs, n_vehicles, time_gap, config)
+
+
+def switch_rule(state: ChartState, config: ChartConfig = ChartConfig()) -> np.ndarray:
+    """The paper's rule: which vehicles should switch their setting to ``config.switch_to``.
+
+    True (n_envs, n_vehicles) where at least ``config.switch_exceedances`` excursions started
+    within the trailing ``config.exceedance_window`` (paper: 3 within 35 s) and the chart is not
+    already centred on ``switch_to``. Pure: the caller applies the switch (tau* <- switch_to)
+    and re-centres the monitor and the chart, which clears the count.
+    """
+    enough = state.exceedances_in_window >= config.switch_exceedances
+    return enough & ~np.isclose(state.center, config.switch_to)

@@ -1,0 +1,97 @@
+"""Benchmark of the streaming monitor: updates per second, and ratios against reference work.
+
+    python -m train.bench_monitor            # 1024 envs x 5 vehicles, and 1 x 1
+    python -m train.bench_monitor --quick    # tiny sizes, seconds (used by the tests)
+
+References, timed in the same process on the same shapes:
+- ``numpy add``: one ``np.add(a, b, out=c)`` on (n_envs, n_vehicles) arrays, the floor of any
+  vectorised per-tick work;
+- ``window recompute``: the naive O(W) alternative to the monitor's O(1) update, summing the
+  sufficient statistics over the whole window buffer every tick.
+Timing depends on the machine: this script prints and never asserts.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from collections.abc import Callable
+
+import numpy as np
+
+from timegap_env.config import MonitorConfig
+from timegap_env.monitor import N_STATS, TimeGapMonitor, _moments_from_stats, prior_precision
+
+
+def seconds_per_call(step: Callable[[int], None], n_calls: int) -> tuple[float, float]:
+    """Mean and worst wall-clock time of ``step(tick)`` over n_calls ticks [s]."""
+    worst, start = 0.0, time.perf_counter()
+    for tick in range(n_calls):
+        before = time.perf_counter()
+        step(tick)
+        worst = max(worst, time.perf_counter() - before)
+    return (time.perf_counter() - start) / n_calls, worst
+
+
+def measurements(n_envs: int, n_vehicles: int, n_distinct: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """n_distinct ticks of speeds [m/s] and spacings [m], with 1 % dropouts (NaN), cycled by the benchmark."""
+    rng = np.random.default_rng(seed)
+    speed = rng.uniform(8.94, 35.76, (n_distinct, n_envs, n_vehicles))
+    spacing = 5.0 + 1.6 * speed + rng.normal(0.0, 0.1, speed.shape)
+    spacing[rng.random(speed.shape) < 0.01] = np.nan
+    return speed, spacing
+
+
+def bench(n_envs: int, n_vehicles: int, n_ticks: int, config: MonitorConfig) -> dict[str, float]:
+    """Seconds per tick of the monitor and of the two references."""
+    speed, spacing = measurements(n_envs, n_vehicles, n_distinct=64)
+    monitor = TimeGapMonitor(n_envs, n_vehicles, time_gap=1.6, config=config)
+    monitor_mean, monitor_worst = seconds_per_call(lambda t: monitor.update(speed[t % 64], spacing[t % 64]), n_ticks)
+
+    a, b, out = speed[0], speed[1], np.empty_like(speed[0])
+    add_mean, _ = seconds_per_call(lambda t: np.add(a, b, out=out), n_ticks)
+
+    window = config.window_ticks or 1
+    buffer = np.zeros((window, N_STATS, n_envs, n_vehicles))
+    precision = prior_precision(config.prior_cov)
+    prior_mean = (config.prior_standstill_spacing, np.full((n_envs, n_vehicles), 1.6))
+
+    def recompute(t: int) -> None:
+        v, s = speed[t % 64], spacing[t % 64]
+        valid = np.isfinite(s)
+        v, s = np.where(valid, v, 0.0), np.where(valid, s, 0.0)
+        buffer[t % window] = np.stack([valid, v, v * v, s, v * s])
+        _moments_from_stats(buffer.sum(axis=0), prior_mean, precision, config.noise_variance)
+
+    recompute_mean, _ = seconds_per_call(recompute, n_ticks)
+    return {"monitor": monitor_mean, "monitor_worst": monitor_worst, "add": add_mean, "recompute": recompute_mean}
+
+
+def report(n_envs: int, n_vehicles: int, n_ticks: int, config: MonitorConfig) -> None:
+    t = bench(n_envs, n_vehicles, n_ticks, config)
+    print(f"{n_envs} envs x {n_vehicles} vehicles, window {config.window} s = {config.window_ticks} ticks,", end=" ")
+    print(f"{n_ticks} ticks timed:")
+    print(f"  monitor update:      {t['monitor'] * 1e6:10.1f} us/tick (worst tick {t['monitor_worst'] * 1e6:.1f} us)")
+    print(f"  batch-updates/s:     {1 / t['monitor']:12.0f}")
+    print(f"  vehicle-updates/s:   {n_envs * n_vehicles / t['monitor']:12.0f}")
+    print(f"  ratio monitor / numpy add:        {t['monitor'] / t['add']:8.1f}")
+    print(f"  ratio window recompute / monitor: {t['recompute'] / t['monitor']:8.1f}")
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--n-envs", type=int, default=1024, help="envs in the batch (default 1024)")
+    parser.add_argument("--n-vehicles", type=int, default=5, help="vehicles per env (default 5)")
+    parser.add_argument("--ticks", type=int, default=2000, help="ticks timed per run (default 2000)")
+    parser.add_argument("--window", type=float, default=MonitorConfig().window, help="sliding window [s]")
+    parser.add_argument("--quick", action="store_true", help="tiny sizes and few ticks, for tests")
+    args = parser.parse_args(argv)
+    if args.quick:
+        args.n_envs, args.n_vehicles, args.ticks = 4, 2, 50
+    config = MonitorConfig(window=args.window)
+    report(args.n_envs, args.n_vehicles, args.ticks, config)
+    report(1, 1, args.ticks, config)
+
+
+if __name__ == "__main__":
+    main()
