@@ -219,6 +219,22 @@ class HumanLeaderConfig(ConfigMixin):
 
 
 @dataclasses.dataclass(frozen=True)
+class SensorConfig(ConfigMixin):
+    """What each follower measures of its own spacing and speed, once per tick."""
+
+    spacing_noise_std: float = 0.1  # radar range noise; matches the spacing model's sigma^2 = 0.01 m^2 [m]
+    speed_noise_std: float = 0.1  # own-speed noise [m/s]
+    dropout_probability: float = 0.0  # chance that a tick's measurement of a follower is missing (NaN) [-]
+
+    def __post_init__(self) -> None:
+        for field in ("spacing_noise_std", "speed_noise_std"):
+            if self._finite(field) < 0:
+                self._fail(field, getattr(self, field), "must be >= 0")
+        if not 0 <= self._finite("dropout_probability") < 1:
+            self._fail("dropout_probability", self.dropout_probability, "must be in [0, 1)")
+
+
+@dataclasses.dataclass(frozen=True)
 class MonitorConfig(ConfigMixin):
     """Bayesian monitor of [s0, tau] from spacing and speed measurements (the paper's spacing model).
 
@@ -232,7 +248,7 @@ class MonitorConfig(ConfigMixin):
     noise_variance: float = 0.01  # sigma^2 of the spacing model S = s0 + tau V + eps [m^2]
     prior_standstill_spacing: float = PlatoonConfig.standstill_spacing  # prior mean of s0 [m]; the prior mean of tau is tau*
     prior_cov: tuple[tuple[float, float], tuple[float, float]] = ((1e-4, -1e-5), (-1e-5, 0.125))  # Sigma_b of [s0 [m], tau [s]]
-    window: float | None = 10.0  # sliding window over the measurements, a multiple of dt [s]; None keeps all
+    window: float | None = 1.0  # sliding window, a multiple of dt; chosen by train/choose_window.py [s]; None keeps all
     forgetting: float = 1.0  # exponential forgetting factor per tick, 1 = none [-]
     dt: float = PlatoonConfig.dt  # measurement period [s]
     max_speed: float = 100.0  # speeds above this are implausible and skipped [m/s]
