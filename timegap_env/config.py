@@ -151,7 +151,7 @@ class AggressiveCyclesConfig(ConfigMixin):
     accel_range: tuple[float, float] = (1.5, 3.5)  # magnitude of each phase's acceleration [m/s^2]
     phase_duration_range: tuple[float, float] = (3.0, 9.0)  # length of each phase [s]
     cruise_probability: float = 0.25  # chance that a phase is a cruise (a = 0) instead [-]
-    max_jerk: float = 5.0  # how fast the leader moves between phase accelerations [m/s^3]
+    max_jerk: float = 10.0  # how fast the leader moves between phase accelerations; aggressive drivers reach ~10 [m/s^3]
 
     def __post_init__(self) -> None:
         self._band("accel_range", low_min=1e-9)
