@@ -16,6 +16,7 @@ $(STAMP): pyproject.toml
 
 demo: $(STAMP)
 	MPLBACKEND=Agg $(PY) -m train.demo
+	MPLBACKEND=Agg $(PY) -m train.reproduce_paper
 
 test: $(STAMP)
 	MPLBACKEND=Agg $(PY) -m pytest -q
