@@ -123,6 +123,14 @@ class ControlChart:
         self._starts[:, vehicles] = False
         self._restart(vehicles)
 
+    def move_center(self, time_gap: ArrayLike) -> None:
+        """Move the centre line to ``time_gap`` [s] (broadcast to (n_envs, n_vehicles)), keeping the history.
+
+        For a setting that is ramped towards its new value: the limits follow the
+        ramp instead of jumping ahead of the controller.
+        """
+        self.center[...] = time_gap_array(time_gap, self.shape)
+
     def reset(self, mask: ArrayLike | None, time_gap: ArrayLike) -> None:
         """Restart the envs in ``mask`` ((n_envs,) bool, None = all), centred on ``time_gap`` [s]."""
         vehicles = np.broadcast_to(env_mask(mask, self.shape[0])[:, None], self.shape)

@@ -15,16 +15,48 @@ from timegap_env.monitor import TimeGapMonitor
 from timegap_env.platoon import Platoon
 
 
+_SPLITMIX_INCREMENT = np.uint64(0x9E3779B97F4A7C15)  # SplitMix64 constants (Steele, Lea & Flood 2014)
+_SPLITMIX_MULTIPLIERS = (np.uint64(0xBF58476D1CE4E5B9), np.uint64(0x94D049BB133111EB))
+_UNIFORM_STREAMS = 3  # per follower and tick: two for the Gaussian pair, one for dropouts
+
+
+def _splitmix64(x: np.ndarray) -> np.ndarray:
+    """SplitMix64 finaliser: a well-mixed uint64 hash of each uint64 in ``x``."""
+    x = (x ^ (x >> np.uint64(30))) * _SPLITMIX_MULTIPLIERS[0]
+    x = (x ^ (x >> np.uint64(27))) * _SPLITMIX_MULTIPLIERS[1]
+    return x ^ (x >> np.uint64(31))
+
+
+def counter_uniforms(keys: np.ndarray, ticks: np.ndarray, n_followers: int) -> np.ndarray:
+    """Uniforms in (0, 1), shape (3, n_envs, n_followers), a pure function of (key, tick, follower, stream).
+
+    Counter-based: an env's draws depend only on its own key and tick, never
+    on which other envs share the batch, so a vector of envs reproduces the
+    same envs run one by one.
+    """
+    counter = (
+        ticks.astype(np.uint64)[None, :, None] * np.uint64(n_followers * _UNIFORM_STREAMS)
+        + np.arange(n_followers, dtype=np.uint64)[None, None, :] * np.uint64(_UNIFORM_STREAMS)
+        + np.arange(_UNIFORM_STREAMS, dtype=np.uint64)[:, None, None]
+    )
+    bits = _splitmix64(_splitmix64(counter * _SPLITMIX_INCREMENT + keys[None, :, None]))
+    return ((bits >> np.uint64(11)).astype(np.float64) + 0.5) * 2.0**-53
+
+
 def measure(
-    spacing: np.ndarray, speed: np.ndarray, config: SensorConfig, rng: np.random.Generator
+    spacing: np.ndarray, speed: np.ndarray, config: SensorConfig, uniforms: np.ndarray, dropout_probability: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Noisy spacing [m] and speed [m/s] measurements; a dropout is NaN in both."""
-    measured_spacing = spacing + config.spacing_noise_std * rng.standard_normal(spacing.shape)
-    measured_speed = speed + config.speed_noise_std * rng.standard_normal(speed.shape)
-    if config.dropout_probability > 0:
-        dropped = rng.random(spacing.shape) < config.dropout_probability
-        measured_spacing[dropped] = np.nan
-        measured_speed[dropped] = np.nan
+    """Noisy spacing [m] and speed [m/s] (n_envs, n_followers) from ``counter_uniforms``; a dropout is NaN in both.
+
+    ``dropout_probability`` (n_envs,) is each env's chance per tick that a follower's measurement is missing.
+    """
+    radius = np.sqrt(-2.0 * np.log(uniforms[0]))  # Box-Muller: two independent standard normals
+    angle = 2.0 * np.pi * uniforms[1]
+    measured_spacing = spacing + config.spacing_noise_std * radius * np.cos(angle)
+    measured_speed = speed + config.speed_noise_std * radius * np.sin(angle)
+    dropped = uniforms[2] < dropout_probability[:, None]
+    measured_spacing[dropped] = np.nan
+    measured_speed[dropped] = np.nan
     return measured_spacing, measured_speed
 
 
@@ -32,7 +64,9 @@ class MonitoredPlatoon:
     """``n_envs`` platoons, each follower with its own sensors, monitor and chart.
 
     Attributes: ``platoon`` (:class:`Platoon`), ``monitor`` (:class:`TimeGapMonitor`),
-    ``chart`` (a chart from :func:`make_chart`), ``sensors`` (:class:`SensorConfig`).
+    ``chart`` (a chart from :func:`make_chart`), ``sensors`` (:class:`SensorConfig`);
+    per env, shaped (n_envs,): ``ticks`` since reset, ``noise_keys`` of the
+    sensor noise (see :func:`counter_uniforms`), ``dropout_probability``.
     """
 
     def __init__(
@@ -51,7 +85,9 @@ class MonitoredPlatoon:
         self.monitor = TimeGapMonitor(n_envs, platoon.n_followers, platoon.time_gap, monitor)
         self.chart = make_chart(n_envs, platoon.n_followers, platoon.time_gap, chart)
         self.sensors = sensors
-        self.rng = np.random.default_rng(seed)
+        self.ticks = np.zeros(n_envs, dtype=np.int64)
+        self.noise_keys = np.random.default_rng(seed).integers(0, 2**63, size=n_envs, dtype=np.uint64)
+        self.dropout_probability = np.full(n_envs, sensors.dropout_probability)
         self.measured_spacing = np.zeros((n_envs, platoon.n_followers))  # last measurements, NaN = dropout [m]
         self.measured_speed = np.zeros((n_envs, platoon.n_followers))  # [m/s]
 
@@ -61,10 +97,17 @@ class MonitoredPlatoon:
         leader_accel: np.ndarray | float = 0.0,
         mask: np.ndarray | None = None,
         time_gap: np.ndarray | float | None = None,
+        noise_key: np.ndarray | None = None,
     ) -> None:
-        """Equilibrium platoons for the envs in ``mask`` (None = all), monitors and charts centred on the setting."""
+        """Equilibrium platoons for the envs in ``mask`` (None = all), monitors and charts centred on the setting.
+
+        ``noise_key`` (n_envs,) uint64, optional: new sensor-noise keys for the envs in ``mask``.
+        """
         env_mask = np.ones(self.platoon.n_envs, dtype=bool) if mask is None else np.asarray(mask, dtype=bool)
         self.platoon.reset(leader_speed, leader_accel, mask=env_mask, time_gap=time_gap)
+        self.ticks[env_mask] = 0
+        if noise_key is not None:
+            self.noise_keys[env_mask] = np.asarray(noise_key, dtype=np.uint64)[env_mask]
         setting = self.platoon.time_gap_setting
         self.monitor.reset(env_mask, setting)
         self.chart.reset(env_mask, setting)
@@ -73,7 +116,8 @@ class MonitoredPlatoon:
         """Ask for a new setting [s] (broadcast to (n_envs, n_followers)) where ``mask``; return who changed.
 
         Only a real change moves anything: the simulator ramps to it, and that
-        follower's prior and chart are re-centred on it.
+        follower's prior and chart are re-centred on it (the chart's history is
+        cleared; its centre line then follows the ramp, see :meth:`tick`).
         """
         current = self.platoon.time_gap_setting
         setting = np.broadcast_to(np.asarray(setting, dtype=float), current.shape)
@@ -82,7 +126,7 @@ class MonitoredPlatoon:
         if changed.any():
             self.platoon.set_time_gap(setting, mask=changed)
             self.monitor.recenter(setting, changed)
-            self.chart.recenter(setting, changed)
+            self.chart.recenter(self.platoon.time_gap, changed)
         return changed
 
     def tick(self, leader_speed: np.ndarray | float, leader_accel: np.ndarray | float) -> tuple[np.ndarray, ChartState]:
@@ -91,8 +135,11 @@ class MonitoredPlatoon:
         Returns the followers that collided this tick (n_envs, n_followers) and the charts' state.
         """
         collisions = self.platoon.step(leader_speed, leader_accel)
+        self.ticks += 1
+        uniforms = counter_uniforms(self.noise_keys, self.ticks, self.platoon.n_followers)
         self.measured_spacing, self.measured_speed = measure(
-            self.platoon.spacing, self.platoon.v[:, 1:], self.sensors, self.rng
+            self.platoon.spacing, self.platoon.v[:, 1:], self.sensors, uniforms, self.dropout_probability
         )
         self.monitor.update(self.measured_speed, self.measured_spacing)
+        self.chart.move_center(self.platoon.time_gap)  # the limits follow a ramping setting
         return collisions, self.chart.update(self.monitor.tau_mean)
