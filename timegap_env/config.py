@@ -319,3 +319,113 @@ MONITOR_PRESETS: dict[str, MonitorConfig] = {
         prior_cov=((1e-4, -1e-5), (-1e-5, 0.125)),
     ),
 }
+
+
+@dataclasses.dataclass(frozen=True)
+class RewardWeights(ConfigMixin):
+    """Weight of each reward term of ``TimeGapMonitor-v0``; each term is <= 0 and about -1 at its worst."""
+
+    tracking: float = 1.0  # -|estimate - tau*| / (L sigma_desired), mean over followers and ticks
+    alarms: float = 1.0  # -share of follower-ticks whose estimate is outside the control limits
+    safety: float = 2.0  # -mean max(0, 1 - TTC / ttc_threshold)
+    collision: float = 1000.0  # -1 on the step a collision ends the episode; outweighs any whole episode
+    comfort: float = 0.05  # -mean (jerk / jerk_reference)^2
+    efficiency: float = 1.0  # -(1 - capacity(tau*) / capacity(smallest level)) at the current speed
+    preference: float = 0.5  # -|tau* - preferred_time_gap| / span of the levels
+    switching: float = 0.2  # -share of followers whose setting changed this step
+
+    def __post_init__(self) -> None:
+        for field in dataclasses.fields(self):
+            if self._finite(field.name) < 0:
+                self._fail(field.name, getattr(self, field.name), "must be >= 0")
+
+
+def _default_scenario_weights() -> dict[str, float]:
+    return {"aggressive_cycles": 1.0, "sinusoid": 1.0, "hard_braking": 1.0, "stochastic_human": 1.0}
+
+
+@dataclasses.dataclass(frozen=True)
+class EnvConfig(ConfigMixin):
+    """Everything ``TimeGapMonitor-v0`` runs with; ``gym.make(..., config={...})`` overrides it.
+
+    Nested configs take dicts of their own fields, e.g. ``{"platoon": {"n_followers": 3}}``.
+    """
+
+    platoon: PlatoonConfig = PlatoonConfig()
+    leader: LeaderConfig = LeaderConfig()
+    sensors: SensorConfig = SensorConfig()
+    monitor: MonitorConfig = MonitorConfig()
+    chart: ChartConfig = ChartConfig()
+    reward_weights: RewardWeights = RewardWeights()
+    decision_interval: float = 1.0  # time between two actions, a multiple of platoon.dt [s]
+    episode_duration: float = 250.0  # [s]
+    action_mode: str = "platoon"  # "platoon": one setting for all followers; "per_vehicle": one each
+    time_gap_levels: tuple[float, ...] = (0.6, 0.8, 1.0, 1.2, 1.4, 1.6, 1.8, 2.0, 2.2)  # settings to choose from [s]
+    preferred_time_gap: float = 1.6  # the setting the driver chose [s]
+    scenario_weights: dict[str, float] = dataclasses.field(default_factory=_default_scenario_weights)  # family -> weight
+    v2v_loss_probability: float = 0.5  # chance per episode that some followers fall back from CACC to ACC [-]
+    v2v_loss_duration_range: tuple[float, float] = (20.0, 80.0)  # how long such a V2V loss lasts [s]
+    v2v_loss_follower_probability: float = 1.0  # chance each follower is hit; 1 = channel-wide outage [-]
+    dropout_probability_range: tuple[float, float] = (0.0, 0.05)  # per-episode sensor dropout rate drawn from [-]
+    ttc_threshold: float = 4.0  # time-to-collision below which safety is penalised [s]
+    jerk_reference: float = 2.0  # jerk that costs one comfort unit [m/s^3]
+
+    def __post_init__(self) -> None:
+        nested = {"platoon": PlatoonConfig, "leader": LeaderConfig, "sensors": SensorConfig, "monitor": MonitorConfig,
+                  "chart": ChartConfig, "reward_weights": RewardWeights}
+        for field, kind in nested.items():
+            if not isinstance(getattr(self, field), kind):
+                self._fail(field, getattr(self, field), f"must be a {kind.__name__} (or a dict of its fields)")
+        self._positive("decision_interval", "episode_duration", "preferred_time_gap", "ttc_threshold", "jerk_reference")
+        dt = self.platoon.dt
+        for field in ("decision_interval", "episode_duration"):
+            ticks = getattr(self, field) / dt
+            if abs(ticks - round(ticks)) > 1e-9:
+                self._fail(field, getattr(self, field), f"must be a multiple of platoon.dt = {dt}")
+        for name, config in (("monitor", self.monitor), ("chart", self.chart), ("leader", self.leader)):
+            if not math.isclose(config.dt, dt):
+                self._fail(f"{name}.dt", config.dt, f"must equal platoon.dt = {dt}")
+        if self.action_mode not in ("platoon", "per_vehicle"):
+            self._fail("action_mode", self.action_mode, "must be 'platoon' or 'per_vehicle'")
+        levels = np.asarray(self.time_gap_levels, dtype=float)
+        if levels.ndim != 1 or levels.size < 2 or not np.all(np.isfinite(levels)) or np.any(levels <= 0):
+            self._fail("time_gap_levels", self.time_gap_levels, "must be at least two finite settings > 0")
+        if np.any(np.diff(levels) <= 0):
+            self._fail("time_gap_levels", self.time_gap_levels, "must increase strictly")
+        if not np.any(np.isclose(levels, self.platoon.time_gap)):
+            self._fail("platoon.time_gap", self.platoon.time_gap, f"the initial setting must be one of {self.time_gap_levels}")
+        if not isinstance(self.scenario_weights, Mapping) or not self.scenario_weights:
+            self._fail("scenario_weights", self.scenario_weights, "must be a non-empty dict family -> weight")
+        weights = list(self.scenario_weights.values())
+        if not all(isinstance(w, (int, float)) and math.isfinite(w) and w >= 0 for w in weights) or sum(weights) <= 0:
+            self._fail("scenario_weights", self.scenario_weights, "weights must be finite, >= 0, not all 0")
+        for field in ("v2v_loss_probability", "v2v_loss_follower_probability"):
+            if not 0 <= self._finite(field) <= 1:
+                self._fail(field, getattr(self, field), "must be in [0, 1]")
+        self._band("v2v_loss_duration_range", low_min=dt)
+        low, high = self.dropout_probability_range
+        if not 0 <= low <= high < 1:
+            self._fail("dropout_probability_range", self.dropout_probability_range, "need 0 <= low <= high < 1")
+
+    @classmethod
+    def from_dict(cls, overrides: Mapping[str, Any] | None = None) -> EnvConfig:
+        """The default config with ``overrides``; nested configs take dicts of their own fields."""
+        overrides = dict(overrides or {})
+        default = cls()
+        for field in dataclasses.fields(cls):
+            value = overrides.get(field.name)
+            if isinstance(value, Mapping) and isinstance(getattr(default, field.name), ConfigMixin):
+                overrides[field.name] = getattr(default, field.name).with_overrides(value)
+        if "time_gap_levels" in overrides:
+            overrides["time_gap_levels"] = tuple(overrides["time_gap_levels"])
+        return default.with_overrides(overrides)
+
+    @property
+    def ticks_per_decision(self) -> int:
+        """Simulator ticks per environment step [-]."""
+        return int(round(self.decision_interval / self.platoon.dt))
+
+    @property
+    def max_episode_steps(self) -> int:
+        """Environment steps in a full episode [-]."""
+        return int(round(self.episode_duration / self.decision_interval))

@@ -28,14 +28,17 @@ Two things highway-env does that this module takes care of:
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
 import numpy as np
-from highway_env.road.road import Road, RoadNetwork
-from highway_env.vehicle.behavior import IDMVehicle
-from highway_env.vehicle.kinematics import Vehicle
 
 from timegap_env.config import HumanLeaderConfig
 from timegap_env.leaders import LeaderProfile
+
+if TYPE_CHECKING:  # highway-env takes about a second to import: only when an IDM leader is built
+    from highway_env.road.road import Road
+    from highway_env.vehicle.behavior import IDMVehicle
+    from highway_env.vehicle.kinematics import Vehicle
 
 ROAD_MARGIN = 100.0  # road left ahead of the disturbance vehicle at the end of the run [m]
 LANE_INDEX = ("0", "1", 0)  # the lane of RoadNetwork.straight_road_network(lanes=1)
@@ -63,6 +66,10 @@ def build_scene(
 
     Returns ``(road, disturbance_vehicle, driver)``.
     """
+    from highway_env.road.road import Road, RoadNetwork
+    from highway_env.vehicle.behavior import IDMVehicle
+    from highway_env.vehicle.kinematics import Vehicle
+
     if target_speed is None:
         target_speed = params.desired_speed_factor * float(disturbance.speed.max())
         if target_speed <= 0:
@@ -128,7 +135,7 @@ def idm_leader(
         accel[k] = driver.action["acceleration"]  # as realised: Vehicle.step clips it in place first
         driver.speed = max(driver.speed, 0.0)  # round-off of a stop can leave -1e-17 m/s
         if driver.crashed or driver.impact is not None:
-            gap = driver.lane_distance_to(scripted) - Vehicle.LENGTH
+            gap = driver.lane_distance_to(scripted) - scripted.LENGTH
             raise RuntimeError(
                 f"the IDM driver collides with the disturbance vehicle at t = {(k + 1) * dt:.1f} s "
                 f"(bumper gap {gap:.2f} m, driver speed {driver.speed:.2f} m/s, "
@@ -151,7 +158,7 @@ def _equilibrium_gap(driver: IDMVehicle) -> float:
             f"{driver.speed!r} m/s for an equilibrium initial gap; pass initial_gap instead"
         )
     centre_distance = driver.desired_gap(driver, driver) / math.sqrt(free_road)  # driver as its own front: dv = 0
-    return centre_distance - Vehicle.LENGTH
+    return centre_distance - driver.LENGTH
 
 
 def _check_positive(field: str, value: float) -> None:

@@ -1,0 +1,283 @@
+"""The task behind ``TimeGapMonitor-v0`` for ``n_envs`` platoons at once.
+
+Scenarios drawn at reset, actions turned into settings, ``ticks_per_decision``
+simulator ticks per step through :class:`MonitoredPlatoon`, then observations,
+reward terms and episode statistics. The single env runs it with
+``n_envs = 1``, the native vector env with ``n_envs = N``: same code, so they
+agree step by step.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+
+from timegap_env.config import EnvConfig
+from timegap_env.leaders import LeaderProfile
+from timegap_env.monitored import MonitoredPlatoon
+from timegap_env.scenarios import LEADER_FAMILIES, SCENARIOS, make_leader
+
+FEATURES = (
+    "deviation",  # (posterior mean of tau - tau*) / DEVIATION_SCALE, clipped to [-1, 1]
+    "estimate_std",  # posterior std of tau / (L sigma_desired), clipped to [0, 1]
+    "prob_outside",  # posterior probability that tau lies outside [LCL, UCL]
+    "alarm",  # 1 while the chart is in alarm
+    "exceedances",  # exceedances within the chart's trailing window / (2 switch_exceedances), clipped to [0, 1]
+    "time_since_alarm",  # time since the last alarm / exceedance_window, clipped to [0, 1]
+    "setting",  # (tau* - smallest level) / (largest level - smallest level)
+    "speed",  # own speed / SPEED_SCALE, clipped to [0, 1]
+    "v2v",  # 1 in CACC (V2V on), 0 in ACC
+)
+DEVIATION_SCALE = 1.0  # [s]
+SPEED_SCALE = 40.0  # [m/s], above the 80 mph band
+OBSERVATION_LOW = np.array([-1, 0, 0, 0, 0, 0, 0, 0, 0], dtype=np.float32)
+OBSERVATION_HIGH = np.ones(len(FEATURES), dtype=np.float32)
+REWARD_TERMS = ("tracking", "alarms", "safety", "collision", "comfort", "efficiency", "preference", "switching")
+
+
+@dataclasses.dataclass(frozen=True)
+class StepResult:
+    """What one step returns for every env, arrays with a leading n_envs axis."""
+
+    reward: np.ndarray  # (n_envs,)
+    terms: dict[str, np.ndarray]  # reward term -> (n_envs,), each <= 0
+    terminated: np.ndarray  # (n_envs,) a collision ended the episode
+    truncated: np.ndarray  # (n_envs,) the episode ran out of time or leader profile
+    info: dict[str, np.ndarray]  # per-step diagnostics, see PlatoonTask.step
+
+
+class PlatoonTask:
+    """Scenarios, actions, observations and rewards of ``n_envs`` monitored platoons."""
+
+    def __init__(self, config: EnvConfig, n_envs: int) -> None:
+        unknown = sorted(set(config.scenario_weights) - set(SCENARIOS))
+        if unknown:
+            raise ValueError(f"EnvConfig.scenario_weights has unknown families {unknown}; known: {sorted(SCENARIOS)}")
+        self.config = config
+        self.n_envs = n_envs
+        self.n_followers = config.platoon.n_followers
+        self.levels = np.asarray(config.time_gap_levels, dtype=float)
+        self.loop = MonitoredPlatoon(config.platoon, config.monitor, config.chart, config.sensors, n_envs)
+        self.ticks_per_decision = config.ticks_per_decision
+        max_ticks = config.max_episode_steps * self.ticks_per_decision
+        self.leader_speed = np.zeros((n_envs, max_ticks + 1))  # [m/s]
+        self.leader_accel = np.zeros((n_envs, max_ticks + 1))  # [m/s^2]
+        self.episode_ticks = np.full(n_envs, max_ticks)  # ticks in each env's episode
+        self.v2v_loss_start = np.zeros((n_envs, self.n_followers), dtype=np.int64)  # first tick without V2V
+        self.v2v_loss_end = np.zeros((n_envs, self.n_followers), dtype=np.int64)  # first tick with V2V again
+        self.scenario = np.full(n_envs, "", dtype=object)
+        self._previous_accel = np.zeros((n_envs, self.n_followers))  # [m/s^2]
+        self._min_ttc_step = np.full((n_envs, self.n_followers), np.inf)
+        self._rms_jerk_step = np.zeros((n_envs, self.n_followers))
+        self.totals = {name: np.zeros(n_envs) for name in (
+            "steps", "alarm_ticks", "exceedances", "max_deviation", "jerk_squared", "switches", "setting",
+            "capacity", "collision")}
+        self.totals["min_ttc"] = np.full(n_envs, np.inf)
+        self.trace: list[tuple[float, np.ndarray]] | None = None  # (t [s], env 0's estimates) per tick, for rendering
+        families = list(config.scenario_weights)
+        weights = np.array([config.scenario_weights[f] for f in families], dtype=float)
+        self._families, self._family_probabilities = families, weights / weights.sum()
+
+    # ------------------------------------------------------------------ reset
+    def reset(self, mask: np.ndarray, rngs: Sequence[np.random.Generator], options: Mapping[str, Any] | None) -> None:
+        """Draw a new episode for every env in ``mask``, env i from ``rngs[i]``.
+
+        ``options``: ``{"scenario": name}`` picks a scenario family; ``{"leader_speed": array}``
+        runs the user's leader speed series [m/s] at ``platoon.dt`` (truncated to the episode,
+        padded to whole decisions by holding its last speed).
+        """
+        cfg, tpd = self.config, self.ticks_per_decision
+        options = dict(options or {})
+        unknown = sorted(set(options) - {"scenario", "leader_speed"})
+        if unknown:
+            raise ValueError(f"reset options {unknown} unknown; known: ['leader_speed', 'scenario']")
+        noise_keys = np.zeros(self.n_envs, dtype=np.uint64)
+        for env in np.flatnonzero(mask):
+            rng = rngs[env]
+            if "leader_speed" in options:
+                profile = LeaderProfile.from_speed(np.asarray(options["leader_speed"], dtype=float), cfg.platoon.dt, "user")
+            else:
+                family = options.get("scenario") or self._families[rng.choice(len(self._families), p=self._family_probabilities)]
+                profile = make_leader(family, int(rng.integers(2**31)), cfg.leader)
+                if not np.isclose(profile.dt, cfg.platoon.dt):
+                    raise ValueError(f"scenario {family!r} has dt = {profile.dt} s; the env runs at {cfg.platoon.dt} s")
+            self._load_leader(env, profile)
+            self._draw_disturbances(env, rng)
+            noise_keys[env] = rng.integers(0, 2**63, dtype=np.uint64)
+        self.loop.reset(self.leader_speed[:, 0], self.leader_accel[:, 0], mask=mask, time_gap=cfg.platoon.time_gap,
+                        noise_key=noise_keys)
+        self.loop.platoon.set_v2v(self._v2v_now())
+        self._previous_accel[mask] = self.loop.platoon.a[mask, 1:]
+        self._min_ttc_step[mask] = np.inf
+        self._rms_jerk_step[mask] = 0.0
+        for name, total in self.totals.items():
+            total[mask] = np.inf if name == "min_ttc" else 0.0
+
+    def _load_leader(self, env: int, profile: LeaderProfile) -> None:
+        """Put ``profile`` in env's leader buffer, cut to the episode and padded to whole decisions."""
+        tpd, capacity = self.ticks_per_decision, self.leader_speed.shape[1] - 1
+        ticks = min(profile.speed.size - 1, capacity)
+        ticks = -(-ticks // tpd) * tpd  # up to whole decisions
+        n = min(profile.speed.size, ticks + 1)
+        self.leader_speed[env, :n] = profile.speed[:n]
+        self.leader_speed[env, n:] = profile.speed[n - 1]
+        self.leader_accel[env, :n] = profile.accel[:n]
+        self.leader_accel[env, n:] = 0.0
+        self.episode_ticks[env] = ticks
+        self.scenario[env] = profile.name
+
+    def _draw_disturbances(self, env: int, rng: np.random.Generator) -> None:
+        """V2V loss for some followers, and this episode's sensor dropout rate."""
+        cfg = self.config
+        self.v2v_loss_start[env] = self.v2v_loss_end[env] = 0
+        if rng.random() < cfg.v2v_loss_probability:
+            losing = rng.random(self.n_followers) < cfg.v2v_loss_follower_probability
+            losing[rng.integers(self.n_followers)] = True  # at least one follower
+            episode = self.episode_ticks[env]
+            duration = int(round(rng.uniform(*cfg.v2v_loss_duration_range) / cfg.platoon.dt))
+            start = int(rng.integers(0, max(episode - duration, 0) + 1))
+            self.v2v_loss_start[env, losing] = start
+            self.v2v_loss_end[env, losing] = start + duration
+        self.loop.dropout_probability[env] = rng.uniform(*cfg.dropout_probability_range)
+
+    # ------------------------------------------------------------------ step
+    def settings_for(self, action: np.ndarray) -> np.ndarray:
+        """Time gap settings [s] (n_envs, n_followers) for ladder indices: (n_envs,) platoon or (n_envs, N) per vehicle."""
+        action = np.asarray(action)
+        expected = (self.n_envs,) if self.config.action_mode == "platoon" else (self.n_envs, self.n_followers)
+        if action.shape != expected or not np.issubdtype(action.dtype, np.integer):
+            raise ValueError(f"action = {action!r}: expected integer ladder indices of shape {expected}")
+        if np.any((action < 0) | (action >= self.levels.size)):
+            raise ValueError(f"action = {action!r}: every index must be in [0, {self.levels.size - 1}]")
+        settings = self.levels[action]
+        return np.broadcast_to(settings[:, None], (self.n_envs, self.n_followers)) if settings.ndim == 1 else settings
+
+    def _v2v_now(self) -> np.ndarray:
+        """CACC status of every follower at each env's current tick (n_envs, n_followers)."""
+        tick = self.loop.ticks[:, None]
+        return ~((tick >= self.v2v_loss_start) & (tick < self.v2v_loss_end))
+
+    def step(self, action: np.ndarray) -> StepResult:
+        """Apply the action, run one decision interval of ticks, and score it."""
+        cfg, loop, platoon = self.config, self.loop, self.loop.platoon
+        changed = loop.change_time_gap(self.settings_for(action))
+        rows = np.arange(self.n_envs)
+        half_width = cfg.chart.limit_width * cfg.chart.baseline_std  # L sigma_desired [s]
+        deviation_sum = np.zeros(self.n_envs)
+        alarm_sum = np.zeros(self.n_envs)
+        jerk_squared = np.zeros((self.n_envs, self.n_followers))
+        self._min_ttc_step[:] = np.inf
+        collided = np.zeros(self.n_envs, dtype=bool)
+        for _ in range(self.ticks_per_decision):
+            next_tick = np.minimum(loop.ticks + 1, self.episode_ticks)
+            platoon.set_v2v(self._v2v_now())
+            collisions, chart = loop.tick(self.leader_speed[rows, next_tick], self.leader_accel[rows, next_tick])
+            if self.trace is not None:
+                self.trace.append((loop.ticks[0] * cfg.platoon.dt, loop.monitor.tau_mean[0]))
+            collided |= collisions.any(axis=1)
+            deviation = np.abs(loop.monitor.tau_mean - chart.center)
+            deviation_sum += deviation.mean(axis=1)
+            alarm_sum += chart.alarm.mean(axis=1)
+            self.totals["alarm_ticks"] += chart.alarm.sum(axis=1)
+            self.totals["exceedances"] += chart.exceedance.sum(axis=1)
+            np.maximum(self.totals["max_deviation"], deviation.max(axis=1), out=self.totals["max_deviation"])
+            closing = platoon.v[:, 1:] - platoon.v[:, :-1]  # [m/s], > 0 when the gap shrinks
+            with np.errstate(divide="ignore"):
+                ttc = np.where(closing > 0, platoon.spacing / closing, np.inf)  # [s]
+            np.minimum(self._min_ttc_step, ttc, out=self._min_ttc_step)
+            accel = platoon.a[:, 1:]
+            jerk_squared += ((accel - self._previous_accel) / cfg.platoon.dt) ** 2
+            self._previous_accel = accel.copy()
+
+        n = self.ticks_per_decision
+        setting = platoon.time_gap_setting
+        speed = platoon.v[:, 1:]
+        gap_per_vehicle = cfg.platoon.standstill_spacing + cfg.platoon.vehicle_length  # [m]
+        capacity = 3600.0 * speed / (speed * setting + gap_per_vehicle)  # [veh/h] at the current speed
+        capacity_ratio = (speed * self.levels[0] + gap_per_vehicle) / (speed * setting + gap_per_vehicle)
+        span = self.levels[-1] - self.levels[0]
+        terms = {
+            "tracking": -deviation_sum / n / half_width,
+            "alarms": -alarm_sum / n,
+            "safety": -np.maximum(0.0, 1.0 - self._min_ttc_step / cfg.ttc_threshold).mean(axis=1),
+            "collision": -collided.astype(float),
+            "comfort": -(jerk_squared / n).mean(axis=1) / cfg.jerk_reference**2,
+            "efficiency": -(1.0 - capacity_ratio).mean(axis=1),
+            "preference": -np.abs(setting - cfg.preferred_time_gap).mean(axis=1) / span,
+            "switching": -changed.mean(axis=1),
+        }
+        weights = cfg.reward_weights
+        reward = sum(getattr(weights, name) * term for name, term in terms.items())
+        self._rms_jerk_step = np.sqrt(jerk_squared / n)
+
+        totals = self.totals
+        totals["steps"] += 1
+        totals["jerk_squared"] += jerk_squared.mean(axis=1)
+        totals["switches"] += changed.sum(axis=1)
+        totals["setting"] += setting.mean(axis=1)
+        totals["capacity"] += capacity.mean(axis=1)
+        totals["collision"] = np.maximum(totals["collision"], collided)
+        np.minimum(totals["min_ttc"], self._min_ttc_step.min(axis=1), out=totals["min_ttc"])
+        terminated = platoon.collided.any(axis=1)
+        truncated = (loop.ticks >= self.episode_ticks) & ~terminated
+        return StepResult(reward=reward, terms=terms, terminated=terminated, truncated=truncated, info=self.info())
+
+    # ------------------------------------------------------------------ read-outs
+    def observation(self) -> np.ndarray:
+        """Observations (n_envs, n_followers, len(FEATURES)) float32, the features in FEATURES order."""
+        cfg, monitor, chart, platoon = self.config, self.loop.monitor, self.loop.chart, self.loop.platoon
+        half_width = cfg.chart.limit_width * cfg.chart.baseline_std
+        center = chart.center
+        features = (
+            np.clip((monitor.tau_mean - center) / DEVIATION_SCALE, -1.0, 1.0),
+            np.clip(monitor.tau_std / half_width, 0.0, 1.0),
+            monitor.prob_outside(center - half_width, center + half_width),
+            chart.alarm,
+            np.clip(chart.exceedances_in_window / (2 * cfg.chart.switch_exceedances), 0.0, 1.0),
+            np.clip(chart.run_length * cfg.platoon.dt / cfg.chart.exceedance_window, 0.0, 1.0),
+            (platoon.time_gap_setting - self.levels[0]) / (self.levels[-1] - self.levels[0]),
+            np.clip(platoon.v[:, 1:] / SPEED_SCALE, 0.0, 1.0),
+            platoon.v2v,
+        )
+        return np.stack(features, axis=-1).astype(np.float32)
+
+    def info(self) -> dict[str, np.ndarray]:
+        """Per-step diagnostics, each (n_envs, n_followers) unless noted."""
+        cfg, monitor, chart, platoon = self.config, self.loop.monitor, self.loop.chart, self.loop.platoon
+        half_width = cfg.chart.limit_width * cfg.chart.baseline_std
+        with np.errstate(divide="ignore", invalid="ignore"):
+            time_gap = (platoon.spacing - cfg.platoon.standstill_spacing) / platoon.v[:, 1:]
+        return {
+            "time_gap": time_gap,  # actual (s - s0) / v [s]
+            "estimate": monitor.tau_mean,  # posterior mean of tau [s]
+            "estimate_std": monitor.tau_std,  # [s]
+            "setting": platoon.time_gap_setting.copy(),  # tau* [s]
+            "lcl": chart.center - half_width,  # [s]
+            "ucl": chart.center + half_width,  # [s]
+            "alarm": chart.alarm,
+            "ttc": self._min_ttc_step.copy(),  # smallest time-to-collision during the step [s], inf if never closing
+            "jerk": self._rms_jerk_step.copy(),  # RMS jerk during the step [m/s^3]
+            "v2v": platoon.v2v.copy(),
+            "collision": platoon.collided.any(axis=1),  # (n_envs,)
+            "skipped_measurements": monitor.skipped.copy(),  # since reset [-]
+        }
+
+    def episode_summary(self) -> dict[str, np.ndarray]:
+        """Episode statistics so far, each (n_envs,)."""
+        totals, dt = self.totals, self.config.platoon.dt
+        steps = np.maximum(totals["steps"], 1)
+        return {
+            "time_out_of_control": totals["alarm_ticks"] * dt / self.n_followers,  # per follower [s]
+            "exceedances": totals["exceedances"].copy(),  # all followers [-]
+            "max_deviation": totals["max_deviation"].copy(),  # largest |estimate - tau*| [s]
+            "min_ttc": totals["min_ttc"].copy(),  # [s]
+            "rms_jerk": np.sqrt(totals["jerk_squared"] / steps),  # [m/s^3]
+            "switches": totals["switches"].copy(),  # follower setting changes [-]
+            "mean_setting": totals["setting"] / steps,  # [s]
+            "mean_capacity": totals["capacity"] / steps,  # implied by the settings at the speeds driven [veh/h]
+            "collision": totals["collision"].astype(bool),
+            "duration": totals["steps"] * self.config.decision_interval,  # [s]
+        }
