@@ -248,7 +248,7 @@ class MonitorConfig(ConfigMixin):
     noise_variance: float = 0.01  # sigma^2 of the spacing model S = s0 + tau V + eps [m^2]
     prior_standstill_spacing: float = PlatoonConfig.standstill_spacing  # prior mean of s0 [m]; the prior mean of tau is tau*
     prior_cov: tuple[tuple[float, float], tuple[float, float]] = ((1e-4, -1e-5), (-1e-5, 0.125))  # Sigma_b of [s0 [m], tau [s]]
-    window: float | None = 1.0  # sliding window, a multiple of dt; chosen by train/choose_window.py [s]; None keeps all
+    window: float | None = 2.0  # sliding window, a multiple of dt; chosen by train/choose_window.py [s]; None keeps all
     forgetting: float = 1.0  # exponential forgetting factor per tick, 1 = none [-]
     dt: float = PlatoonConfig.dt  # measurement period [s]
     max_speed: float = 100.0  # speeds above this are implausible and skipped [m/s]

@@ -1,7 +1,7 @@
 """Choose the monitor's default sliding window by experiment.
 
 For each candidate window [s] (and "all data", the paper's literal estimator),
-20 platoons (four synthetic leader families x five seeds, 250 s, tau* = 1.6 s,
+60 platoons (four synthetic leader families x fifteen seeds, 250 s, tau* = 1.6 s,
 CACC) run through the sensors, the monitor and the paper's Shewhart chart, at
 the default sensor noise and at a five times noisier radar. Per window it reports:
 
@@ -33,7 +33,7 @@ from timegap_env.scenarios import make_leader
 
 WINDOWS: list[float | None] = [0.5, 1.0, 2.0, 3.0, 5.0, 10.0, 20.0, None]  # [s]; None = all data since t = 0
 FAMILIES = ["aggressive_cycles", "sinusoid", "hard_braking", "stochastic_human"]
-SEEDS = range(5)
+SEEDS = range(15)
 NOISY = SensorConfig(spacing_noise_std=0.5, speed_noise_std=0.5)
 
 
