@@ -170,24 +170,30 @@ class TimeGapMonitorEnv(gym.Env):
         from timegap_env.rendering import PlatoonRenderer, RenderFrame
 
         if self._renderer is None:
-            self._renderer = PlatoonRenderer(self.config.platoon.n_followers)
+            self._renderer = PlatoonRenderer(self.config.platoon.n_followers, time_window=RENDER_HISTORY)
         platoon, chart = self.task.loop.platoon, self.task.loop.chart
         now = self.task.loop.ticks[0] * self.config.platoon.dt
-        recent = [(t, estimate) for t, estimate in self.task.trace if t >= now - RENDER_HISTORY]
+        n = self.config.platoon.n_followers
+        recent = [entry for entry in self.task.trace if entry[0] >= now - RENDER_HISTORY]
+        estimates = np.array([estimate for _, estimate, _ in recent]).reshape(-1, n)
+        centers = np.array([center for _, _, center in recent]).reshape(-1, n)
         half_width = self.config.chart.limit_width * self.config.chart.baseline_std
         frame = RenderFrame(
             t=now,
             x=platoon.x[0].copy(),
             v=platoon.v[0].copy(),
             vehicle_length=self.config.platoon.vehicle_length,
-            history_t=np.array([t for t, _ in recent]),
-            estimate_history=np.array([e for _, e in recent]).reshape(-1, self.config.platoon.n_followers),
+            history_t=np.array([t for t, _, _ in recent]),
+            estimate_history=estimates,
             lcl=chart.center[0] - half_width,
             ucl=chart.center[0] + half_width,
-            setting=platoon.time_gap_setting[0].copy(),
+            setting=chart.center[0].copy(),
             alarm=chart.alarm[0].copy(),
             v2v=platoon.v2v[0].copy(),
             collided=platoon.collided[0].copy(),
+            lcl_history=centers - half_width,
+            ucl_history=centers + half_width,
+            setting_history=centers,
         )
         if self.render_mode == "human":
             self._renderer.show(frame)

@@ -76,7 +76,8 @@ class PlatoonTask:
             "steps", "alarm_ticks", "exceedances", "max_deviation", "jerk_squared", "switches", "setting",
             "capacity", "collision")}
         self.totals["min_ttc"] = np.full(n_envs, np.inf)
-        self.trace: list[tuple[float, np.ndarray]] | None = None  # (t [s], env 0's estimates) per tick, for rendering
+        self.trace: list[tuple[float, np.ndarray, np.ndarray]] | None = None  # env 0 per tick, for rendering:
+        # (t [s], posterior means of tau [s], chart centre lines [s])
         families = list(config.scenario_weights)
         weights = np.array([config.scenario_weights[f] for f in families], dtype=float)
         self._families, self._family_probabilities = families, weights / weights.sum()
@@ -176,7 +177,7 @@ class PlatoonTask:
             platoon.set_v2v(self._v2v_now())
             collisions, chart = loop.tick(self.leader_speed[rows, next_tick], self.leader_accel[rows, next_tick])
             if self.trace is not None:
-                self.trace.append((loop.ticks[0] * cfg.platoon.dt, loop.monitor.tau_mean[0]))
+                self.trace.append((loop.ticks[0] * cfg.platoon.dt, loop.monitor.tau_mean[0], chart.center[0]))
             collided |= collisions.any(axis=1)
             deviation = np.abs(loop.monitor.tau_mean - chart.center)
             deviation_sum += deviation.mean(axis=1)

@@ -1,0 +1,249 @@
+"""TimeGapMonitor-v0: registration, config, spaces, scenarios, rewards, info, vector env, checkers."""
+
+import subprocess
+import sys
+import warnings
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env
+from gymnasium.vector import AutoresetMode, SyncVectorEnv
+from stable_baselines3.common.env_checker import check_env as sb3_check_env
+
+import timegap_env
+from timegap_env.config import EnvConfig, RewardWeights
+from timegap_env.task import FEATURES
+
+LEVELS = np.array(EnvConfig().time_gap_levels)
+N_FEATURES = len(FEATURES)
+
+
+def level_index(time_gap: float) -> int:
+    return int(np.argmin(np.abs(LEVELS - time_gap)))
+
+
+def run_episode(env: gym.Env, policy, seed: int, options=None) -> tuple[float, list[dict]]:
+    obs, info = env.reset(seed=seed, options=options)
+    total, infos = 0.0, [info]
+    while True:
+        obs, reward, terminated, truncated, info = env.step(policy(obs))
+        total += reward
+        infos.append(info)
+        if terminated or truncated:
+            return total, infos
+
+
+def test_registered_with_a_time_limit_and_makeable_without_importing_first():
+    assert gym.spec("TimeGapMonitor-v0").max_episode_steps == 250
+    code = "import gymnasium as gym; env = gym.make('timegap_env:TimeGapMonitor-v0'); env.reset(seed=0); print('ok')"
+    assert subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.strip() == "ok"
+
+
+def test_spaces():
+    env = gym.make("TimeGapMonitor-v0")
+    assert env.action_space == gym.spaces.Discrete(len(LEVELS))
+    assert {1.0, 1.6} <= set(np.round(LEVELS, 3)) and LEVELS[0] == pytest.approx(0.6) and LEVELS[-1] == pytest.approx(2.2)
+    box = env.observation_space
+    assert box.shape == (5 * N_FEATURES,) and box.dtype == np.float32
+    assert np.all(np.isfinite(box.low)) and np.all(np.isfinite(box.high))
+    per_vehicle = gym.make("TimeGapMonitor-v0", config={"action_mode": "per_vehicle", "platoon": {"n_followers": 3}})
+    assert per_vehicle.action_space == gym.spaces.MultiDiscrete([len(LEVELS)] * 3)
+    assert per_vehicle.observation_space.shape == (3 * N_FEATURES,)
+
+
+@pytest.mark.parametrize(
+    "config, message",
+    [
+        ({"decision_interval_s": 1.0}, r"unknown EnvConfig field\(s\) \['decision_interval_s'\]"),
+        ({"platoon": {"time_gap": -1.0}}, r"PlatoonConfig.time_gap = -1.0"),
+        ({"platoon": {"time_gap": 1.7}}, r"platoon.time_gap = 1.7: the initial setting must be one of"),
+        ({"action_mode": "fleet"}, r"action_mode = 'fleet'"),
+        ({"time_gap_levels": (1.0,)}, r"time_gap_levels = \(1.0,\)"),
+        ({"reward_weights": {"safety": -1.0}}, r"RewardWeights.safety = -1.0"),
+        ({"scenario_weights": {"rush_hour": 1.0}}, r"unknown families \['rush_hour'\]"),
+        ({"v2v_loss_probability": 2.0}, r"v2v_loss_probability = 2.0"),
+    ],
+)
+def test_bad_config_is_named(config, message):
+    with pytest.raises(ValueError, match=message):
+        gym.make("TimeGapMonitor-v0", config=config)
+
+
+@pytest.mark.parametrize("action", [len(LEVELS), -1, 1.5, "fast", np.array([1, 2])])
+def test_action_outside_the_space_is_refused(action):
+    env = gym.make("TimeGapMonitor-v0")
+    env.reset(seed=0)
+    with pytest.raises(ValueError, match="outside the action space"):
+        env.step(action)
+
+
+def test_observations_stay_in_bounds_and_info_is_complete():
+    env = gym.make("TimeGapMonitor-v0", config={"dropout_probability_range": (0.05, 0.05)})
+    env.action_space.seed(0)
+    _, infos = run_episode(env, lambda obs: env.action_space.sample(), seed=3)
+    step_keys = {"time_gap", "estimate", "estimate_std", "setting", "lcl", "ucl", "alarm", "ttc", "jerk", "v2v",
+                 "collision", "rewards", "scenario", "skipped_measurements"}
+    assert step_keys <= set(infos[1])
+    assert set(infos[1]["rewards"]) == {"tracking", "alarms", "safety", "collision", "comfort", "efficiency",
+                                        "preference", "switching"}
+    summary = infos[-1]["episode_summary"]
+    assert {"time_out_of_control", "exceedances", "max_deviation", "min_ttc", "rms_jerk", "switches",
+            "mean_setting", "mean_capacity", "collision"} <= set(summary)
+    assert infos[-1]["skipped_measurements"].sum() > 0  # 5 % dropouts are skipped, not fatal
+    assert all(np.all(np.isfinite(info["estimate"])) for info in infos)
+
+
+def test_observation_bounds_hold_every_step():
+    env = gym.make("TimeGapMonitor-v0")
+    env.action_space.seed(1)
+    obs, _ = env.reset(seed=1)
+    for _ in range(60):
+        obs, *_ = env.step(env.action_space.sample())
+        assert env.observation_space.contains(obs)
+
+
+def test_reward_is_the_weighted_sum_of_its_terms():
+    env = gym.make("TimeGapMonitor-v0")
+    env.reset(seed=2)
+    weights = RewardWeights()
+    for action in (level_index(1.0), level_index(2.2), level_index(0.6)):
+        _, reward, _, _, info = env.step(action)
+        assert reward == pytest.approx(sum(getattr(weights, k) * v for k, v in info["rewards"].items()))
+        assert all(v <= 0 for v in info["rewards"].values())
+    assert info["rewards"]["switching"] == -1.0  # every follower changed setting on that step
+
+
+def test_setting_change_ramps_and_recentres_the_chart():
+    env = gym.make("TimeGapMonitor-v0", config={"v2v_loss_probability": 0.0})
+    env.reset(seed=4)
+    _, _, _, _, info = env.step(level_index(1.0))
+    assert np.allclose(info["setting"], 1.0)
+    ramp_end = 1.6 - 0.2 * 1.0  # 0.2 s/s over one 1 s step
+    assert np.allclose((info["lcl"] + info["ucl"]) / 2, ramp_end)
+    for _ in range(10):
+        _, _, _, _, info = env.step(level_index(1.0))
+    assert np.allclose(info["lcl"], 0.75) and np.allclose(info["ucl"], 1.25)
+
+
+def test_named_scenario_and_user_leader():
+    env = gym.make("TimeGapMonitor-v0")
+    _, info = env.reset(seed=0, options={"scenario": "sinusoid"})
+    assert info["scenario"] == "sinusoid"
+    speed = 20.0 + 3.0 * np.sin(np.arange(455) * 0.02)  # 45.4 s of field data at 10 Hz
+    total, infos = run_episode(env, lambda obs: level_index(1.6), seed=0, options={"leader_speed": speed})
+    assert infos[0]["scenario"] == "user" and len(infos) - 1 == 46  # padded to whole decisions
+    assert infos[-1]["episode_summary"]["duration"] == pytest.approx(46.0)
+    with pytest.raises(ValueError, match="scenario = 'rush_hour'"):
+        env.reset(options={"scenario": "rush_hour"})
+    with pytest.raises(ValueError, match=r"reset options \['weather'\] unknown"):
+        env.reset(options={"weather": "rain"})
+    with pytest.raises(ValueError, match=r"speed\[1\] = nan"):
+        env.reset(options={"leader_speed": [20.0, np.nan, 20.0]})
+
+
+def test_v2v_outages_happen_and_show_in_the_observation():
+    env = gym.make("TimeGapMonitor-v0", config={"v2v_loss_probability": 1.0})
+    obs, _ = env.reset(seed=5)
+    seen_acc = False
+    for _ in range(250):
+        obs, _, terminated, truncated, info = env.step(level_index(1.6))
+        if not info["v2v"].all():
+            seen_acc = True
+            assert np.all(obs.reshape(5, N_FEATURES)[~info["v2v"], FEATURES.index("v2v")] == 0)
+        if terminated or truncated:
+            break
+    assert seen_acc
+
+
+def test_collision_terminates_with_the_collision_penalty():
+    speed = np.r_[np.full(30, 30.0), np.maximum(30.0 - 2.0 * np.arange(1, 20), 0.0), np.zeros(300)]  # 20 m/s^2 stop
+    env = gym.make("TimeGapMonitor-v0", config={"v2v_loss_probability": 0.0})
+    env.reset(seed=0, options={"leader_speed": speed})
+    for _ in range(60):
+        _, reward, terminated, truncated, info = env.step(level_index(0.6))
+        if terminated:
+            break
+    assert terminated and not truncated and info["collision"]
+    assert info["rewards"]["collision"] == -1.0 and reward < -RewardWeights().collision * 0.99
+    assert info["episode_summary"]["collision"]
+
+
+def test_same_seed_same_episode():
+    first = run_episode(gym.make("TimeGapMonitor-v0"), lambda obs: level_index(1.0), seed=11)
+    again = run_episode(gym.make("TimeGapMonitor-v0"), lambda obs: level_index(1.0), seed=11)
+    assert first[0] == again[0]
+    np.testing.assert_array_equal(first[1][-1]["estimate"], again[1][-1]["estimate"])
+
+
+def test_vector_env_equals_single_envs_step_by_step():
+    config = {"episode_duration": 6.0, "v2v_loss_probability": 1.0, "v2v_loss_duration_range": (1.0, 3.0),
+              "dropout_probability_range": (0.0, 0.1)}
+    n = 3
+    native = gym.make_vec("TimeGapMonitor-v0", num_envs=n, vectorization_mode="vector_entry_point", config=config)
+    reference = SyncVectorEnv([lambda: gym.make("TimeGapMonitor-v0", config=config) for _ in range(n)],
+                              autoreset_mode=AutoresetMode.SAME_STEP)
+    obs_native, _ = native.reset(seed=7)
+    obs_reference, _ = reference.reset(seed=7)
+    np.testing.assert_array_equal(obs_native, obs_reference)
+    rng = np.random.default_rng(0)
+    for step in range(20):  # three episodes of 6 steps each and more: crosses autoresets
+        actions = rng.integers(0, len(LEVELS), size=n)
+        step_native = native.step(actions)
+        step_reference = reference.step(actions)
+        for got, want in zip(step_native[:4], step_reference[:4]):
+            np.testing.assert_array_equal(got, want, err_msg=f"step {step}")
+        np.testing.assert_array_equal(step_native[4]["estimate"][~step_native[3]], step_reference[4]["estimate"][~step_native[3]])
+
+
+def test_constant_extremes_lose_to_a_v2v_aware_policy():
+    """The reward is not won by a constant: always 0.6 s and always 2.2 s both score below
+    '1.0 s while every follower has V2V, 1.6 s (string stable in ACC) otherwise', over 30 episodes."""
+    n = 30
+
+    def mean_return(policy) -> float:
+        env = gym.make_vec("TimeGapMonitor-v0", num_envs=n, vectorization_mode="vector_entry_point")
+        obs, _ = env.reset(seed=100)
+        returns, done = np.zeros(n), np.zeros(n, dtype=bool)
+        while not done.all():
+            obs, reward, terminated, truncated, _ = env.step(policy(obs))
+            returns += np.where(done, 0.0, reward)
+            done |= terminated | truncated
+        return float(returns.mean())
+
+    v2v_column = FEATURES.index("v2v")
+
+    def v2v_aware(obs: np.ndarray) -> np.ndarray:
+        all_connected = obs.reshape(n, -1, N_FEATURES)[:, :, v2v_column].min(axis=1) > 0.5
+        return np.where(all_connected, level_index(1.0), level_index(1.6))
+
+    adaptive = mean_return(v2v_aware)
+    smallest = mean_return(lambda obs: np.full(n, 0))
+    largest = mean_return(lambda obs: np.full(n, len(LEVELS) - 1))
+    assert adaptive > smallest + 20 and adaptive > largest + 20, (adaptive, smallest, largest)
+
+
+def test_checkers_pass_without_warnings_on_every_registered_id():
+    ids = [env_id for env_id in gym.registry if env_id.startswith(timegap_env.ENV_ID.split("-")[0])]
+    assert ids == [timegap_env.ENV_ID]
+    for env_id in ids:
+        for config in ({}, {"action_mode": "per_vehicle"}):
+            with warnings.catch_warnings():
+                warnings.simplefilter("error")
+                env = gym.make(env_id, config=config)
+                check_env(env.unwrapped, skip_render_check=True)
+                sb3_check_env(env.unwrapped, warn=True)
+
+
+def test_rgb_array_frames_are_drawn_and_change():
+    env = gym.make("TimeGapMonitor-v0", render_mode="rgb_array")
+    env.reset(seed=0)
+    env.step(level_index(1.6))
+    first = env.render()
+    for _ in range(5):
+        env.step(level_index(1.0))
+    second = env.render()
+    assert first.ndim == 3 and first.shape[2] == 3 and first.dtype == np.uint8
+    assert len(np.unique(first.reshape(-1, 3), axis=0)) > 50 and first.mean() > 40  # not a blank or black frame
+    assert np.abs(first.astype(int) - second.astype(int)).sum() > 0
+    env.close()
