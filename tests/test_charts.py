@@ -256,3 +256,12 @@ def test_charts_reject_bad_arguments(call, message):
 def test_chart_config_rejects_bad_values(overrides, message):
     with pytest.raises(ValueError, match=message):
         ChartConfig().with_overrides(overrides)
+
+
+def test_hold_suppresses_alarms_for_exactly_that_many_ticks():
+    chart = ShewhartChart(1, 2, 1.6)
+    chart.hold(3, np.array([[True, False]]))
+    alarms = [chart.update(np.full((1, 2), 2.5)).alarm.copy() for _ in range(5)]
+    assert [a[0, 0] for a in alarms] == [False, False, False, True, True]
+    assert all(a[0, 1] for a in alarms)
+    assert chart.exceedances_in_window[0, 0] == 1  # the held excursion counts once, from when it shows

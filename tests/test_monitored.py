@@ -62,3 +62,12 @@ def test_change_of_setting_ramps_and_recentres_only_who_changed():
 def test_configs_must_share_the_tick():
     with pytest.raises(ValueError, match="monitor.dt"):
         MonitoredPlatoon(PlatoonConfig(dt=0.2, v2v_delay=0.2), MonitorConfig(dt=0.1))
+
+
+def test_a_commanded_change_raises_no_alarm_but_a_real_excursion_after_it_does():
+    loop = MonitoredPlatoon(n_envs=1, seed=0)
+    loop.reset(25.0, time_gap=0.6)
+    loop.change_time_gap(2.2)  # the slowest transition of the ladder
+    assert not any(loop.tick(25.0, 0.0)[1].alarm.any() for _ in range(300))
+    loop.platoon.x[0, 0] += 15.0  # the leader jumps 15 m ahead: a real gap excursion
+    assert any(loop.tick(25.0, 0.0)[1].alarm.any() for _ in range(20))

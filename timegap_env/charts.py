@@ -69,6 +69,7 @@ class ControlChart:
         self.exceedance = np.zeros(self.shape, dtype=bool)
         self.exceedances_in_window = np.zeros(self.shape, dtype=np.int64)
         self.run_length = np.zeros(self.shape, dtype=np.int64)  # [ticks]
+        self.hold_off = np.zeros(self.shape, dtype=np.int64)  # ticks left in which alarms are held off [ticks]
         self._starts = np.zeros((config.exceedance_window_ticks,) + self.shape, dtype=bool)  # ring of start flags
         self._slot = 0  # ring slot of this tick
         self._allocate()
@@ -98,7 +99,8 @@ class ControlChart:
         if bad.size:
             index = tuple(int(i) for i in bad[0])
             raise ValueError(f"tau_estimate{list(index)} = {estimate[index]}: must be finite [s]")
-        side = self._side(estimate)
+        side = np.where(self.hold_off > 0, 0, self._side(estimate)).astype(np.int8)
+        np.maximum(self.hold_off - 1, 0, out=self.hold_off)
         self.exceedance = (side != 0) & (side != self.side)
         self.side = side
         self.exceedances_in_window += self.exceedance.astype(np.int64) - self._starts[self._slot]
@@ -120,8 +122,19 @@ class ControlChart:
         self.exceedance[vehicles] = False
         self.exceedances_in_window[vehicles] = 0
         self.run_length[vehicles] = 0
+        self.hold_off[vehicles] = 0
         self._starts[:, vehicles] = False
         self._restart(vehicles)
+
+    def hold(self, ticks: ArrayLike, mask: ArrayLike | None = None) -> None:
+        """Hold alarms off for the next ``ticks`` ticks (broadcast to (n_envs, n_vehicles)) where ``mask``.
+
+        After a deliberate change of setting the estimate needs time to reach the
+        new centre line; alarms in that time would only report the change itself.
+        The statistic keeps updating meanwhile.
+        """
+        vehicles = vehicle_mask(mask, self.shape)
+        self.hold_off[vehicles] = np.broadcast_to(np.asarray(ticks, dtype=np.int64), self.shape)[vehicles]
 
     def move_center(self, time_gap: ArrayLike) -> None:
         """Move the centre line to ``time_gap`` [s] (broadcast to (n_envs, n_vehicles)), keeping the history.

@@ -289,6 +289,8 @@ class ChartConfig(ConfigMixin):
     exceedance_window: float = 35.0  # trailing window in which exceedances are counted, a multiple of dt [s]
     switch_exceedances: int = 3  # paper's rule: this many exceedances within the window ... [-]
     switch_to: float = 1.0  # ... switch the setting to this time gap [s]
+    settle_time: float = 8.0  # alarms wait this long after a commanded change has ramped in; measured
+    # transients end 2.4-6.8 s after the ramp (0.6 -> 2.2 s the slowest) [s]
     dt: float = PlatoonConfig.dt  # chart tick, one estimate per tick [s]
 
     def __post_init__(self) -> None:
@@ -297,8 +299,9 @@ class ChartConfig(ConfigMixin):
         self._positive("baseline_std", "limit_width", "ewma_width", "cusum_h", "exceedance_window", "switch_to", "dt")
         if not 0 < self._finite("ewma_lambda") <= 1:
             self._fail("ewma_lambda", self.ewma_lambda, "must be in (0, 1]")
-        if self._finite("cusum_k") < 0:
-            self._fail("cusum_k", self.cusum_k, "must be >= 0")
+        for field in ("cusum_k", "settle_time"):
+            if self._finite(field) < 0:
+                self._fail(field, getattr(self, field), "must be >= 0")
         ticks = self.exceedance_window / self.dt
         if ticks < 1 - 1e-9 or abs(ticks - round(ticks)) > 1e-9:
             self._fail("exceedance_window", self.exceedance_window, f"must be a positive multiple of dt = {self.dt}")

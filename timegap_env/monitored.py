@@ -117,7 +117,8 @@ class MonitoredPlatoon:
 
         Only a real change moves anything: the simulator ramps to it, and that
         follower's prior and chart are re-centred on it (the chart's history is
-        cleared; its centre line then follows the ramp, see :meth:`tick`).
+        cleared; its centre line then follows the ramp, see :meth:`tick`). The
+        chart holds its alarms off until the ramp is done plus ``settle_time``.
         """
         current = self.platoon.time_gap_setting
         setting = np.broadcast_to(np.asarray(setting, dtype=float), current.shape)
@@ -127,6 +128,9 @@ class MonitoredPlatoon:
             self.platoon.set_time_gap(setting, mask=changed)
             self.monitor.recenter(setting, changed)
             self.chart.recenter(self.platoon.time_gap, changed)
+            config, chart_config = self.platoon.config, self.chart.config
+            ramp_ticks = np.ceil(np.abs(setting - self.platoon.time_gap) / (config.time_gap_ramp_rate * config.dt))
+            self.chart.hold(ramp_ticks + round(chart_config.settle_time / config.dt), changed)
         return changed
 
     def tick(self, leader_speed: np.ndarray | float, leader_accel: np.ndarray | float) -> tuple[np.ndarray, ChartState]:
