@@ -1,0 +1,257 @@
+"""Hand-written policies for ``TimeGapMonitor-v0``: the paper's rule, fixed settings, a V2V-aware heuristic.
+
+Every policy here has stable-baselines3's interface,
+``predict(obs, state=None, episode_start=None, deterministic=True) -> (action, state)``,
+so one evaluation loop runs them and trained SB3 models alike (see ``agents.learned``).
+``obs`` is one observation (obs_dim,) or a batch (n_envs, obs_dim); the action is
+shaped like SB3's: ``()`` or ``(n_envs,)`` for ``action_mode="platoon"``,
+``(N,)`` or ``(n_envs, N)`` for ``"per_vehicle"``, ladder indices (int64).
+
+The policies are stateless: they read all they need from the observation
+(:func:`decode_observation`), never from the env, and return ``state`` unchanged.
+Each is built for one :class:`EnvConfig` (the env's), which fixes the action
+mode, the ladder of settings and the scaling of the features.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Mapping
+from typing import Any, Protocol, runtime_checkable
+
+import numpy as np
+
+from timegap_env.config import EnvConfig
+from timegap_env.task import FEATURES
+
+LADDER_TOLERANCE = 1e-3  # a decoded setting farther than this from every level means a config mismatch [s]
+V2V_TIME_GAP = 1.0  # string stable with V2V (CACC) from 1.0 s with the default gains [s]
+ACC_TIME_GAP = 1.6  # string stable without V2V (ACC) from about 1.6 s with the default gains [s]
+
+
+@runtime_checkable
+class Policy(Protocol):
+    """What the evaluation calls: stable-baselines3's ``predict``."""
+
+    def predict(
+        self,
+        observation: np.ndarray,
+        state: Any = None,
+        episode_start: np.ndarray | None = None,
+        deterministic: bool = True,
+    ) -> tuple[np.ndarray, Any]: ...
+
+
+@runtime_checkable
+class NamedPolicy(Policy, Protocol):
+    """A policy that also says what to call it and which env it acts in (all policies in ``agents``)."""
+
+    name: str  # label in tables and figures
+    action_mode: str  # "platoon" (Discrete action) or "per_vehicle" (MultiDiscrete)
+
+
+def as_config(config: EnvConfig | Mapping[str, Any] | None) -> EnvConfig:
+    """An :class:`EnvConfig` from itself, a dict of overrides (``gym.make``'s ``config=``) or None (defaults)."""
+    return config if isinstance(config, EnvConfig) else EnvConfig.from_dict(config)
+
+
+def seconds(time_gap: float) -> str:
+    """A setting for names and labels: '1.0', '0.6', '1.25'."""
+    return str(round(float(time_gap), 3))
+
+
+def level_index(config: EnvConfig, time_gap: float, field: str = "time_gap") -> int:
+    """Index of ``time_gap`` [s] in ``config.time_gap_levels``; ``ValueError`` naming ``field`` if it is not a level."""
+    levels = np.asarray(config.time_gap_levels)
+    matches = np.flatnonzero(np.isclose(levels, time_gap))
+    if matches.size == 0:
+        raise ValueError(f"{field} = {time_gap!r} s: must be one of time_gap_levels {config.time_gap_levels}")
+    return int(matches[0])
+
+
+@dataclasses.dataclass(frozen=True)
+class FollowerView:
+    """What the hand-written policies read from a batch of observations, arrays (n_envs, n_followers)."""
+
+    exceedances: np.ndarray  # exceedances in the chart's trailing window, exact up to 2 switch_exceedances [-]
+    setting_index: np.ndarray  # index of the current setting tau* in time_gap_levels [-]
+    v2v: np.ndarray  # follower in CACC (V2V on) [bool]
+
+
+def decode_observation(observation: np.ndarray, config: EnvConfig) -> FollowerView:
+    """Undo the feature scaling of ``timegap_env.task.PlatoonTask.observation`` for (n_envs, obs_dim) observations.
+
+    - ``exceedances`` = count / (2 k), k = ``config.chart.switch_exceedances``, clipped to [0, 1]:
+      count = round(feature * 2 k), exact for counts up to 2 k (larger counts read as 2 k);
+    - ``setting`` = (tau* - smallest level) / (largest - smallest level): tau* is the setting last
+      asked for (not the ramped value the controller applies yet), mapped to its ladder index;
+    - ``v2v`` is 1 in CACC, 0 in ACC.
+    """
+    n_followers, n_features = config.platoon.n_followers, len(FEATURES)
+    features = observation.reshape(observation.shape[0], n_followers, n_features)
+    counts = np.rint(features[..., FEATURES.index("exceedances")] * 2 * config.chart.switch_exceedances)
+    levels = np.asarray(config.time_gap_levels)
+    setting = levels[0] + features[..., FEATURES.index("setting")] * (levels[-1] - levels[0])  # [s]
+    distance = np.abs(setting[..., None] - levels)
+    index = distance.argmin(axis=-1)
+    if np.any(np.take_along_axis(distance, index[..., None], axis=-1) > LADDER_TOLERANCE):
+        raise ValueError(
+            f"observation feature 'setting' decodes to {setting.ravel()[:5]} s, not on time_gap_levels "
+            f"{config.time_gap_levels}: was the policy built with the env's config?"
+        )
+    return FollowerView(
+        exceedances=counts.astype(np.int64),
+        setting_index=index.astype(np.int64),
+        v2v=features[..., FEATURES.index("v2v")] > 0.5,
+    )
+
+
+class ObservationPolicy:
+    """Base of the hand-written policies: shape checks, decoding, and SB3's ``predict`` signature.
+
+    A subclass sets ``name`` and defines ``_platoon_action(view) -> (n_envs,)`` and
+    ``_per_vehicle_action(view) -> (n_envs, n_followers)``, both ladder indices.
+    """
+
+    name = "policy"
+
+    def __init__(self, config: EnvConfig | Mapping[str, Any] | None = None) -> None:
+        self.config = as_config(config)
+        self.action_mode = self.config.action_mode
+        self.obs_dim = self.config.platoon.n_followers * len(FEATURES)
+
+    def predict(
+        self,
+        observation: np.ndarray,
+        state: Any = None,
+        episode_start: np.ndarray | None = None,
+        deterministic: bool = True,
+    ) -> tuple[np.ndarray, Any]:
+        """Ladder indices for one observation (obs_dim,) or a batch (n_envs, obs_dim); ``state`` is passed through."""
+        obs = np.asarray(observation, dtype=np.float64)
+        if obs.ndim not in (1, 2) or obs.shape[-1] != self.obs_dim:
+            raise ValueError(f"observation shape {obs.shape}: expected ({self.obs_dim},) or (n_envs, {self.obs_dim})")
+        view = decode_observation(np.atleast_2d(obs), self.config)
+        if self.action_mode == "platoon":
+            action = self._platoon_action(view)
+        else:
+            action = self._per_vehicle_action(view)
+        action = np.asarray(action, dtype=np.int64)
+        return (action[0] if obs.ndim == 1 else action), state
+
+    def _platoon_action(self, view: FollowerView) -> np.ndarray:
+        raise NotImplementedError
+
+    def _per_vehicle_action(self, view: FollowerView) -> np.ndarray:
+        raise NotImplementedError
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}({self.name!r}, action_mode={self.action_mode!r})"
+
+
+class PaperRulePolicy(ObservationPolicy):
+    """The paper's rule: ``switch_exceedances`` exceedances within ``exceedance_window`` -> ``switch_to``.
+
+    Paper: 3 exceedances within 35 s -> 1.6 s becomes 1.0 s. Defaults come from
+    ``config.chart``. As :func:`timegap_env.charts.switch_rule`: a follower triggers when its
+    decoded count reaches k and its setting is not ``switch_to`` already; otherwise the current
+    setting is kept (the env's re-centring clears the count after a switch, so the rule fires once).
+
+    - ``action_mode="platoon"``: everyone switches when any follower triggers;
+    - ``action_mode="per_vehicle"``: each follower switches on its own chart.
+
+    The count in the observation is the env's, over ``config.chart.exceedance_window``; a rule
+    with another window cannot be read from it, so ``exceedance_window`` must equal the env's
+    (change the env's ``chart.exceedance_window`` instead). k may be at most 2 ×
+    ``config.chart.switch_exceedances``, where the feature saturates. The rule acts on the count
+    at each decision (every ``decision_interval``), not at the tick the count reaches k.
+    """
+
+    def __init__(
+        self,
+        config: EnvConfig | Mapping[str, Any] | None = None,
+        *,
+        switch_exceedances: int | None = None,
+        exceedance_window: float | None = None,
+        switch_to: float | None = None,
+    ) -> None:
+        super().__init__(config)
+        chart = self.config.chart
+        self.switch_exceedances = chart.switch_exceedances if switch_exceedances is None else switch_exceedances
+        self.exceedance_window = chart.exceedance_window if exceedance_window is None else exceedance_window
+        self.switch_to = chart.switch_to if switch_to is None else switch_to
+        saturation = 2 * chart.switch_exceedances
+        if isinstance(self.switch_exceedances, bool) or not isinstance(self.switch_exceedances, (int, np.integer)):
+            raise ValueError(f"switch_exceedances = {self.switch_exceedances!r}: must be an integer")
+        if not 1 <= self.switch_exceedances <= saturation:
+            raise ValueError(
+                f"switch_exceedances = {self.switch_exceedances}: must be in [1, {saturation}]; the observation's "
+                f"exceedance feature saturates at 2 x the env's chart.switch_exceedances = {saturation}"
+            )
+        if not np.isclose(self.exceedance_window, chart.exceedance_window):
+            raise ValueError(
+                f"exceedance_window = {self.exceedance_window} s: the observation counts exceedances over the env's "
+                f"chart.exceedance_window = {chart.exceedance_window} s; set that in the env config instead"
+            )
+        self.switch_index = level_index(self.config, self.switch_to, "switch_to")
+        scope = "platoon" if self.action_mode == "platoon" else "per vehicle"
+        self.name = f"paper rule ({scope})"
+
+    def _triggered(self, view: FollowerView) -> np.ndarray:
+        """Followers whose chart says switch (n_envs, n_followers)."""
+        return (view.exceedances >= self.switch_exceedances) & (view.setting_index != self.switch_index)
+
+    def _platoon_action(self, view: FollowerView) -> np.ndarray:
+        return np.where(self._triggered(view).any(axis=1), self.switch_index, view.setting_index[:, 0])
+
+    def _per_vehicle_action(self, view: FollowerView) -> np.ndarray:
+        return np.where(self._triggered(view), self.switch_index, view.setting_index)
+
+
+class FixedPolicy(ObservationPolicy):
+    """Always the same setting ``time_gap`` [s], one of ``config.time_gap_levels``."""
+
+    def __init__(self, time_gap: float, config: EnvConfig | Mapping[str, Any] | None = None) -> None:
+        super().__init__(config)
+        self.time_gap = time_gap
+        self.index = level_index(self.config, time_gap)
+        self.name = f"fixed {seconds(time_gap)} s"
+
+    def _platoon_action(self, view: FollowerView) -> np.ndarray:
+        return np.full(view.setting_index.shape[0], self.index)
+
+    def _per_vehicle_action(self, view: FollowerView) -> np.ndarray:
+        return np.full(view.setting_index.shape, self.index)
+
+
+class V2VAwarePolicy(ObservationPolicy):
+    """``connected`` [s] while V2V is up, ``acc`` [s] without it (string stable in ACC).
+
+    Platoon: ``connected`` only while every follower has V2V; per vehicle: each follower by its own link.
+    """
+
+    def __init__(
+        self,
+        config: EnvConfig | Mapping[str, Any] | None = None,
+        *,
+        connected: float = V2V_TIME_GAP,
+        acc: float = ACC_TIME_GAP,
+    ) -> None:
+        super().__init__(config)
+        self.connected_index = level_index(self.config, connected, "connected")
+        self.acc_index = level_index(self.config, acc, "acc")
+        self.name = f"V2V-aware {seconds(connected)}/{seconds(acc)} s"
+        if self.action_mode == "per_vehicle":
+            self.name += " (per vehicle)"
+
+    def _platoon_action(self, view: FollowerView) -> np.ndarray:
+        return np.where(view.v2v.all(axis=1), self.connected_index, self.acc_index)
+
+    def _per_vehicle_action(self, view: FollowerView) -> np.ndarray:
+        return np.where(view.v2v, self.connected_index, self.acc_index)
+
+
+def fixed_policies(config: EnvConfig | Mapping[str, Any] | None = None) -> list[FixedPolicy]:
+    """One :class:`FixedPolicy` per level of the ladder, smallest first."""
+    config = as_config(config)
+    return [FixedPolicy(level, config) for level in config.time_gap_levels]
