@@ -95,8 +95,8 @@ class ControlChart:
     def update(self, tau_estimate: ArrayLike) -> ChartState:
         """Chart one tick's estimate of tau (n_envs, n_vehicles) [s]; return the new state."""
         estimate = batch_array("tau_estimate", tau_estimate, self.shape)
-        bad = np.argwhere(~np.isfinite(estimate))
-        if bad.size:
+        if not np.isfinite(estimate).all():  # called every tick: find the culprit only when there is one
+            bad = np.argwhere(~np.isfinite(estimate))
             index = tuple(int(i) for i in bad[0])
             raise ValueError(f"tau_estimate{list(index)} = {estimate[index]}: must be finite [s]")
         side = np.where(self.hold_off > 0, 0, self._side(estimate)).astype(np.int8)

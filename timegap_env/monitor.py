@@ -404,12 +404,14 @@ def batch_array(name: str, value: ArrayLike, shape: tuple[int, int]) -> np.ndarr
 def time_gap_array(time_gap: ArrayLike, shape: tuple[int, int]) -> np.ndarray:
     """``time_gap`` [s] broadcast to ``shape``, every value finite and > 0."""
     array = np.asarray(time_gap, dtype=float)
-    try:
-        array = np.broadcast_to(array, shape)
-    except ValueError:
-        raise ValueError(f"time_gap has shape {array.shape}: not broadcastable to {shape}") from None
-    bad = np.argwhere(~(np.isfinite(array) & (array > 0)))
-    if bad.size:
+    if array.shape != shape:
+        try:
+            array = np.broadcast_to(array, shape)
+        except ValueError:
+            raise ValueError(f"time_gap has shape {array.shape}: not broadcastable to {shape}") from None
+    valid = np.isfinite(array) & (array > 0)
+    if not valid.all():  # called every tick: find the culprit only when there is one
+        bad = np.argwhere(~valid)
         index = tuple(int(i) for i in bad[0])
         raise ValueError(f"time_gap{list(index)} = {float(array[index])}: must be finite and > 0 [s]")
     return array

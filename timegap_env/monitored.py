@@ -7,6 +7,8 @@ re-centres that follower's prior and chart on the new setting.
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 from timegap_env.charts import ChartState, make_chart
@@ -34,13 +36,16 @@ def counter_uniforms(keys: np.ndarray, ticks: np.ndarray, n_followers: int) -> n
     on which other envs share the batch, so a vector of envs reproduces the
     same envs run one by one.
     """
-    counter = (
-        ticks.astype(np.uint64)[None, :, None] * np.uint64(n_followers * _UNIFORM_STREAMS)
-        + np.arange(n_followers, dtype=np.uint64)[None, None, :] * np.uint64(_UNIFORM_STREAMS)
-        + np.arange(_UNIFORM_STREAMS, dtype=np.uint64)[:, None, None]
-    )
+    counter = ticks.astype(np.uint64)[None, :, None] * np.uint64(n_followers * _UNIFORM_STREAMS) + _offsets(n_followers)
     bits = _splitmix64(_splitmix64(counter * _SPLITMIX_INCREMENT + keys[None, :, None]))
     return ((bits >> np.uint64(11)).astype(np.float64) + 0.5) * 2.0**-53
+
+
+@functools.cache
+def _offsets(n_followers: int) -> np.ndarray:
+    """Counter offset of each (stream, follower) within a tick, shape (3, 1, n_followers)."""
+    follower = np.arange(n_followers, dtype=np.uint64)[None, None, :] * np.uint64(_UNIFORM_STREAMS)
+    return follower + np.arange(_UNIFORM_STREAMS, dtype=np.uint64)[:, None, None]
 
 
 def measure(

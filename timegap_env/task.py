@@ -180,8 +180,8 @@ class PlatoonTask:
                 self.trace.append((loop.ticks[0] * cfg.platoon.dt, loop.monitor.tau_mean[0], chart.center[0]))
             collided |= collisions.any(axis=1)
             deviation = np.abs(loop.monitor.tau_mean - chart.center)
-            deviation_sum += deviation.mean(axis=1)
-            alarm_sum += chart.alarm.mean(axis=1)
+            deviation_sum += deviation.sum(axis=1)
+            alarm_sum += chart.alarm.sum(axis=1)
             self.totals["alarm_ticks"] += chart.alarm.sum(axis=1)
             self.totals["exceedances"] += chart.exceedance.sum(axis=1)
             np.maximum(self.totals["max_deviation"], deviation.max(axis=1), out=self.totals["max_deviation"])
@@ -194,6 +194,7 @@ class PlatoonTask:
             self._previous_accel = accel.copy()
 
         n = self.ticks_per_decision
+        follower_ticks = n * self.n_followers
         setting = platoon.time_gap_setting
         speed = platoon.v[:, 1:]
         gap_per_vehicle = cfg.platoon.standstill_spacing + cfg.platoon.vehicle_length  # [m]
@@ -201,8 +202,8 @@ class PlatoonTask:
         capacity_ratio = (speed * self.levels[0] + gap_per_vehicle) / (speed * setting + gap_per_vehicle)
         span = self.levels[-1] - self.levels[0]
         terms = {
-            "tracking": -deviation_sum / n / half_width,
-            "alarms": -alarm_sum / n,
+            "tracking": -deviation_sum / follower_ticks / half_width,
+            "alarms": -alarm_sum / follower_ticks,
             "safety": -np.maximum(0.0, 1.0 - self._min_ttc_step / cfg.ttc_threshold).mean(axis=1),
             "collision": -collided.astype(float),
             "comfort": -(jerk_squared / n).mean(axis=1) / cfg.jerk_reference**2,
