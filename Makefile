@@ -4,7 +4,7 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: install demo test clean
+.PHONY: install demo test train bench clean
 
 install: $(STAMP)
 
@@ -20,6 +20,12 @@ demo: $(STAMP)
 
 test: $(STAMP)
 	MPLBACKEND=Agg $(PY) -m pytest -q
+
+train: $(STAMP)
+	$(PY) -m train.train_ppo
+
+bench: $(STAMP)
+	MPLBACKEND=Agg $(PY) -m train.bench
 
 clean:
 	rm -rf $(VENV) build *.egg-info .pytest_cache

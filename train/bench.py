@@ -1,0 +1,221 @@
+"""``make bench``: how much the simulator, the monitor and the environment cost, against reference environments.
+
+Every figure is measured in this process, the same way, back to back, and the
+table reports ratios, which survive a busy machine better than absolute times:
+
+1. env steps/s of ``TimeGapMonitor-v0`` (one env, random actions) against
+   highway-env's ``highway-fast-v0`` and gymnasium's ``CartPole-v1``;
+2. vehicle-ticks/s of the batched simulator (``Platoon``) at 1, 64 and 1024
+   envs, and the native vector env against a ``SyncVectorEnv`` of single envs;
+3. monitor updates/s, batched (1024 envs x 5 vehicles);
+4. PPO training steps/s on ``TimeGapMonitor-v0`` against PPO on ``CartPole-v1``
+   with the same hyperparameters;
+5. peak memory of a 1024-env vector env (tracemalloc: NumPy allocations included).
+
+Writes ``results/bench.md``.
+
+    python -m train.bench [--quick] [--out results/bench.md]
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import platform
+import time
+import tracemalloc
+from collections.abc import Callable
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+
+import timegap_env
+from timegap_env.config import MonitorConfig, PlatoonConfig
+from timegap_env.platoon import Platoon
+from train.bench_monitor import bench as bench_monitor
+
+TARGET_VS_HIGHWAY = 100.0  # single env steps/s over highway-fast-v0's [-]
+TARGET_VEHICLE_TICKS = 10e6  # batched simulator at 1024 envs [vehicle-ticks/s]
+TARGET_PPO_VS_CARTPOLE = 0.8  # PPO steps/s on TimeGapMonitor-v0 over CartPole-v1's [-]
+PPO_SETTINGS = dict(n_envs=8, n_steps=128, batch_size=256, n_epochs=4, learning_rate=3e-4)  # shared by both envs
+
+
+@dataclasses.dataclass(frozen=True)
+class Sizes:
+    """How long each measurement runs."""
+
+    env_steps: int  # steps of TimeGapMonitor-v0 and CartPole-v1
+    highway_steps: int  # steps of highway-fast-v0 (about 100x slower)
+    ticks: dict[int, int]  # simulator ticks timed per batch size
+    vector_envs: int  # sub-envs of the vector env comparison
+    vector_steps: int
+    monitor_ticks: int
+    ppo_timesteps: int
+    ppo_n_steps: int  # rollout length per env; PPO_SETTINGS' for the full run
+    memory_envs: int
+
+
+FULL = Sizes(2000, 60, {1: 3000, 64: 2000, 1024: 500}, 64, 100, 300, 8192, PPO_SETTINGS["n_steps"], 1024)
+QUICK = Sizes(20, 3, {1: 20, 64: 10, 1024: 5}, 4, 5, 5, 64, 8, 16)
+
+
+def timed(run: Callable[[], int]) -> float:
+    """Units of work per second of ``run()``, which returns how many units it did."""
+    start = time.perf_counter()
+    units = run()
+    return units / (time.perf_counter() - start)
+
+
+def env_steps_per_second(env: gym.Env, n_steps: int) -> float:
+    """Steps/s of one env under uniformly random actions, resets included."""
+    env.reset(seed=0)
+    env.action_space.seed(0)
+
+    def run() -> int:
+        for _ in range(n_steps):
+            _, _, terminated, truncated, _ = env.step(env.action_space.sample())
+            if terminated or truncated:
+                env.reset()
+        return n_steps
+
+    return timed(run)
+
+
+def vector_env_steps_per_second(envs: gym.vector.VectorEnv, n_steps: int) -> float:
+    """Env-steps/s (sub-envs x steps) of a vector env under random actions."""
+    envs.reset(seed=0)
+    envs.action_space.seed(0)
+
+    def run() -> int:
+        for _ in range(n_steps):
+            envs.step(envs.action_space.sample())
+        return n_steps * envs.num_envs
+
+    return timed(run)
+
+
+def vehicle_ticks_per_second(n_envs: int, n_ticks: int) -> float:
+    """Vehicle-ticks/s of the batched simulator: n_envs platoons of 1 + 5 vehicles behind a braking leader."""
+    platoon = Platoon(PlatoonConfig(), n_envs)
+    platoon.reset(np.full(n_envs, 25.0))
+    speeds = 25.0 - 0.1 * np.arange(n_ticks + 1)  # a gentle 1 m/s^2 deceleration
+
+    def run() -> int:
+        for k in range(1, n_ticks + 1):
+            platoon.step(speeds[k], -1.0)
+        return n_ticks * n_envs * (platoon.n_followers + 1)
+
+    return timed(run)
+
+
+def ppo_steps_per_second(make_venv: Callable[[], object], timesteps: int, n_steps: int) -> float:
+    """Environment steps/s of PPO learning, after one warm-up update (torch start-up excluded)."""
+    from stable_baselines3 import PPO
+
+    settings = {key: value for key, value in PPO_SETTINGS.items() if key != "n_envs"}
+    settings["n_steps"] = n_steps
+    settings["batch_size"] = min(settings["batch_size"], n_steps * PPO_SETTINGS["n_envs"])
+    model = PPO("MlpPolicy", make_venv(), seed=0, device="cpu", verbose=0, **settings)
+    model.learn(PPO_SETTINGS["n_envs"] * n_steps)
+    return timed(lambda: (model.learn(timesteps, reset_num_timesteps=False), timesteps)[1])
+
+
+def peak_memory_mib(n_envs: int, n_steps: int = 10) -> float:
+    """Peak traced memory of building, resetting and stepping an n_envs vector env [MiB]."""
+    tracemalloc.start()
+    envs = gym.make_vec(timegap_env.ENV_ID, num_envs=n_envs, vectorization_mode="vector_entry_point")
+    envs.reset(seed=0)
+    for _ in range(n_steps):
+        envs.step(envs.action_space.sample())
+    peak = tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+    envs.close()
+    return peak / 2**20
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--quick", action="store_true", help="tiny sizes, for a smoke test (numbers meaningless)")
+    parser.add_argument("--out", type=Path, default=Path("results/bench.md"))
+    args = parser.parse_args()
+    sizes = QUICK if args.quick else FULL
+
+    from stable_baselines3.common.env_util import make_vec_env
+
+    from timegap_env.sb3 import TimeGapVecEnv
+
+    import highway_env  # noqa: F401  (registers highway-fast-v0)
+
+    rows: list[tuple[str, str, str]] = []  # (measure, value, verdict)
+
+    ours = env_steps_per_second(gym.make(timegap_env.ENV_ID), sizes.env_steps)
+    highway = env_steps_per_second(gym.make("highway-fast-v0"), sizes.highway_steps)
+    cartpole = env_steps_per_second(gym.make("CartPole-v1"), sizes.env_steps)
+    rows += [
+        ("TimeGapMonitor-v0, one env [steps/s]", f"{ours:,.0f}", ""),
+        ("highway-fast-v0, one env [steps/s]", f"{highway:,.1f}", ""),
+        ("CartPole-v1, one env [steps/s]", f"{cartpole:,.0f}", ""),
+        ("TimeGapMonitor-v0 / highway-fast-v0", f"{ours / highway:,.1f}x",
+         f"target >= {TARGET_VS_HIGHWAY:.0f}x: {'met' if ours / highway >= TARGET_VS_HIGHWAY else 'NOT met'}"),
+        ("TimeGapMonitor-v0 / CartPole-v1", f"{ours / cartpole:.3f}x", ""),
+    ]
+
+    ticks = {n: vehicle_ticks_per_second(n, k) for n, k in sizes.ticks.items()}
+    for n, rate in ticks.items():
+        verdict = ""
+        if n == 1024:
+            verdict = f"target >= {TARGET_VEHICLE_TICKS / 1e6:.0f} M: {'met' if rate >= TARGET_VEHICLE_TICKS else 'NOT met'}"
+        rows.append((f"simulator, {n} envs [vehicle-ticks/s]", f"{rate / 1e6:,.2f} M", verdict))
+
+    n = sizes.vector_envs
+    native = vector_env_steps_per_second(
+        gym.make_vec(timegap_env.ENV_ID, num_envs=n, vectorization_mode="vector_entry_point"), sizes.vector_steps)
+    synced = vector_env_steps_per_second(gym.make_vec(timegap_env.ENV_ID, num_envs=n, vectorization_mode="sync"),
+                                         max(sizes.vector_steps // 4, 1))
+    rows += [
+        (f"native vector env, {n} envs [env-steps/s]", f"{native:,.0f}", ""),
+        (f"SyncVectorEnv, {n} envs [env-steps/s]", f"{synced:,.0f}", ""),
+        ("native / SyncVectorEnv", f"{native / synced:,.1f}x", ""),
+    ]
+
+    monitor = bench_monitor(1024, 5, sizes.monitor_ticks, MonitorConfig())
+    rows += [
+        ("monitor, 1024 x 5 [vehicle-updates/s]", f"{1024 * 5 / monitor['monitor'] / 1e6:,.1f} M", ""),
+        ("monitor / NumPy add of the same arrays [time ratio]", f"{monitor['monitor'] / monitor['add']:,.0f}x", ""),
+    ]
+
+    n_envs = PPO_SETTINGS["n_envs"]
+    ppo_ours = ppo_steps_per_second(lambda: TimeGapVecEnv(n_envs=n_envs), sizes.ppo_timesteps, sizes.ppo_n_steps)
+    ppo_cartpole = ppo_steps_per_second(lambda: make_vec_env("CartPole-v1", n_envs=n_envs, seed=0),
+                                        sizes.ppo_timesteps, sizes.ppo_n_steps)
+    ratio = ppo_ours / ppo_cartpole
+    rows += [
+        ("PPO on TimeGapMonitor-v0 [steps/s]", f"{ppo_ours:,.0f}", ""),
+        ("PPO on CartPole-v1 [steps/s]", f"{ppo_cartpole:,.0f}", ""),
+        ("PPO TimeGapMonitor-v0 / CartPole-v1", f"{ratio:.2f}x",
+         f"target >= {TARGET_PPO_VS_CARTPOLE:.0%}: {'met' if ratio >= TARGET_PPO_VS_CARTPOLE else 'NOT met'}"),
+    ]
+
+    rows.append((f"peak memory, {sizes.memory_envs}-env vector env [MiB]", f"{peak_memory_mib(sizes.memory_envs):,.1f}", ""))
+
+    lines = [
+        f"# Benchmarks (`python -m train.bench{' --quick' if args.quick else ''}`)",
+        "",
+        f"Python {platform.python_version()}, NumPy {np.__version__}, {platform.machine()}; one process, "
+        "measured back to back. Ratios are the figures to compare; absolute rates move with the machine's load.",
+        f"PPO settings for both envs: {PPO_SETTINGS}, MlpPolicy, CPU; "
+        "TimeGapMonitor-v0 through the native vector env (`timegap_env.sb3.TimeGapVecEnv`), CartPole-v1 through DummyVecEnv.",
+        "",
+        "| measure | value | target |",
+        "|---|---|---|",
+        *[f"| {measure} | {value} | {verdict} |" for measure, value, verdict in rows],
+    ]
+    text = "\n".join(lines) + "\n"
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text(text)
+    print(text)
+
+
+if __name__ == "__main__":
+    main()
