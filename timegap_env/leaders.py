@@ -30,6 +30,17 @@ from timegap_env.config import (
 )
 
 
+def _series(name: str, values: np.ndarray) -> np.ndarray:
+    """``values`` as a finite 1-D float array of at least 2 samples; ValueError naming ``name`` otherwise."""
+    array = np.asarray(values, dtype=float)
+    if array.ndim != 1 or array.size < 2:
+        raise ValueError(f"{name} has shape {array.shape}: must be 1-D with at least 2 samples")
+    bad = np.flatnonzero(~np.isfinite(array))
+    if bad.size:
+        raise ValueError(f"{name}[{bad[0]}] = {array[bad[0]]}: every sample must be finite ({bad.size} are not)")
+    return array
+
+
 @dataclasses.dataclass(frozen=True)
 class LeaderProfile:
     """A leader's speed and acceleration, one sample every ``dt``."""
@@ -43,17 +54,7 @@ class LeaderProfile:
         if not (isinstance(self.dt, (int, float)) and math.isfinite(self.dt) and self.dt > 0):
             raise ValueError(f"LeaderProfile.dt = {self.dt!r}: must be a finite number > 0")
         for field in ("speed", "accel"):
-            values = np.asarray(getattr(self, field), dtype=float)
-            if values.ndim != 1 or values.size < 2:
-                raise ValueError(
-                    f"LeaderProfile.{field} has shape {values.shape}: must be 1-D with at least 2 samples"
-                )
-            bad = np.flatnonzero(~np.isfinite(values))
-            if bad.size:
-                raise ValueError(
-                    f"LeaderProfile.{field}[{bad[0]}] = {values[bad[0]]}: every sample must be finite "
-                    f"({bad.size} non-finite samples)"
-                )
+            values = _series(f"LeaderProfile.{field}", getattr(self, field)).copy()
             values.setflags(write=False)
             object.__setattr__(self, field, values)
         if self.speed.shape != self.accel.shape:
@@ -77,12 +78,7 @@ class LeaderProfile:
     @classmethod
     def from_speed(cls, speed: np.ndarray, dt: float = LeaderConfig.dt, name: str = "custom") -> LeaderProfile:
         """A profile from a speed series [m/s]; the acceleration is its central difference."""
-        speed = np.asarray(speed, dtype=float)
-        if speed.ndim != 1 or speed.size < 2:
-            raise ValueError(f"speed has shape {speed.shape}: must be 1-D with at least 2 samples")
-        bad = np.flatnonzero(~np.isfinite(speed))
-        if bad.size:
-            raise ValueError(f"speed[{bad[0]}] = {speed[bad[0]]}: every sample must be finite")
+        speed = _series("speed", speed)
         return cls(speed=speed, accel=np.gradient(speed, dt), dt=dt, name=name)
 
     @classmethod
@@ -97,12 +93,7 @@ class LeaderProfile:
         Where the band stops the integration the realised acceleration is the
         clipped one, so speed and acceleration stay consistent.
         """
-        accel = np.asarray(accel, dtype=float)
-        if accel.ndim != 1 or accel.size < 2:
-            raise ValueError(f"accel has shape {accel.shape}: must be 1-D with at least 2 samples")
-        bad = np.flatnonzero(~np.isfinite(accel))
-        if bad.size:
-            raise ValueError(f"accel[{bad[0]}] = {accel[bad[0]]}: every sample must be finite")
+        accel = _series("accel", accel)
         low, high = leader.speed_band
         speed = np.empty_like(accel)
         speed[0] = leader.initial_speed
