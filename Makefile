@@ -17,6 +17,7 @@ $(STAMP): pyproject.toml
 demo: $(STAMP)
 	MPLBACKEND=Agg $(PY) -m train.demo
 	MPLBACKEND=Agg $(PY) -m train.reproduce_paper
+	MPLBACKEND=Agg $(PY) -m train.evaluate
 
 test: $(STAMP)
 	MPLBACKEND=Agg $(PY) -m pytest -q

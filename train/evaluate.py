@@ -448,7 +448,8 @@ def main(argv: Sequence[str] | None = None) -> None:
     write_episodes(policies, records, args.out)
     plot_profiles(policies, profiles, args.out)
     plot_metrics(rows, args.out)
-    print(f"wrote {args.out}/table.md, table.csv, episodes.csv, profiles.png, metrics.png in {elapsed:.0f} s")
+    print(f"wrote {args.out}/table.md, table.csv, episodes.csv, profiles.png, metrics.png in {elapsed:.0f} s\n")
+    print((args.out / "table.md").read_text().split("\n## Group")[0])  # the table over all episodes
 
 
 if __name__ == "__main__":
