@@ -11,6 +11,6 @@ def test_bench_runs_quick(tmp_path, monkeypatch, capsys):
     bench.main()
     table = out.read_text()
     for measure in ("TimeGapMonitor-v0 / highway-fast-v0", "simulator, 1024 envs", "native / SyncVectorEnv",
-                    "monitor, 1024 x 5", "PPO TimeGapMonitor-v0 / CartPole-v1", "peak memory"):
+                    "monitor, 1024 x 5", "PPO, training setting: TimeGapMonitor-v0 / CartPole-v1", "peak memory"):
         assert measure in table
     assert "| TimeGapMonitor-v0 / highway-fast-v0 |" in capsys.readouterr().out

@@ -29,6 +29,7 @@ from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
+import torch
 
 import timegap_env
 from timegap_env.config import MonitorConfig, PlatoonConfig
@@ -38,7 +39,8 @@ from train.bench_monitor import bench as bench_monitor
 TARGET_VS_HIGHWAY = 100.0  # single env steps/s over highway-fast-v0's [-]
 TARGET_VEHICLE_TICKS = 10e6  # batched simulator at 1024 envs [vehicle-ticks/s]
 TARGET_PPO_VS_CARTPOLE = 0.8  # PPO steps/s on TimeGapMonitor-v0 over CartPole-v1's [-]
-PPO_SETTINGS = dict(n_envs=8, n_steps=128, batch_size=256, n_epochs=4, learning_rate=3e-4)  # shared by both envs
+PPO_SMALL = dict(n_envs=8, n_steps=128, batch_size=256, n_epochs=4, learning_rate=3e-4)  # a small, common setting
+PPO_TRAINING = dict(n_envs=64, n_steps=64, batch_size=512, n_epochs=10, learning_rate=1e-3)  # hyperparams/ppo.yml's
 
 
 @dataclasses.dataclass(frozen=True)
@@ -52,12 +54,12 @@ class Sizes:
     vector_steps: int
     monitor_ticks: int
     ppo_timesteps: int
-    ppo_n_steps: int  # rollout length per env; PPO_SETTINGS' for the full run
+    ppo_n_steps: int  # rollout length per env; 0 = the setting's own
     memory_envs: int
 
 
-FULL = Sizes(2000, 60, {1: 3000, 64: 2000, 1024: 500}, 64, 100, 300, 8192, PPO_SETTINGS["n_steps"], 1024)
-QUICK = Sizes(20, 3, {1: 20, 64: 10, 1024: 5}, 4, 5, 5, 64, 8, 16)
+FULL = Sizes(2000, 60, {1: 3000, 64: 2000, 1024: 500}, 64, 100, 300, 8192, 0, 1024)  # 0: each setting's n_steps
+QUICK = Sizes(20, 3, {1: 20, 64: 10, 1024: 5}, 4, 5, 5, 64, 1, 16)
 
 
 def timed(run: Callable[[], int]) -> float:
@@ -109,15 +111,15 @@ def vehicle_ticks_per_second(n_envs: int, n_ticks: int) -> float:
     return timed(run)
 
 
-def ppo_steps_per_second(make_venv: Callable[[], object], timesteps: int, n_steps: int) -> float:
-    """Environment steps/s of PPO learning, after one warm-up update (torch start-up excluded)."""
+def ppo_steps_per_second(make_venv: Callable[[int], object], setting: dict, timesteps: int, n_steps: int) -> float:
+    """Environment steps/s of PPO learning with ``setting``, after one warm-up update (torch start-up excluded)."""
     from stable_baselines3 import PPO
 
-    settings = {key: value for key, value in PPO_SETTINGS.items() if key != "n_envs"}
-    settings["n_steps"] = n_steps
-    settings["batch_size"] = min(settings["batch_size"], n_steps * PPO_SETTINGS["n_envs"])
-    model = PPO("MlpPolicy", make_venv(), seed=0, device="cpu", verbose=0, **settings)
-    model.learn(PPO_SETTINGS["n_envs"] * n_steps)
+    settings = {key: value for key, value in setting.items() if key != "n_envs"}
+    settings["n_steps"] = n_steps or setting["n_steps"]
+    settings["batch_size"] = min(settings["batch_size"], settings["n_steps"] * setting["n_envs"])
+    model = PPO("MlpPolicy", make_venv(setting["n_envs"]), seed=0, device="cpu", verbose=0, **settings)
+    model.learn(setting["n_envs"] * settings["n_steps"])
     return timed(lambda: (model.learn(timesteps, reset_num_timesteps=False), timesteps)[1])
 
 
@@ -185,17 +187,19 @@ def main() -> None:
         ("monitor / NumPy add of the same arrays [time ratio]", f"{monitor['monitor'] / monitor['add']:,.0f}x", ""),
     ]
 
-    n_envs = PPO_SETTINGS["n_envs"]
-    ppo_ours = ppo_steps_per_second(lambda: TimeGapVecEnv(n_envs=n_envs), sizes.ppo_timesteps, sizes.ppo_n_steps)
-    ppo_cartpole = ppo_steps_per_second(lambda: make_vec_env("CartPole-v1", n_envs=n_envs, seed=0),
-                                        sizes.ppo_timesteps, sizes.ppo_n_steps)
-    ratio = ppo_ours / ppo_cartpole
-    rows += [
-        ("PPO on TimeGapMonitor-v0 [steps/s]", f"{ppo_ours:,.0f}", ""),
-        ("PPO on CartPole-v1 [steps/s]", f"{ppo_cartpole:,.0f}", ""),
-        ("PPO TimeGapMonitor-v0 / CartPole-v1", f"{ratio:.2f}x",
-         f"target >= {TARGET_PPO_VS_CARTPOLE:.0%}: {'met' if ratio >= TARGET_PPO_VS_CARTPOLE else 'NOT met'}"),
-    ]
+    torch.set_num_threads(1)  # as train_ppo does: faster than two threads on this 2-core machine
+    for label, setting in (("small setting", PPO_SMALL), ("training setting", PPO_TRAINING)):
+        timesteps = max(sizes.ppo_timesteps, 2 * setting["n_envs"] * (sizes.ppo_n_steps or setting["n_steps"]))
+        ppo_ours = ppo_steps_per_second(lambda n: TimeGapVecEnv(n_envs=n), setting, timesteps, sizes.ppo_n_steps)
+        ppo_cartpole = ppo_steps_per_second(lambda n: make_vec_env("CartPole-v1", n_envs=n, seed=0), setting,
+                                            timesteps, sizes.ppo_n_steps)
+        ratio = ppo_ours / ppo_cartpole
+        rows += [
+            (f"PPO, {label} {setting}: TimeGapMonitor-v0 [steps/s]", f"{ppo_ours:,.0f}", ""),
+            (f"PPO, {label}: CartPole-v1 [steps/s]", f"{ppo_cartpole:,.0f}", ""),
+            (f"PPO, {label}: TimeGapMonitor-v0 / CartPole-v1", f"{ratio:.2f}x",
+             f"target >= {TARGET_PPO_VS_CARTPOLE:.0%}: {'met' if ratio >= TARGET_PPO_VS_CARTPOLE else 'NOT met'}"),
+        ]
 
     rows.append((f"peak memory, {sizes.memory_envs}-env vector env [MiB]", f"{peak_memory_mib(sizes.memory_envs):,.1f}", ""))
 
@@ -204,7 +208,7 @@ def main() -> None:
         "",
         f"Python {platform.python_version()}, NumPy {np.__version__}, {platform.machine()}; one process, "
         "measured back to back. Ratios are the figures to compare; absolute rates move with the machine's load.",
-        f"PPO settings for both envs: {PPO_SETTINGS}, MlpPolicy, CPU; "
+        "PPO: each setting runs on both envs alike, MlpPolicy, CPU, one torch thread; "
         "TimeGapMonitor-v0 through the native vector env (`timegap_env.sb3.TimeGapVecEnv`), CartPole-v1 through DummyVecEnv.",
         "",
         "| measure | value | target |",
