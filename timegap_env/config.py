@@ -289,8 +289,8 @@ class ChartConfig(ConfigMixin):
     exceedance_window: float = 35.0  # trailing window in which exceedances are counted, a multiple of dt [s]
     switch_exceedances: int = 3  # paper's rule: this many exceedances within the window ... [-]
     switch_to: float = 1.0  # ... switch the setting to this time gap [s]
-    settle_time: float = 8.0  # alarms wait this long after a commanded change has ramped in; measured
-    # transients end 2.4-6.8 s after the ramp (0.6 -> 2.2 s the slowest) [s]
+    settle_time: float = 8.0  # alarms wait this long after a commanded change has ramped in; long enough
+    # for the slowest change of the default ladder, 0.6 -> 2.2 s (tests/test_monitored.py) [s]
     dt: float = PlatoonConfig.dt  # chart tick, one estimate per tick [s]
 
     def __post_init__(self) -> None:

@@ -10,7 +10,7 @@ import numpy as np
 from gymnasium import spaces
 
 from timegap_env.config import EnvConfig
-from timegap_env.task import FEATURES, OBSERVATION_HIGH, OBSERVATION_LOW, PlatoonTask
+from timegap_env.task import OBSERVATION_HIGH, OBSERVATION_LOW, PlatoonTask
 
 RENDER_HISTORY = 60.0  # seconds of chart history drawn by the renderer [s]
 

@@ -83,7 +83,7 @@ class MonitoredPlatoon:
         n_envs: int = 1,
         seed: int | None = None,
     ) -> None:
-        for name, config, expected in (("monitor", monitor, MonitorConfig), ("chart", chart, ChartConfig)):
+        for name, config in (("monitor", monitor), ("chart", chart)):
             if not np.isclose(config.dt, platoon.dt):
                 raise ValueError(f"{name}.dt = {config.dt}: must equal PlatoonConfig.dt = {platoon.dt}")
         self.platoon = Platoon(platoon, n_envs)

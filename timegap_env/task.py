@@ -18,7 +18,7 @@ import numpy as np
 from timegap_env.config import EnvConfig
 from timegap_env.leaders import LeaderProfile
 from timegap_env.monitored import MonitoredPlatoon
-from timegap_env.scenarios import LEADER_FAMILIES, SCENARIOS, make_leader
+from timegap_env.scenarios import SCENARIOS, make_leader
 
 FEATURES = (
     "deviation",  # (posterior mean of tau - tau*) / DEVIATION_SCALE, clipped to [-1, 1]
@@ -90,7 +90,7 @@ class PlatoonTask:
         runs the user's leader speed series [m/s] at ``platoon.dt`` (truncated to the episode,
         padded to whole decisions by holding its last speed).
         """
-        cfg, tpd = self.config, self.ticks_per_decision
+        cfg = self.config
         options = dict(options or {})
         unknown = sorted(set(options) - {"scenario", "leader_speed"})
         if unknown:

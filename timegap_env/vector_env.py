@@ -58,9 +58,8 @@ class TimeGapMonitorVectorEnv(VectorEnv):
             seeds = list(seed)
             if len(seeds) != self.num_envs:
                 raise ValueError(f"seed has {len(seeds)} entries: must have num_envs = {self.num_envs}")
-        if seed is not None or not hasattr(self, "_seeded"):
+        if seed is not None:  # otherwise each sub-env's generator carries on, as a single env's would
             self._rngs = [seeding.np_random(s)[0] for s in seeds]
-            self._seeded = True
         everyone = np.ones(self.num_envs, dtype=bool)
         self.task.reset(everyone, self._rngs, options)
         self._steps[:] = 0

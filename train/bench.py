@@ -187,7 +187,7 @@ def main() -> None:
         ("monitor / NumPy add of the same arrays [time ratio]", f"{monitor['monitor'] / monitor['add']:,.0f}x", ""),
     ]
 
-    torch.set_num_threads(1)  # as train_ppo does: faster than two threads on this 2-core machine
+    torch.set_num_threads(1)  # as train_ppo does
     for label, setting in (("small setting", PPO_SMALL), ("training setting", PPO_TRAINING)):
         timesteps = max(sizes.ppo_timesteps, 2 * setting["n_envs"] * (sizes.ppo_n_steps or setting["n_steps"]))
         ppo_ours = ppo_steps_per_second(lambda n: TimeGapVecEnv(n_envs=n), setting, timesteps, sizes.ppo_n_steps)
