@@ -41,7 +41,8 @@ __all__ = [
 
 @dataclasses.dataclass(frozen=True)
 class ChartState:
-    """A chart after a tick: copies of its arrays, each (n_envs, n_vehicles)."""
+    """A chart after a tick: copies of its arrays, each (n_envs, n_vehicles); from
+    :meth:`ControlChart.update_block`, one per tick, each (n_ticks, n_envs, n_vehicles)."""
 
     center: np.ndarray  # tau* the chart is centred on [s]
     alarm: np.ndarray  # charted statistic outside its limits now [bool]
@@ -54,9 +55,10 @@ class ChartState:
 class ControlChart:
     """What every chart shares: excursions, their windowed count, run length, re-centring.
 
-    A subclass defines ``_side(estimate)``: update its statistic and say on which side of its
-    limits it lies (-1, 0, +1); ``_restart(mask)``: restart its statistic for those vehicles;
-    and, if it has a statistic, ``_allocate()`` to create it.
+    A subclass defines ``_sides(estimates, centers)``: update its statistic through a block of
+    ticks and say on which side of its limits it lies after each (-1, 0, +1); ``_restart(mask)``:
+    restart its statistic for those vehicles; and, if it has a statistic, ``_allocate()`` to
+    create it.
     """
 
     def __init__(
@@ -95,19 +97,54 @@ class ControlChart:
     def update(self, tau_estimate: ArrayLike) -> ChartState:
         """Chart one tick's estimate of tau (n_envs, n_vehicles) [s]; return the new state."""
         estimate = batch_array("tau_estimate", tau_estimate, self.shape)
-        if not np.isfinite(estimate).all():  # called every tick: find the culprit only when there is one
-            bad = np.argwhere(~np.isfinite(estimate))
-            index = tuple(int(i) for i in bad[0])
-            raise ValueError(f"tau_estimate{list(index)} = {estimate[index]}: must be finite [s]")
-        side = np.where(self.hold_off > 0, 0, self._side(estimate)).astype(np.int8)
-        np.maximum(self.hold_off - 1, 0, out=self.hold_off)
-        self.exceedance = (side != 0) & (side != self.side)
-        self.side = side
-        self.exceedances_in_window += self.exceedance.astype(np.int64) - self._starts[self._slot]
-        self._starts[self._slot] = self.exceedance
-        self._slot = (self._slot + 1) % len(self._starts)
-        self.run_length = np.where(side != 0, 0, self.run_length + 1)
-        return self.state
+        _check_finite("tau_estimate", estimate)
+        block = self._update_block(estimate[None], self.center[None])
+        return ChartState(*(getattr(block, field.name)[0] for field in dataclasses.fields(ChartState)))
+
+    def update_block(self, tau_estimates: ArrayLike, centers: ArrayLike) -> ChartState:
+        """Chart n_ticks estimates of tau (n_ticks, n_envs, n_vehicles) [s], tick k against centre line
+        ``centers[k]`` [s] (same shape; a ramping setting moves the limits with it); return the state after each tick.
+        """
+        estimates = np.asarray(tau_estimates, dtype=float)
+        if estimates.ndim != 3 or estimates.shape[1:] != self.shape or not len(estimates):
+            raise ValueError(f"tau_estimates has shape {estimates.shape}: expected (n_ticks >= 1, *{self.shape})")
+        _check_finite("tau_estimates", estimates)
+        centers = np.asarray(centers, dtype=float)
+        if centers.shape != estimates.shape:
+            raise ValueError(f"centers has shape {centers.shape}: expected {estimates.shape} like tau_estimates")
+        _check_finite("centers", centers)
+        return self._update_block(estimates, centers)
+
+    def _update_block(self, estimates: np.ndarray, centers: np.ndarray) -> ChartState:
+        n_ticks = len(estimates)
+        tick = np.arange(n_ticks)[:, None, None]
+        sides = np.where(self.hold_off > tick, 0, self._sides(estimates, centers)).astype(np.int8)
+        self.hold_off = np.maximum(self.hold_off - n_ticks, 0)
+        previous = np.concatenate([self.side[None], sides[:-1]])
+        exceedances = (sides != 0) & (sides != previous)
+        in_window = self._count_in_window(exceedances)
+        last_alarm = np.maximum.accumulate(np.where(sides != 0, tick, -1 - self.run_length), axis=0)
+        run_lengths = tick - last_alarm  # ticks since the last alarm, or since the run before the block started
+        self.center, self.side, self.exceedance = centers[-1].copy(), sides[-1].copy(), exceedances[-1].copy()
+        self.exceedances_in_window, self.run_length = in_window[-1].copy(), run_lengths[-1].copy()
+        return ChartState(center=centers, alarm=sides != 0, side=sides, exceedance=exceedances,
+                          exceedances_in_window=in_window, run_length=run_lengths)
+
+    def _count_in_window(self, exceedances: np.ndarray) -> np.ndarray:
+        """Excursions started within the trailing window after each tick; the ring of start flags moves on."""
+        ring_length, counts = len(self._starts), np.empty(exceedances.shape, dtype=np.int64)
+        count = self.exceedances_in_window
+        for start in range(0, len(exceedances), ring_length):  # chunks no longer than the ring
+            new = exceedances[start : start + ring_length]
+            slots = (self._slot + np.arange(len(new))) % ring_length
+            leaving = self._starts[slots]  # flags of the ticks that drop out of the window
+            chunk = counts[start : start + len(new)]
+            np.cumsum(new.astype(np.int64) - leaving, axis=0, out=chunk)
+            chunk += count
+            count = chunk[-1]
+            self._starts[slots] = new
+            self._slot = (self._slot + len(new)) % ring_length
+        return counts
 
     def recenter(self, time_gap: ArrayLike, mask: ArrayLike | None = None) -> None:
         """Centre the chart on a new tau* ``time_gap`` [s] for the vehicles in ``mask``.
@@ -136,14 +173,6 @@ class ControlChart:
         vehicles = vehicle_mask(mask, self.shape)
         self.hold_off[vehicles] = np.broadcast_to(np.asarray(ticks, dtype=np.int64), self.shape)[vehicles]
 
-    def move_center(self, time_gap: ArrayLike) -> None:
-        """Move the centre line to ``time_gap`` [s] (broadcast to (n_envs, n_vehicles)), keeping the history.
-
-        For a setting that is ramped towards its new value: the limits follow the
-        ramp instead of jumping ahead of the controller.
-        """
-        self.center[...] = time_gap_array(time_gap, self.shape)
-
     def reset(self, mask: ArrayLike | None, time_gap: ArrayLike) -> None:
         """Restart the envs in ``mask`` ((n_envs,) bool, None = all), centred on ``time_gap`` [s]."""
         vehicles = np.broadcast_to(env_mask(mask, self.shape[0])[:, None], self.shape)
@@ -152,11 +181,18 @@ class ControlChart:
     def _allocate(self) -> None:
         """Create the chart's own statistic arrays (none by default)."""
 
-    def _side(self, estimate: np.ndarray) -> np.ndarray:
+    def _sides(self, estimates: np.ndarray, centers: np.ndarray) -> np.ndarray:
         raise NotImplementedError
 
     def _restart(self, mask: np.ndarray) -> None:
         raise NotImplementedError
+
+
+def _check_finite(name: str, values: np.ndarray) -> None:
+    """ValueError naming the first non-finite value; called every tick, so it searches only when there is one."""
+    if not np.isfinite(values).all():
+        index = tuple(int(i) for i in np.argwhere(~np.isfinite(values))[0])
+        raise ValueError(f"{name}{list(index)} = {values[index]}: must be finite [s]")
 
 
 def _outside(value: np.ndarray, low: np.ndarray, high: np.ndarray) -> np.ndarray:
@@ -180,8 +216,9 @@ class ShewhartChart(ControlChart):
         """Upper control limit (n_envs, n_vehicles) [s]."""
         return self.center + self.config.limit_width * self.config.baseline_std
 
-    def _side(self, estimate: np.ndarray) -> np.ndarray:
-        return _outside(estimate, self.lcl, self.ucl)
+    def _sides(self, estimates: np.ndarray, centers: np.ndarray) -> np.ndarray:
+        half_width = self.config.limit_width * self.config.baseline_std
+        return _outside(estimates, centers - half_width, centers + half_width)
 
     def _restart(self, mask: np.ndarray) -> None:
         """Memoryless: nothing to restart."""
@@ -213,10 +250,11 @@ class EwmaChart(ControlChart):
         """Upper control limit of the EWMA (n_envs, n_vehicles) [s]."""
         return self.center + self.half_width
 
-    def _side(self, estimate: np.ndarray) -> np.ndarray:
-        lam = self.config.ewma_lambda
-        self.ewma = lam * estimate + (1.0 - lam) * self.ewma
-        return _outside(self.ewma, self.lcl, self.ucl)
+    def _sides(self, estimates: np.ndarray, centers: np.ndarray) -> np.ndarray:
+        lam, ewmas = self.config.ewma_lambda, np.empty_like(estimates)
+        for k, estimate in enumerate(estimates):  # a recursion: tick by tick
+            self.ewma = ewmas[k] = lam * estimate + (1.0 - lam) * self.ewma
+        return _outside(ewmas, centers - self.half_width, centers + self.half_width)
 
     def _restart(self, mask: np.ndarray) -> None:
         self.ewma[mask] = self.center[mask]
@@ -234,13 +272,15 @@ class CusumChart(ControlChart):
         self.upper_sum = np.zeros(self.shape)  # C+ [sigma_desired]
         self.lower_sum = np.zeros(self.shape)  # C- [sigma_desired]
 
-    def _side(self, estimate: np.ndarray) -> np.ndarray:
+    def _sides(self, estimates: np.ndarray, centers: np.ndarray) -> np.ndarray:
         cfg = self.config
-        y = (estimate - self.center) / cfg.baseline_std
-        self.upper_sum = np.maximum(0.0, self.upper_sum + y - cfg.cusum_k)
-        self.lower_sum = np.maximum(0.0, self.lower_sum - y - cfg.cusum_k)
-        above = (self.upper_sum > cfg.cusum_h) & (self.upper_sum >= self.lower_sum)
-        below = (self.lower_sum > cfg.cusum_h) & ~above
+        deviations = (estimates - centers) / cfg.baseline_std
+        upper, lower = np.empty_like(estimates), np.empty_like(estimates)
+        for k, y in enumerate(deviations):  # a recursion: tick by tick
+            self.upper_sum = upper[k] = np.maximum(0.0, self.upper_sum + y - cfg.cusum_k)
+            self.lower_sum = lower[k] = np.maximum(0.0, self.lower_sum - y - cfg.cusum_k)
+        above = (upper > cfg.cusum_h) & (upper >= lower)
+        below = (lower > cfg.cusum_h) & ~above
         return above.astype(np.int8) - below.astype(np.int8)
 
     def _restart(self, mask: np.ndarray) -> None:

@@ -9,7 +9,7 @@ Z_j = [1, V_j] the posterior is N(mu*, Sigma*) with
 The data enter only through Z^T Z (2x2) and Z^T S (2), i.e. five sums per vehicle,
 ``[n, sum V, sum V^2, sum S, sum V S]`` (the "stats" below). :func:`posterior` computes them
 for one vehicle's measurements; :class:`TimeGapMonitor` keeps them for a sliding window of
-every vehicle of every env and updates them in O(1) per measurement.
+every vehicle of every env, tick by tick or a block of ticks at a time.
 
 Numerics. The 2x2 posterior precision Lambda = P + D (P = Sigma_b^-1, D = Z^T Z / sigma^2)
 is inverted through its adjugate, with the determinant assembled from three terms that are
@@ -31,7 +31,7 @@ from numpy.typing import ArrayLike
 
 from timegap_env.config import MonitorConfig
 
-__all__ = ["posterior", "prior_precision", "TimeGapMonitor", "erfc"]
+__all__ = ["posterior", "prior_precision", "TimeGapMonitor", "MonitorTicks", "erfc"]
 
 N_STATS = 5  # channels of the sufficient statistics: n, sum V, sum V^2, sum S, sum V S
 
@@ -163,13 +163,22 @@ def _moments_from_stats(
     )
 
 
+class MonitorTicks(NamedTuple):
+    """What :meth:`TimeGapMonitor.update_block` returns, arrays (n_ticks, n_envs, n_vehicles)."""
+
+    used: np.ndarray  # the measurement was used (else skipped) [bool]
+    tau_mean: np.ndarray  # posterior mean of tau after the tick [s]
+
+
 class TimeGapMonitor:
     """Streaming posterior of [s0, tau] for every vehicle of every env, O(1) work per measurement.
 
-    Arrays are shaped (n_envs, n_vehicles); one :meth:`update` is one tick (``config.dt``)
-    of measurements, all vehicles and envs in the same NumPy operations. Read-outs: ``mean``
-    (..., 2) and ``cov`` (..., 2, 2) of [s0, tau], ``tau_mean``, ``tau_std``,
-    :meth:`prob_outside`, ``skipped``, ``n_measurements``, ``ztz``, ``zts``.
+    Arrays are shaped (n_envs, n_vehicles); one tick (``config.dt``) brings one measurement
+    per vehicle. :meth:`update` takes one tick, :meth:`update_block` several at once, with
+    every vehicle and env in the same NumPy operations; the result does not depend on how
+    the ticks are grouped. Read-outs (after the last tick): ``mean`` (..., 2) and ``cov``
+    (..., 2, 2) of [s0, tau], ``tau_mean``, ``tau_std``, :meth:`prob_outside`, ``skipped``,
+    ``n_measurements``, ``ztz``, ``zts``.
 
     Forgetting. With all data since t = 0 the estimate would freeze, so old data are
     forgotten by a sliding window of the last ``config.window`` seconds (W ticks), by an
@@ -191,7 +200,8 @@ class TimeGapMonitor:
     slots k..W-1). The window total is then the running sum plus one suffix slot: only
     additions of at most 2W terms, so the error is bounded and does not grow with time. When
     a block is full it is turned into suffix sums in place: O(W) work every W ticks,
-    amortised O(1) per tick.
+    amortised O(1) per tick. A block of ticks is added as a few array operations per ring
+    block it touches, with the same additions in the same order as tick by tick.
     """
 
     def __init__(
@@ -202,9 +212,7 @@ class TimeGapMonitor:
         self._precision = prior_precision(config.prior_cov)
         self._prior_tau = np.empty(self.shape)  # prior mean of tau, the setting tau* [s]
         self.skipped = np.zeros(self.shape, dtype=np.int64)  # measurements skipped since reset [-]
-
         stats_shape = (N_STATS,) + self.shape
-        self._tick_stats = np.zeros(stats_shape)  # this tick's measurements
         self._block_sum = np.zeros(stats_shape)  # forgetting-weighted sum of this block
         self._window_stats = np.zeros(stats_shape)  # forgetting-weighted sum of the window
         self._window_ticks = config.window_ticks
@@ -226,49 +234,76 @@ class TimeGapMonitor:
         """
         speed = batch_array("speed", speed, self.shape)
         spacing = batch_array("spacing", spacing, self.shape)
-        cfg = self.config
-        valid = (speed >= 0) & (speed <= cfg.max_speed) & (spacing >= 0) & (spacing <= cfg.max_spacing)  # NaN -> False
-        self.skipped += ~valid
-        x = self._tick_stats
-        x[0] = valid
-        x[1] = np.where(valid, speed, 0.0)
-        x[3] = np.where(valid, spacing, 0.0)
-        np.multiply(x[1], x[1], out=x[2])
-        np.multiply(x[1], x[3], out=x[4])
+        return self.update_block(speed[None], spacing[None]).used[0]
 
-        if cfg.forgetting < 1:
-            self._block_sum *= cfg.forgetting
-        self._block_sum += x
+    def update_block(self, speed: ArrayLike, spacing: ArrayLike) -> MonitorTicks:
+        """Add n_ticks ticks of measurements, speed [m/s] and spacing [m], each (n_ticks, n_envs, n_vehicles)."""
+        speed, spacing = np.asarray(speed, dtype=float), np.asarray(spacing, dtype=float)
+        if speed.ndim != 3 or speed.shape[1:] != self.shape or spacing.shape != speed.shape or not len(speed):
+            raise ValueError(
+                f"speed, spacing have shapes {speed.shape}, {spacing.shape}: expected (n_ticks >= 1, *{self.shape})"
+            )
+        cfg = self.config
+        used = (speed >= 0) & (speed <= cfg.max_speed) & (spacing >= 0) & (spacing <= cfg.max_spacing)  # NaN -> False
+        self.skipped += (~used).sum(axis=0)
+        stats = np.empty((len(speed), N_STATS) + self.shape)  # this block's per-tick stats
+        stats[:, 0] = used
+        np.copyto(stats[:, 1], np.where(used, speed, 0.0))
+        np.copyto(stats[:, 3], np.where(used, spacing, 0.0))
+        np.multiply(stats[:, 1], stats[:, 1], out=stats[:, 2])
+        np.multiply(stats[:, 1], stats[:, 3], out=stats[:, 4])
+        window = self._window_sums(stats)
+        self._window_stats = window[-1]
+        prior_mean = (cfg.prior_standstill_spacing, self._prior_tau)
+        moments = _moments_from_stats(np.moveaxis(window, 1, 0), prior_mean, self._precision, cfg.noise_variance)
+        self._moments = Moments(*(channel[-1] for channel in moments))
+        return MonitorTicks(used=used, tau_mean=moments.mean_tau)
+
+    def _window_sums(self, stats: np.ndarray) -> np.ndarray:
+        """Forgetting-weighted window sums after each tick of ``stats`` (n_ticks, 5, n_envs, n_vehicles)."""
         if self._window_ticks is None:
-            self._window_stats[...] = self._block_sum
-        else:
+            sums = self._running_sums(self._block_sum, stats)
+            self._block_sum = sums[-1]
+            return sums
+        sums = np.empty_like(stats)
+        start, W = 0, self._window_ticks
+        while start < len(stats):  # one ring block at a time: slots p .. p + m - 1
             p = self._slot
-            self._slots[p] = x
-            np.multiply(self._slots[p + 1], self._suffix_weight[p], out=self._window_stats)
-            self._window_stats += self._block_sum
-            if p == self._window_ticks - 1:
+            m = min(len(stats) - start, W - p)
+            suffix = self._slots[p + 1 : p + m + 1] * self._suffix_weight[p : p + m, None, None, None]
+            self._slots[p : p + m] = stats[start : start + m]
+            block = self._running_sums(self._block_sum, stats[start : start + m])
+            self._block_sum = block[-1]
+            np.add(block, suffix, out=sums[start : start + m])
+            start += m
+            if p + m == W:
                 self._close_block()
             else:
-                self._slot = p + 1
-        self._refresh()
-        return valid
+                self._slot = p + m
+        return sums
+
+    def _running_sums(self, previous: np.ndarray, stats: np.ndarray) -> np.ndarray:
+        """``previous`` (5, n_envs, n_vehicles) carried on through each tick of ``stats``, with forgetting."""
+        decay = self.config.forgetting
+        if decay == 1:
+            return np.cumsum(np.concatenate([previous[None], stats]), axis=0)[1:]
+        sums = np.empty_like(stats)
+        running = previous
+        for k, tick_stats in enumerate(stats):
+            running = sums[k] = decay * running + tick_stats
+        return sums
 
     def _close_block(self) -> None:
-        """Turn the full block into suffix sums and start a new block.
-
-        In place, slot by slot (a loop over the W time slots, each step vectorised over all
-        vehicles): slot m becomes forgetting^(W-1-m) x_m + slot m+1.
-        """
-        slots = self._slots
-        for m in range(self._window_ticks - 2, -1, -1):
-            slots[m] *= self._age_weight[m]
-            slots[m] += slots[m + 1]
-        self._block_sum[...] = 0.0
+        """Turn the full block into suffix sums and start a new block: slot m becomes forgetting^(W-1-m) x_m + slot m+1."""
+        W, slots = self._window_ticks, self._slots
+        if self.config.forgetting == 1:
+            slots[:W] = np.cumsum(slots[W - 1 :: -1], axis=0)[::-1]
+        else:
+            for m in range(W - 2, -1, -1):  # each step vectorised over all vehicles
+                slots[m] *= self._age_weight[m]
+                slots[m] += slots[m + 1]
+        self._block_sum = np.zeros_like(self._block_sum)
         self._slot = 0
-
-    def _refresh(self) -> None:
-        prior_mean = (self.config.prior_standstill_spacing, self._prior_tau)
-        self._moments = _moments_from_stats(self._window_stats, prior_mean, self._precision, self.config.noise_variance)
 
     # ---- changes of setting ------------------------------------------------------------------
 
@@ -301,7 +336,8 @@ class TimeGapMonitor:
         self._window_stats[:, vehicles] = 0.0
         if self._window_ticks is not None:
             self._slots[:, :, vehicles] = 0.0
-        self._refresh()
+        prior_mean = (self.config.prior_standstill_spacing, self._prior_tau)
+        self._moments = _moments_from_stats(self._window_stats, prior_mean, self._precision, self.config.noise_variance)
 
     # ---- read-outs ----------------------------------------------------------------------------
 

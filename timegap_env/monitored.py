@@ -7,6 +7,7 @@ re-centres that follower's prior and chart on the new setting.
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 
 import numpy as np
@@ -14,7 +15,7 @@ import numpy as np
 from timegap_env.charts import ChartState, make_chart
 from timegap_env.config import ChartConfig, MonitorConfig, PlatoonConfig, SensorConfig
 from timegap_env.monitor import TimeGapMonitor
-from timegap_env.platoon import Platoon
+from timegap_env.platoon import Platoon, PlatoonTicks, per_env
 
 
 _SPLITMIX_INCREMENT = np.uint64(0x9E3779B97F4A7C15)  # SplitMix64 constants (Steele, Lea & Flood 2014)
@@ -30,28 +31,31 @@ def _splitmix64(x: np.ndarray) -> np.ndarray:
 
 
 def counter_uniforms(keys: np.ndarray, ticks: np.ndarray, n_followers: int) -> np.ndarray:
-    """Uniforms in (0, 1), shape (3, n_envs, n_followers), a pure function of (key, tick, follower, stream).
+    """Uniforms in (0, 1), shape (3, *ticks.shape, n_followers), a pure function of (key, tick, follower, stream).
 
-    Counter-based: an env's draws depend only on its own key and tick, never
-    on which other envs share the batch, so a vector of envs reproduces the
-    same envs run one by one.
+    ``keys`` (n_envs,); ``ticks`` (n_envs,) or (n_ticks, n_envs). Counter-based: an env's
+    draws depend only on its own key and tick, never on which other envs share the batch
+    or how ticks are grouped, so a vector of envs reproduces the same envs run one by one.
     """
-    counter = ticks.astype(np.uint64)[None, :, None] * np.uint64(n_followers * _UNIFORM_STREAMS) + _offsets(n_followers)
-    bits = _splitmix64(_splitmix64(counter * _SPLITMIX_INCREMENT + keys[None, :, None]))
+    ticks = np.asarray(ticks).astype(np.uint64)
+    offsets = _offsets(n_followers).reshape((_UNIFORM_STREAMS,) + (1,) * ticks.ndim + (n_followers,))
+    counter = ticks[None, ..., None] * np.uint64(n_followers * _UNIFORM_STREAMS) + offsets
+    bits = _splitmix64(_splitmix64(counter * _SPLITMIX_INCREMENT + keys[..., None]))
     return ((bits >> np.uint64(11)).astype(np.float64) + 0.5) * 2.0**-53
 
 
 @functools.cache
 def _offsets(n_followers: int) -> np.ndarray:
-    """Counter offset of each (stream, follower) within a tick, shape (3, 1, n_followers)."""
-    follower = np.arange(n_followers, dtype=np.uint64)[None, None, :] * np.uint64(_UNIFORM_STREAMS)
-    return follower + np.arange(_UNIFORM_STREAMS, dtype=np.uint64)[:, None, None]
+    """Counter offset of each (stream, follower) within a tick, shape (3, n_followers)."""
+    follower = np.arange(n_followers, dtype=np.uint64)[None, :] * np.uint64(_UNIFORM_STREAMS)
+    return follower + np.arange(_UNIFORM_STREAMS, dtype=np.uint64)[:, None]
 
 
 def measure(
     spacing: np.ndarray, speed: np.ndarray, config: SensorConfig, uniforms: np.ndarray, dropout_probability: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Noisy spacing [m] and speed [m/s] (n_envs, n_followers) from ``counter_uniforms``; a dropout is NaN in both.
+    """Noisy spacing [m] and speed [m/s], each (..., n_envs, n_followers) like ``uniforms[0]`` from
+    ``counter_uniforms``; a dropout is NaN in both.
 
     ``dropout_probability`` (n_envs,) is each env's chance per tick that a follower's measurement is missing.
     """
@@ -59,10 +63,21 @@ def measure(
     angle = 2.0 * np.pi * uniforms[1]
     measured_spacing = spacing + config.spacing_noise_std * radius * np.cos(angle)
     measured_speed = speed + config.speed_noise_std * radius * np.sin(angle)
-    dropped = uniforms[2] < dropout_probability[:, None]
+    dropped = uniforms[2] < dropout_probability[:, None]  # broadcast over the envs axis
     measured_spacing[dropped] = np.nan
     measured_speed[dropped] = np.nan
     return measured_spacing, measured_speed
+
+
+@dataclasses.dataclass(frozen=True)
+class MonitoredTicks:
+    """A block of ticks of :meth:`MonitoredPlatoon.run`, arrays (n_ticks, n_envs, n_followers)."""
+
+    physics: PlatoonTicks  # the simulator's state after each tick
+    measured_spacing: np.ndarray  # [m], NaN = dropout
+    measured_speed: np.ndarray  # [m/s], NaN = dropout
+    tau_mean: np.ndarray  # posterior mean of tau [s]
+    chart: ChartState  # the chart after each tick
 
 
 class MonitoredPlatoon:
@@ -139,16 +154,31 @@ class MonitoredPlatoon:
         return changed
 
     def tick(self, leader_speed: np.ndarray | float, leader_accel: np.ndarray | float) -> tuple[np.ndarray, ChartState]:
-        """One tick: move the platoons, measure, update monitors and charts.
+        """One tick to a leader at ``leader_speed`` [m/s] with ``leader_accel`` [m/s^2] (scalars or (n_envs,)).
 
         Returns the followers that collided this tick (n_envs, n_followers) and the charts' state.
         """
-        collisions = self.platoon.step(leader_speed, leader_accel)
-        self.ticks += 1
-        uniforms = counter_uniforms(self.noise_keys, self.ticks, self.platoon.n_followers)
-        self.measured_spacing, self.measured_speed = measure(
-            self.platoon.spacing, self.platoon.v[:, 1:], self.sensors, uniforms, self.dropout_probability
-        )
-        self.monitor.update(self.measured_speed, self.measured_spacing)
-        self.chart.move_center(self.platoon.time_gap)  # the limits follow a ramping setting
-        return collisions, self.chart.update(self.monitor.tau_mean)
+        n_envs = self.platoon.n_envs
+        speed, accel = per_env("leader_speed", leader_speed, n_envs), per_env("leader_accel", leader_accel, n_envs)
+        block = self.run(speed[None], accel[None])
+        chart = ChartState(*(getattr(block.chart, field.name)[0] for field in dataclasses.fields(ChartState)))
+        return block.physics.collisions[0], chart
+
+    def run(self, leader_speed: np.ndarray, leader_accel: np.ndarray, v2v: np.ndarray | None = None) -> MonitoredTicks:
+        """A block of ticks: move the platoons, measure, update monitors and charts.
+
+        ``leader_speed`` [m/s], ``leader_accel`` [m/s^2]: (n_ticks, n_envs), the leader at the end of each
+        tick; ``v2v`` (n_ticks, n_envs, n_followers), optional: CACC status during each tick (see
+        :meth:`Platoon.advance`). The physics is a compiled loop; sensors, monitors and charts take
+        the whole block at once, with the same result as tick by tick.
+        """
+        physics = self.platoon.advance(leader_speed, leader_accel, v2v)
+        n_ticks = len(physics.spacing)
+        ticks = self.ticks + np.arange(1, n_ticks + 1)[:, None]  # (n_ticks, n_envs)
+        self.ticks += n_ticks
+        uniforms = counter_uniforms(self.noise_keys, ticks, self.platoon.n_followers)
+        spacing, speed = measure(physics.spacing, physics.speed, self.sensors, uniforms, self.dropout_probability)
+        self.measured_spacing, self.measured_speed = spacing[-1], speed[-1]
+        tau_mean = self.monitor.update_block(speed, spacing).tau_mean
+        chart = self.chart.update_block(tau_mean, physics.time_gap)  # the limits follow a ramping setting
+        return MonitoredTicks(physics, spacing, speed, tau_mean, chart)

@@ -11,12 +11,18 @@ headway (CTH) controller
 with u held over each tick (zero-order hold) and the GLVD integrated exactly
 over the tick, not with Euler. The feed-forward term comes over V2V with a
 delay of ``v2v_delay_ticks`` ticks; a follower without V2V (ACC mode) drops it.
+
+The tick loop is a compiled kernel (numba): a tick is a recurrence through the
+feedback, so it cannot be vectorised over time, and as ~40 NumPy calls per tick
+it cost about 50 us even for one platoon (``make bench`` reports the result).
+:meth:`Platoon.advance` runs a whole block of ticks in one call.
 """
 
 from __future__ import annotations
 
 import dataclasses
 
+import numba
 import numpy as np
 
 from timegap_env.config import PlatoonConfig
@@ -60,10 +66,28 @@ class ZOHCoefficients:
         self, x: np.ndarray, v: np.ndarray, a: np.ndarray, u: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Position [m], speed [m/s] and acceleration [m/s^2] one tick later under held command u [m/s^2]."""
-        x_next = x + self.dt * v + self.x_from_a * a + self.x_from_u * u
-        v_next = v + self.v_from_a * a + self.v_from_u * u
-        a_next = self.a_from_a * a + self.a_from_u * u
-        return x_next, v_next, a_next
+        return glvd_tick(x, v, a, u, self.a_from_a, self.a_from_u, self.v_from_a, self.v_from_u,
+                         self.x_from_a, self.x_from_u, self.dt)
+
+
+@numba.njit(cache=True)
+def glvd_tick(x, v, a, u, a_from_a, a_from_u, v_from_a, v_from_u, x_from_a, x_from_u, dt):  # noqa: ANN001, ANN201
+    """The transition of :class:`ZOHCoefficients`, for scalars (inside the kernel) or arrays."""
+    x_next = x + dt * v + x_from_a * a + x_from_u * u
+    v_next = v + v_from_a * a + v_from_u * u
+    a_next = a_from_a * a + a_from_u * u
+    return x_next, v_next, a_next
+
+
+@dataclasses.dataclass(frozen=True)
+class PlatoonTicks:
+    """What :meth:`Platoon.advance` records at the end of each tick, arrays (n_ticks, n_envs, n_followers)."""
+
+    spacing: np.ndarray  # bumper-to-bumper gap to the predecessor [m]
+    speed: np.ndarray  # follower speed [m/s]
+    accel: np.ndarray  # follower acceleration [m/s^2]
+    time_gap: np.ndarray  # time gap the controller applied during the tick (ramped) [s]
+    collisions: np.ndarray  # gap <= 0 reached for the first time this tick [bool]
 
 
 class Platoon:
@@ -130,8 +154,8 @@ class Platoon:
         """
         cfg = self.config
         mask = np.ones(self.n_envs, dtype=bool) if mask is None else np.asarray(mask, dtype=bool)
-        speed = self._per_env("leader_speed", leader_speed)[mask]
-        accel = self._per_env("leader_accel", leader_accel)[mask]
+        speed = per_env("leader_speed", leader_speed, self.n_envs)[mask]
+        accel = per_env("leader_accel", leader_accel, self.n_envs)[mask]
         if np.any(speed < 0):
             raise ValueError(f"leader_speed = {speed}: must be >= 0")
         n_reset = int(mask.sum())
@@ -174,57 +198,118 @@ class Platoon:
         return self.x[:, :-1] - self.x[:, 1:] - self.config.vehicle_length
 
     def step(self, leader_speed: np.ndarray | float, leader_accel: np.ndarray | float) -> np.ndarray:
-        """Advance one tick to a leader at ``leader_speed`` [m/s] with ``leader_accel`` [m/s^2].
+        """Advance one tick to a leader at ``leader_speed`` [m/s] with ``leader_accel`` [m/s^2], each (n_envs,).
 
         Returns the followers that reached a gap <= 0 during this tick, (n_envs, n_followers) bool.
         """
+        speed = per_env("leader_speed", leader_speed, self.n_envs)
+        accel = per_env("leader_accel", leader_accel, self.n_envs)
+        return self.advance(speed[None], accel[None]).collisions[0]
+
+    def advance(
+        self, leader_speed: np.ndarray, leader_accel: np.ndarray, v2v: np.ndarray | None = None
+    ) -> PlatoonTicks:
+        """Advance n_ticks ticks; row k of ``leader_speed`` [m/s] and ``leader_accel`` [m/s^2], each (n_ticks, n_envs),
+        is where the leader is at the end of tick k.
+
+        ``v2v`` (n_ticks, n_envs, n_followers) bool, optional: CACC status during each tick
+        (default: keep the current ``v2v``); ``v2v`` is left at its last row.
+        """
         cfg = self.config
-        leader_speed = self._per_env("leader_speed", leader_speed)
-        leader_accel = self._per_env("leader_accel", leader_accel)
-
-        max_change = cfg.time_gap_ramp_rate * cfg.dt
-        self.time_gap += np.clip(self.time_gap_setting - self.time_gap, -max_change, max_change)
-
-        slot = self.tick % self._feedforward_buffer.shape[0]
-        self._feedforward_buffer[slot] = self.a[:, :-1]
-        delayed_slot = (self.tick - cfg.v2v_delay_ticks) % self._feedforward_buffer.shape[0]
-        predecessor_accel = self._feedforward_buffer[delayed_slot]
-
-        followers = slice(1, None)
-        spacing_error = self.spacing - cfg.standstill_spacing - self.time_gap * self.v[:, followers]
-        speed_difference = self.v[:, :-1] - self.v[:, followers]
-        command = (
-            cfg.k_s * spacing_error
-            + cfg.k_v * speed_difference
-            + cfg.k_a * self.a[:, followers]
-            + cfg.k_f * self.v2v * predecessor_accel
+        leader_speed = self._per_tick("leader_speed", leader_speed)
+        n_ticks = leader_speed.shape[0]
+        leader_accel = self._per_tick("leader_accel", leader_accel, n_ticks)
+        follower_shape = (n_ticks, self.n_envs, self.n_followers)
+        if v2v is None:
+            v2v = np.broadcast_to(self.v2v, follower_shape)
+        elif np.shape(v2v) != follower_shape:
+            raise ValueError(f"v2v has shape {np.shape(v2v)}: expected {follower_shape} (n_ticks, n_envs, n_followers)")
+        ticks = PlatoonTicks(*(np.empty(follower_shape) for _ in range(4)), np.empty(follower_shape, dtype=bool))
+        zoh = self._zoh
+        _advance(
+            self.x, self.v, self.a, self.u, self.time_gap, self.time_gap_setting, self.collided,
+            self._feedforward_buffer, self.tick, leader_speed, leader_accel, np.ascontiguousarray(v2v, dtype=bool),
+            zoh.a_from_a, zoh.a_from_u, zoh.v_from_a, zoh.v_from_u, zoh.x_from_a, zoh.x_from_u,
+            (cfg.dt, cfg.k_s, cfg.k_v, cfg.k_a, cfg.k_f, cfg.accel_min, cfg.accel_max,
+             cfg.standstill_spacing, cfg.vehicle_length, cfg.time_gap_ramp_rate * cfg.dt),
+            ticks.spacing, ticks.speed, ticks.accel, ticks.time_gap, ticks.collisions,
         )
-        command = np.clip(command, cfg.accel_min, cfg.accel_max)
+        self.v2v[:] = v2v[-1]
+        self.tick += n_ticks
+        return ticks
 
-        x, v, a = self._zoh.step(self.x[:, followers], self.v[:, followers], self.a[:, followers], command)
-        stopped = v < 0.0  # a vehicle does not reverse: it stays at standstill
-        v[stopped] = 0.0
-        a[stopped] = np.maximum(a[stopped], 0.0)
-        self.x[:, followers], self.v[:, followers], self.a[:, followers] = x, v, a
-        self.u[:, followers] = command
-
-        self.x[:, 0] += 0.5 * (self.v[:, 0] + leader_speed) * cfg.dt
-        self.v[:, 0] = leader_speed
-        self.a[:, 0] = leader_accel
-        self.u[:, 0] = leader_accel
-        self.tick += 1
-
-        new_collisions = (self.spacing <= 0.0) & ~self.collided
-        self.collided |= new_collisions
-        return new_collisions
-
-    def _per_env(self, name: str, value: np.ndarray | float) -> np.ndarray:
-        """``value`` as a finite float array of shape (n_envs,)."""
-        array = np.asarray(value, dtype=float)
-        if array.ndim == 0:
-            array = np.full(self.n_envs, float(array))
-        if array.shape != (self.n_envs,):
-            raise ValueError(f"{name} has shape {array.shape}: must be a scalar or ({self.n_envs},)")
-        if not np.all(np.isfinite(array)):
+    def _per_tick(self, name: str, value: np.ndarray, n_ticks: int | None = None) -> np.ndarray:
+        """``value`` as a finite float array of shape (n_ticks, n_envs), n_ticks >= 1 (None: any)."""
+        array = np.ascontiguousarray(value, dtype=float)
+        if array.ndim != 2 or array.shape[1] != self.n_envs or array.shape[0] != (n_ticks or max(array.shape[0], 1)):
+            expected = f"({n_ticks or 'n_ticks >= 1'}, {self.n_envs})"
+            raise ValueError(f"{name} has shape {array.shape}: must be {expected} (n_ticks, n_envs)")
+        if not np.isfinite(array).all():
             raise ValueError(f"{name} = {array}: must be finite")
         return array
+
+
+def per_env(name: str, value: np.ndarray | float, n_envs: int) -> np.ndarray:
+    """``value`` as a finite float array of shape (n_envs,); a scalar is repeated."""
+    array = np.asarray(value, dtype=float)
+    if array.ndim == 0:
+        array = np.full(n_envs, float(array))
+    if array.shape != (n_envs,):
+        raise ValueError(f"{name} has shape {array.shape}: must be a scalar or ({n_envs},)")
+    if not np.all(np.isfinite(array)):
+        raise ValueError(f"{name} = {array}: must be finite")
+    return array
+
+
+@numba.njit(cache=True)
+def _advance(  # noqa: ANN202, PLR0913 -- the kernel takes the platoon's arrays one by one
+    x, v, a, u, time_gap, time_gap_setting, collided, feedforward_buffer, first_tick,
+    leader_speed, leader_accel, v2v,
+    a_from_a, a_from_u, v_from_a, v_from_u, x_from_a, x_from_u,
+    constants,
+    out_spacing, out_speed, out_accel, out_time_gap, out_collisions,
+):
+    """The physics of :meth:`Platoon.step`, tick by tick, in place; see the module docstring for the model.
+
+    Followers are updated from the last to the first, so each one still sees its
+    predecessor's state from the start of the tick, as in the continuous model.
+    """
+    dt, k_s, k_v, k_a, k_f, accel_min, accel_max, standstill_spacing, vehicle_length, max_change = constants
+    n_ticks, n_envs, n_followers = v2v.shape
+    buffer_length = feedforward_buffer.shape[0]
+    delay = buffer_length - 1
+    for k in range(n_ticks):
+        tick = first_tick + k
+        slot, delayed_slot = tick % buffer_length, (tick - delay) % buffer_length
+        for e in range(n_envs):
+            for i in range(n_followers, 0, -1):  # vehicle i is follower f = i - 1
+                f = i - 1
+                time_gap[e, f] += min(max(time_gap_setting[e, f] - time_gap[e, f], -max_change), max_change)
+                feedforward_buffer[slot, e, f] = a[e, i - 1]
+                spacing = x[e, i - 1] - x[e, i] - vehicle_length
+                spacing_error = spacing - standstill_spacing - time_gap[e, f] * v[e, i]
+                command = (
+                    k_s * spacing_error
+                    + k_v * (v[e, i - 1] - v[e, i])
+                    + k_a * a[e, i]
+                    + k_f * (1.0 if v2v[k, e, f] else 0.0) * feedforward_buffer[delayed_slot, e, f]
+                )
+                command = min(max(command, accel_min), accel_max)
+                x_next, v_next, a_next = glvd_tick(
+                    x[e, i], v[e, i], a[e, i], command, a_from_a[e, f], a_from_u[e, f],
+                    v_from_a[e, f], v_from_u[e, f], x_from_a[e, f], x_from_u[e, f], dt,
+                )
+                if v_next < 0.0:  # a vehicle does not reverse: it stays at standstill
+                    v_next, a_next = 0.0, max(a_next, 0.0)
+                x[e, i], v[e, i], a[e, i], u[e, i] = x_next, v_next, a_next, command
+            x[e, 0] += 0.5 * (v[e, 0] + leader_speed[k, e]) * dt
+            v[e, 0] = leader_speed[k, e]
+            a[e, 0] = u[e, 0] = leader_accel[k, e]
+            for f in range(n_followers):
+                spacing = x[e, f] - x[e, f + 1] - vehicle_length
+                out_collisions[k, e, f] = spacing <= 0.0 and not collided[e, f]
+                collided[e, f] = collided[e, f] or spacing <= 0.0
+                out_spacing[k, e, f] = spacing
+                out_speed[k, e, f] = v[e, f + 1]
+                out_accel[k, e, f] = a[e, f + 1]
+                out_time_gap[k, e, f] = time_gap[e, f]

@@ -110,7 +110,7 @@ class PlatoonTask:
             noise_keys[env] = rng.integers(0, 2**63, dtype=np.uint64)
         self.loop.reset(self.leader_speed[:, 0], self.leader_accel[:, 0], mask=mask, time_gap=cfg.platoon.time_gap,
                         noise_key=noise_keys)
-        self.loop.platoon.set_v2v(self._v2v_now())
+        self.loop.platoon.set_v2v(self._v2v_at(self.loop.ticks))
         self._previous_accel[mask] = self.loop.platoon.a[mask, 1:]
         self._min_ttc_step[mask] = np.inf
         self._rms_jerk_step[mask] = 0.0
@@ -156,42 +156,39 @@ class PlatoonTask:
         settings = self.levels[action]
         return np.broadcast_to(settings[:, None], (self.n_envs, self.n_followers)) if settings.ndim == 1 else settings
 
-    def _v2v_now(self) -> np.ndarray:
-        """CACC status of every follower at each env's current tick (n_envs, n_followers)."""
-        tick = self.loop.ticks[:, None]
-        return ~((tick >= self.v2v_loss_start) & (tick < self.v2v_loss_end))
+    def _v2v_at(self, ticks: np.ndarray) -> np.ndarray:
+        """CACC status of every follower at the given ticks, (..., n_envs) -> (..., n_envs, n_followers)."""
+        ticks = ticks[..., None]
+        return ~((ticks >= self.v2v_loss_start) & (ticks < self.v2v_loss_end))
 
     def step(self, action: np.ndarray) -> StepResult:
         """Apply the action, run one decision interval of ticks, and score it."""
         cfg, loop, platoon = self.config, self.loop, self.loop.platoon
         changed = loop.change_time_gap(self.settings_for(action))
+        ticks = loop.ticks + np.arange(self.ticks_per_decision)[:, None]  # (n_ticks, n_envs), before each tick
+        leader_ticks = np.minimum(ticks + 1, self.episode_ticks)
         rows = np.arange(self.n_envs)
-        half_width = cfg.chart.limit_width * cfg.chart.baseline_std  # L sigma_desired [s]
-        deviation_sum = np.zeros(self.n_envs)
-        alarm_sum = np.zeros(self.n_envs)
-        jerk_squared = np.zeros((self.n_envs, self.n_followers))
-        self._min_ttc_step[:] = np.inf
-        collided = np.zeros(self.n_envs, dtype=bool)
-        for _ in range(self.ticks_per_decision):
-            next_tick = np.minimum(loop.ticks + 1, self.episode_ticks)
-            platoon.set_v2v(self._v2v_now())
-            collisions, chart = loop.tick(self.leader_speed[rows, next_tick], self.leader_accel[rows, next_tick])
-            if self.trace is not None:
-                self.trace.append((loop.ticks[0] * cfg.platoon.dt, loop.monitor.tau_mean[0], chart.center[0]))
-            collided |= collisions.any(axis=1)
-            deviation = np.abs(loop.monitor.tau_mean - chart.center)
-            deviation_sum += deviation.sum(axis=1)
-            alarm_sum += chart.alarm.sum(axis=1)
-            self.totals["alarm_ticks"] += chart.alarm.sum(axis=1)
-            self.totals["exceedances"] += chart.exceedance.sum(axis=1)
-            np.maximum(self.totals["max_deviation"], deviation.max(axis=1), out=self.totals["max_deviation"])
-            closing = platoon.v[:, 1:] - platoon.v[:, :-1]  # [m/s], > 0 when the gap shrinks
-            with np.errstate(divide="ignore"):
-                ttc = np.where(closing > 0, platoon.spacing / closing, np.inf)  # [s]
-            np.minimum(self._min_ttc_step, ttc, out=self._min_ttc_step)
-            accel = platoon.a[:, 1:]
-            jerk_squared += ((accel - self._previous_accel) / cfg.platoon.dt) ** 2
-            self._previous_accel = accel.copy()
+        leader_speed = self.leader_speed[rows, leader_ticks]
+        block = loop.run(leader_speed, self.leader_accel[rows, leader_ticks], self._v2v_at(ticks))
+        physics, chart = block.physics, block.chart
+        if self.trace is not None:
+            self.trace.extend(zip((ticks[:, 0] + 1) * cfg.platoon.dt, block.tau_mean[:, 0], chart.center[:, 0]))
+
+        collided = physics.collisions.any(axis=(0, 2))
+        deviation = np.abs(block.tau_mean - chart.center)
+        deviation_sum = _sum_over_ticks(deviation.sum(axis=2))
+        alarm_sum = chart.alarm.sum(axis=(0, 2))
+        self.totals["alarm_ticks"] += alarm_sum
+        self.totals["exceedances"] += chart.exceedance.sum(axis=(0, 2))
+        np.maximum(self.totals["max_deviation"], deviation.max(axis=(0, 2)), out=self.totals["max_deviation"])
+        predecessor_speed = np.concatenate([leader_speed[..., None], physics.speed[..., :-1]], axis=-1)
+        closing = physics.speed - predecessor_speed  # [m/s], > 0 when the gap shrinks
+        with np.errstate(divide="ignore"):
+            ttc = np.where(closing > 0, physics.spacing / closing, np.inf)  # [s]
+        self._min_ttc_step = ttc.min(axis=0)
+        previous_accel = np.concatenate([self._previous_accel[None], physics.accel[:-1]])
+        jerk_squared = _sum_over_ticks(((physics.accel - previous_accel) / cfg.platoon.dt) ** 2)
+        self._previous_accel = physics.accel[-1].copy()
 
         n = self.ticks_per_decision
         follower_ticks = n * self.n_followers
@@ -202,7 +199,7 @@ class PlatoonTask:
         capacity_ratio = (speed * self.levels[0] + gap_per_vehicle) / (speed * setting + gap_per_vehicle)
         span = self.levels[-1] - self.levels[0]
         terms = {
-            "tracking": -deviation_sum / follower_ticks / half_width,
+            "tracking": -deviation_sum / follower_ticks / (cfg.chart.limit_width * cfg.chart.baseline_std),
             "alarms": -alarm_sum / follower_ticks,
             "safety": -np.maximum(0.0, 1.0 - self._min_ttc_step / cfg.ttc_threshold).mean(axis=1),
             "collision": -collided.astype(float),
@@ -283,3 +280,13 @@ class PlatoonTask:
             "collision": totals["collision"].astype(bool),
             "duration": totals["steps"] * self.config.decision_interval,  # [s]
         }
+
+
+def _sum_over_ticks(values: np.ndarray) -> np.ndarray:
+    """Sum over the leading tick axis in tick order, whatever the batch size.
+
+    ``values.sum(axis=0)`` may add in a different order for one env than for many
+    (pairwise summation on contiguous data), which would break the equality of the
+    vector env with single envs in the last bit; a cumulative sum is sequential.
+    """
+    return np.cumsum(values, axis=0)[-1]
