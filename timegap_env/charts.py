@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import dataclasses
 
+import numba
 import numpy as np
 from numpy.typing import ArrayLike
 
@@ -116,35 +117,18 @@ class ControlChart:
         return self._update_block(estimates, centers)
 
     def _update_block(self, estimates: np.ndarray, centers: np.ndarray) -> ChartState:
-        n_ticks = len(estimates)
-        tick = np.arange(n_ticks)[:, None, None]
-        sides = np.where(self.hold_off > tick, 0, self._sides(estimates, centers)).astype(np.int8)
-        self.hold_off = np.maximum(self.hold_off - n_ticks, 0)
-        previous = np.concatenate([self.side[None], sides[:-1]])
-        exceedances = (sides != 0) & (sides != previous)
-        in_window = self._count_in_window(exceedances)
-        last_alarm = np.maximum.accumulate(np.where(sides != 0, tick, -1 - self.run_length), axis=0)
-        run_lengths = tick - last_alarm  # ticks since the last alarm, or since the run before the block started
-        self.center, self.side, self.exceedance = centers[-1].copy(), sides[-1].copy(), exceedances[-1].copy()
-        self.exceedances_in_window, self.run_length = in_window[-1].copy(), run_lengths[-1].copy()
-        return ChartState(center=centers, alarm=sides != 0, side=sides, exceedance=exceedances,
-                          exceedances_in_window=in_window, run_length=run_lengths)
-
-    def _count_in_window(self, exceedances: np.ndarray) -> np.ndarray:
-        """Excursions started within the trailing window after each tick; the ring of start flags moves on."""
-        ring_length, counts = len(self._starts), np.empty(exceedances.shape, dtype=np.int64)
-        count = self.exceedances_in_window
-        for start in range(0, len(exceedances), ring_length):  # chunks no longer than the ring
-            new = exceedances[start : start + ring_length]
-            slots = (self._slot + np.arange(len(new))) % ring_length
-            leaving = self._starts[slots]  # flags of the ticks that drop out of the window
-            chunk = counts[start : start + len(new)]
-            np.cumsum(new.astype(np.int64) - leaving, axis=0, out=chunk)
-            chunk += count
-            count = chunk[-1]
-            self._starts[slots] = new
-            self._slot = (self._slot + len(new)) % ring_length
-        return counts
+        sides = self._sides(estimates, centers).astype(np.int8)
+        block = ChartState(center=centers, alarm=np.empty(sides.shape, dtype=bool), side=sides,
+                           exceedance=np.empty(sides.shape, dtype=bool),
+                           exceedances_in_window=np.empty(sides.shape, dtype=np.int64),
+                           run_length=np.empty(sides.shape, dtype=np.int64))
+        self._slot = _excursions_kernel(
+            self.hold_off, self.side, self.exceedance, self.exceedances_in_window, self.run_length,
+            self._starts, self._slot, block.side, block.alarm, block.exceedance, block.exceedances_in_window,
+            block.run_length,
+        )
+        self.center = centers[-1].copy()
+        return block
 
     def recenter(self, time_gap: ArrayLike, mask: ArrayLike | None = None) -> None:
         """Centre the chart on a new tau* ``time_gap`` [s] for the vehicles in ``mask``.
@@ -286,6 +270,34 @@ class CusumChart(ControlChart):
     def _restart(self, mask: np.ndarray) -> None:
         self.upper_sum[mask] = 0.0
         self.lower_sum[mask] = 0.0
+
+
+@numba.njit(cache=True)
+def _excursions_kernel(  # noqa: ANN202, PLR0913 -- the kernel takes the chart's arrays one by one
+    hold_off, side, exceedance, exceedances_in_window, run_length, starts, slot,
+    sides, out_alarm, out_exceedance, out_in_window, out_run_length,
+):
+    """What every chart does with its statistic's sides (n_ticks, n_envs, n_vehicles), tick by tick, in place.
+
+    ``sides`` comes in as the statistic's side and leaves as the charted side (0 while alarms
+    are held off); returns the ring slot of the next tick.
+    """
+    n_ticks, n_envs, n_vehicles = sides.shape
+    ring_length = starts.shape[0]
+    for k in range(n_ticks):
+        for e in range(n_envs):
+            for i in range(n_vehicles):
+                now = sides[k, e, i] if hold_off[e, i] == 0 else 0
+                hold_off[e, i] = max(hold_off[e, i] - 1, 0)
+                started = now != 0 and now != side[e, i]  # a new excursion
+                side[e, i], exceedance[e, i] = now, started
+                exceedances_in_window[e, i] += int(started) - int(starts[slot, e, i])
+                starts[slot, e, i] = started
+                run_length[e, i] = 0 if now != 0 else run_length[e, i] + 1
+                sides[k, e, i], out_alarm[k, e, i], out_exceedance[k, e, i] = now, now != 0, started
+                out_in_window[k, e, i], out_run_length[k, e, i] = exceedances_in_window[e, i], run_length[e, i]
+        slot = (slot + 1) % ring_length
+    return slot
 
 
 CHARTS: dict[str, type[ControlChart]] = {"shewhart": ShewhartChart, "ewma": EwmaChart, "cusum": CusumChart}

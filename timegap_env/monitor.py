@@ -24,8 +24,10 @@ computed as a correction of the prior mean, mu* = mu_b + Sigma* Z^T (S - Z mu_b)
 
 from __future__ import annotations
 
+import math
 from typing import NamedTuple
 
+import numba
 import numpy as np
 from numpy.typing import ArrayLike
 
@@ -135,14 +137,22 @@ class Moments(NamedTuple):
 def _moments_from_stats(
     stats: np.ndarray, prior_mean: tuple[ArrayLike, ArrayLike], precision: np.ndarray, sigma2: float
 ) -> Moments:
-    """Posterior from stats (5, ...) = [n, sum V, sum V^2, sum S, sum V S] and prior mean (s0, tau).
-
-    Channels come first so that each one is a contiguous array. See the module docstring
-    for the determinant that cannot cancel.
-    """
+    """Posterior from stats (5, ...) = [n, sum V, sum V^2, sum S, sum V S] and prior mean (s0, tau)."""
     n, sum_v, sum_vv, sum_s, sum_vs = stats
+    prior_s0, prior_tau = prior_mean
+    return Moments(*_posterior_moments(
+        n, sum_v, sum_vv, sum_s, sum_vs, prior_s0, prior_tau, precision[0, 0], precision[0, 1], precision[1, 1], sigma2
+    ))
+
+
+@numba.njit(cache=True)
+def _posterior_moments(n, sum_v, sum_vv, sum_s, sum_vs, m0, m1, p00, p01, p11, sigma2):  # noqa: ANN001, ANN201
+    """(mean_s0, mean_tau, var_s0, cov_s0_tau, var_tau) from the five sums, the prior mean (m0, m1),
+    the prior precision P = [[p00, p01], [p01, p11]] and the noise variance sigma2; scalars or arrays.
+
+    See the module docstring for the determinant that cannot cancel.
+    """
     d00, d01, d11 = n / sigma2, sum_v / sigma2, sum_vv / sigma2  # D = Z^T Z / sigma^2
-    p00, p01, p11 = precision[0, 0], precision[0, 1], precision[1, 1]
     det = (
         (p00 * p11 - p01 * p01)  # det P
         + np.maximum(p11 * d00 + p00 * d11 - 2.0 * p01 * d01, 0.0)  # tr(adj(P) D)
@@ -151,16 +161,9 @@ def _moments_from_stats(
     var_s0 = (p11 + d11) / det  # Sigma* = adj(P + D) / det(P + D)
     cov_s0_tau = -(p01 + d01) / det
     var_tau = (p00 + d00) / det
-    m0, m1 = prior_mean
     r0 = (sum_s - n * m0 - sum_v * m1) / sigma2  # Z^T (S - Z mu_b) / sigma^2
     r1 = (sum_vs - sum_v * m0 - sum_vv * m1) / sigma2
-    return Moments(
-        mean_s0=m0 + var_s0 * r0 + cov_s0_tau * r1,
-        mean_tau=m1 + cov_s0_tau * r0 + var_tau * r1,
-        var_s0=var_s0,
-        cov_s0_tau=cov_s0_tau,
-        var_tau=var_tau,
-    )
+    return m0 + var_s0 * r0 + cov_s0_tau * r1, m1 + cov_s0_tau * r0 + var_tau * r1, var_s0, cov_s0_tau, var_tau
 
 
 class MonitorTicks(NamedTuple):
@@ -215,13 +218,11 @@ class TimeGapMonitor:
         stats_shape = (N_STATS,) + self.shape
         self._block_sum = np.zeros(stats_shape)  # forgetting-weighted sum of this block
         self._window_stats = np.zeros(stats_shape)  # forgetting-weighted sum of the window
-        self._window_ticks = config.window_ticks
-        if self._window_ticks is not None:
-            W, decay = self._window_ticks, config.forgetting
-            self._slots = np.zeros((W + 1,) + stats_shape)  # slot W stays zero
-            self._slot = 0  # slot of the next measurement, p
-            self._suffix_weight = decay ** np.arange(1, W + 1)  # weight of suffix slot p+1 at slot p
-            self._age_weight = decay ** np.arange(W - 1, -1, -1)  # weight of slot m when the block is full
+        W, decay = config.window_ticks or 0, config.forgetting  # W = 0: no window
+        self._slots = np.zeros((W + 1,) + stats_shape)  # ring of per-tick stats; slot W stays zero
+        self._slot = 0 if W else -1  # slot of the next measurement, p; -1: no window
+        self._suffix_weight = decay ** np.arange(1, W + 1)  # weight of suffix slot p+1 at slot p
+        self._age_weight = decay ** np.arange(W - 1, -1, -1.0)  # weight of slot m when the block is full
         self.reset(None, time_gap)
 
     # ---- streaming ------------------------------------------------------------------------
@@ -238,72 +239,21 @@ class TimeGapMonitor:
 
     def update_block(self, speed: ArrayLike, spacing: ArrayLike) -> MonitorTicks:
         """Add n_ticks ticks of measurements, speed [m/s] and spacing [m], each (n_ticks, n_envs, n_vehicles)."""
-        speed, spacing = np.asarray(speed, dtype=float), np.asarray(spacing, dtype=float)
+        speed, spacing = np.ascontiguousarray(speed, dtype=float), np.ascontiguousarray(spacing, dtype=float)
         if speed.ndim != 3 or speed.shape[1:] != self.shape or spacing.shape != speed.shape or not len(speed):
             raise ValueError(
                 f"speed, spacing have shapes {speed.shape}, {spacing.shape}: expected (n_ticks >= 1, *{self.shape})"
             )
-        cfg = self.config
-        used = (speed >= 0) & (speed <= cfg.max_speed) & (spacing >= 0) & (spacing <= cfg.max_spacing)  # NaN -> False
-        self.skipped += (~used).sum(axis=0)
-        stats = np.empty((len(speed), N_STATS) + self.shape)  # this block's per-tick stats
-        stats[:, 0] = used
-        np.copyto(stats[:, 1], np.where(used, speed, 0.0))
-        np.copyto(stats[:, 3], np.where(used, spacing, 0.0))
-        np.multiply(stats[:, 1], stats[:, 1], out=stats[:, 2])
-        np.multiply(stats[:, 1], stats[:, 3], out=stats[:, 4])
-        window = self._window_sums(stats)
-        self._window_stats = window[-1]
-        prior_mean = (cfg.prior_standstill_spacing, self._prior_tau)
-        moments = _moments_from_stats(np.moveaxis(window, 1, 0), prior_mean, self._precision, cfg.noise_variance)
-        self._moments = Moments(*(channel[-1] for channel in moments))
-        return MonitorTicks(used=used, tau_mean=moments.mean_tau)
-
-    def _window_sums(self, stats: np.ndarray) -> np.ndarray:
-        """Forgetting-weighted window sums after each tick of ``stats`` (n_ticks, 5, n_envs, n_vehicles)."""
-        if self._window_ticks is None:
-            sums = self._running_sums(self._block_sum, stats)
-            self._block_sum = sums[-1]
-            return sums
-        sums = np.empty_like(stats)
-        start, W = 0, self._window_ticks
-        while start < len(stats):  # one ring block at a time: slots p .. p + m - 1
-            p = self._slot
-            m = min(len(stats) - start, W - p)
-            suffix = self._slots[p + 1 : p + m + 1] * self._suffix_weight[p : p + m, None, None, None]
-            self._slots[p : p + m] = stats[start : start + m]
-            block = self._running_sums(self._block_sum, stats[start : start + m])
-            self._block_sum = block[-1]
-            np.add(block, suffix, out=sums[start : start + m])
-            start += m
-            if p + m == W:
-                self._close_block()
-            else:
-                self._slot = p + m
-        return sums
-
-    def _running_sums(self, previous: np.ndarray, stats: np.ndarray) -> np.ndarray:
-        """``previous`` (5, n_envs, n_vehicles) carried on through each tick of ``stats``, with forgetting."""
-        decay = self.config.forgetting
-        if decay == 1:
-            return np.cumsum(np.concatenate([previous[None], stats]), axis=0)[1:]
-        sums = np.empty_like(stats)
-        running = previous
-        for k, tick_stats in enumerate(stats):
-            running = sums[k] = decay * running + tick_stats
-        return sums
-
-    def _close_block(self) -> None:
-        """Turn the full block into suffix sums and start a new block: slot m becomes forgetting^(W-1-m) x_m + slot m+1."""
-        W, slots = self._window_ticks, self._slots
-        if self.config.forgetting == 1:
-            slots[:W] = np.cumsum(slots[W - 1 :: -1], axis=0)[::-1]
-        else:
-            for m in range(W - 2, -1, -1):  # each step vectorised over all vehicles
-                slots[m] *= self._age_weight[m]
-                slots[m] += slots[m + 1]
-        self._block_sum = np.zeros_like(self._block_sum)
-        self._slot = 0
+        cfg, precision = self.config, self._precision
+        ticks = MonitorTicks(used=np.empty(speed.shape, dtype=bool), tau_mean=np.empty(speed.shape))
+        self._slot = _update_kernel(
+            speed, spacing, cfg.max_speed, cfg.max_spacing, cfg.forgetting,
+            self._slots, self._slot, self._suffix_weight, self._age_weight,
+            cfg.prior_standstill_spacing, self._prior_tau, precision[0, 0], precision[0, 1], precision[1, 1],
+            cfg.noise_variance, self._block_sum, self._window_stats, self.skipped, ticks.used, ticks.tau_mean,
+        )
+        self._moments = None
+        return ticks
 
     # ---- changes of setting ------------------------------------------------------------------
 
@@ -334,22 +284,29 @@ class TimeGapMonitor:
         self._prior_tau[vehicles] = tau[vehicles]
         self._block_sum[:, vehicles] = 0.0
         self._window_stats[:, vehicles] = 0.0
-        if self._window_ticks is not None:
-            self._slots[:, :, vehicles] = 0.0
-        prior_mean = (self.config.prior_standstill_spacing, self._prior_tau)
-        self._moments = _moments_from_stats(self._window_stats, prior_mean, self._precision, self.config.noise_variance)
+        self._slots[:, :, vehicles] = 0.0
+        self._moments = None  # the prior, recomputed when first read
+
+    def _latest(self) -> Moments:
+        """The posterior after the last tick (or change of setting)."""
+        if self._moments is None:
+            prior_mean = (self.config.prior_standstill_spacing, self._prior_tau)
+            self._moments = _moments_from_stats(
+                self._window_stats, prior_mean, self._precision, self.config.noise_variance
+            )
+        return self._moments
 
     # ---- read-outs ----------------------------------------------------------------------------
 
     @property
     def mean(self) -> np.ndarray:
         """Posterior mean of [s0 [m], tau [s]] (n_envs, n_vehicles, 2)."""
-        return self._moments.mean()
+        return self._latest().mean()
 
     @property
     def cov(self) -> np.ndarray:
         """Posterior covariance of [s0, tau] (n_envs, n_vehicles, 2, 2), symmetric positive definite."""
-        return self._moments.cov()
+        return self._latest().cov()
 
     @property
     def prior_mean(self) -> np.ndarray:
@@ -359,12 +316,12 @@ class TimeGapMonitor:
     @property
     def tau_mean(self) -> np.ndarray:
         """Posterior mean of tau (n_envs, n_vehicles) [s]."""
-        return self._moments.mean_tau.copy()
+        return self._latest().mean_tau.copy()
 
     @property
     def tau_std(self) -> np.ndarray:
         """Posterior standard deviation of tau (n_envs, n_vehicles) [s]."""
-        return np.sqrt(self._moments.var_tau)
+        return np.sqrt(self._latest().var_tau)
 
     @property
     def n_measurements(self) -> np.ndarray:
@@ -387,32 +344,19 @@ class TimeGapMonitor:
 
         lcl, ucl [s]: broadcastable to (n_envs, n_vehicles), lcl <= ucl (infinite limits allowed).
         """
-        low = np.broadcast_to(np.asarray(lcl, dtype=float), self.shape)
-        high = np.broadcast_to(np.asarray(ucl, dtype=float), self.shape)
+        low, high = (np.asarray(limit, dtype=float) for limit in (lcl, ucl))
+        low, high = (limit if limit.shape == self.shape else np.broadcast_to(limit, self.shape) for limit in (low, high))
         if not np.all(low <= high):
             raise ValueError(f"lcl = {lcl!r}, ucl = {ucl!r}: need lcl <= ucl everywhere")
-        mean, scale = self._moments.mean_tau, np.sqrt(2.0 * self._moments.var_tau)
+        moments = self._latest()
+        mean, scale = moments.mean_tau, np.sqrt(2.0 * moments.var_tau)
         return 0.5 * (erfc((mean - low) / scale) + erfc((high - mean) / scale))
 
 
-def erfc(x: ArrayLike) -> np.ndarray:
-    """Complementary error function, vectorised, relative error < 1.2e-7 everywhere.
-
-    Chebyshev-fitted exponential form (Press et al., Numerical Recipes, sec. 6.2):
-    erfc(x) = t exp(-x^2 + poly(t)), t = 1 / (1 + |x| / 2), and erfc(-x) = 2 - erfc(x).
-    """
-    x = np.asarray(x, dtype=float)
-    z = np.abs(x)
-    t = 1.0 / (1.0 + 0.5 * z)
-    poly = 0.0
-    for coefficient in (
-        0.17087277, -0.82215223, 1.48851587, -1.13520398, 0.27886807,
-        -0.18628806, 0.09678418, 0.37409196, 1.00002368, -1.26551223,
-    ):  # Horner, highest power first
-        poly = poly * t + coefficient
-    with np.errstate(over="ignore"):  # exp(-z^2) underflows to 0 for z > 27: fine
-        tail = t * np.exp(-z * z + poly)
-    return np.where(x >= 0, tail, 2.0 - tail)
+@numba.vectorize(["float64(float64)"], cache=True)
+def erfc(x: float) -> float:
+    """Complementary error function as a NumPy ufunc (the C library's, compiled by numba)."""
+    return math.erfc(x)
 
 
 # ---- batch argument checks (shared with charts.py) ---------------------------------------------
@@ -460,6 +404,8 @@ def vehicle_mask(mask: ArrayLike | None, shape: tuple[int, int]) -> np.ndarray:
     array = np.asarray(mask)
     if array.dtype != bool:
         raise ValueError(f"mask has dtype {array.dtype}: must be bool")
+    if array.shape == shape:
+        return array
     try:
         return np.broadcast_to(array, shape)
     except ValueError:
@@ -474,3 +420,54 @@ def env_mask(mask: ArrayLike | None, n_envs: int) -> np.ndarray:
     if array.dtype != bool or array.shape != (n_envs,):
         raise ValueError(f"mask has dtype {array.dtype} and shape {array.shape}: must be bool of shape ({n_envs},)")
     return array
+
+
+@numba.njit(cache=True)
+def _update_kernel(  # noqa: ANN202, PLR0913 -- the kernel takes the monitor's arrays one by one
+    speed, spacing, max_speed, max_spacing, forgetting,
+    slots, slot, suffix_weight, age_weight,
+    prior_s0, prior_tau, p00, p01, p11, sigma2,
+    block_sum, window_stats, skipped, out_used, out_tau_mean,
+):
+    """:meth:`TimeGapMonitor.update_block`, tick by tick and vehicle by vehicle, in place; returns the next slot.
+
+    ``slot = -1`` means no window: the window sums are the block sums, which never close.
+    The additions are those of the class docstring's drift guard, in the same order.
+    """
+    n_ticks, n_envs, n_vehicles = speed.shape
+    window_ticks = slots.shape[0] - 1
+    x = np.empty(N_STATS)
+    for k in range(n_ticks):
+        for e in range(n_envs):
+            for i in range(n_vehicles):
+                v, s = speed[k, e, i], spacing[k, e, i]
+                used = 0.0 <= v <= max_speed and 0.0 <= s <= max_spacing  # NaN -> False
+                out_used[k, e, i] = used
+                if not used:
+                    skipped[e, i] += 1
+                    v = s = 0.0
+                x[0], x[1], x[2], x[3], x[4] = (1.0 if used else 0.0), v, v * v, s, v * s
+                for c in range(N_STATS):
+                    if forgetting < 1.0:
+                        block_sum[c, e, i] *= forgetting
+                    block_sum[c, e, i] += x[c]
+                    if slot < 0:
+                        window_stats[c, e, i] = block_sum[c, e, i]
+                    else:
+                        slots[slot, c, e, i] = x[c]
+                        window_stats[c, e, i] = slots[slot + 1, c, e, i] * suffix_weight[slot] + block_sum[c, e, i]
+                out_tau_mean[k, e, i] = _posterior_moments(
+                    window_stats[0, e, i], window_stats[1, e, i], window_stats[2, e, i], window_stats[3, e, i],
+                    window_stats[4, e, i], prior_s0, prior_tau[e, i], p00, p01, p11, sigma2,
+                )[1]
+        if slot < 0:  # no window
+            continue
+        if slot < window_ticks - 1:
+            slot += 1
+        else:  # the block is full: turn it into suffix sums
+            for m in range(window_ticks - 2, -1, -1):
+                slots[m] *= age_weight[m]
+                slots[m] += slots[m + 1]
+            block_sum[:] = 0.0
+            slot = 0
+    return slot

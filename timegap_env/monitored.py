@@ -8,8 +8,8 @@ re-centres that follower's prior and chart on the new setting.
 from __future__ import annotations
 
 import dataclasses
-import functools
 
+import numba
 import numpy as np
 
 from timegap_env.charts import ChartState, make_chart
@@ -21,13 +21,7 @@ from timegap_env.platoon import Platoon, PlatoonTicks, per_env
 _SPLITMIX_INCREMENT = np.uint64(0x9E3779B97F4A7C15)  # SplitMix64 constants (Steele, Lea & Flood 2014)
 _SPLITMIX_MULTIPLIERS = (np.uint64(0xBF58476D1CE4E5B9), np.uint64(0x94D049BB133111EB))
 _UNIFORM_STREAMS = 3  # per follower and tick: two for the Gaussian pair, one for dropouts
-
-
-def _splitmix64(x: np.ndarray) -> np.ndarray:
-    """SplitMix64 finaliser: a well-mixed uint64 hash of each uint64 in ``x``."""
-    x = (x ^ (x >> np.uint64(30))) * _SPLITMIX_MULTIPLIERS[0]
-    x = (x ^ (x >> np.uint64(27))) * _SPLITMIX_MULTIPLIERS[1]
-    return x ^ (x >> np.uint64(31))
+SAME_SETTING = 1e-6  # settings closer than this are the same setting [s]
 
 
 def counter_uniforms(keys: np.ndarray, ticks: np.ndarray, n_followers: int) -> np.ndarray:
@@ -38,17 +32,33 @@ def counter_uniforms(keys: np.ndarray, ticks: np.ndarray, n_followers: int) -> n
     or how ticks are grouped, so a vector of envs reproduces the same envs run one by one.
     """
     ticks = np.asarray(ticks).astype(np.uint64)
-    offsets = _offsets(n_followers).reshape((_UNIFORM_STREAMS,) + (1,) * ticks.ndim + (n_followers,))
-    counter = ticks[None, ..., None] * np.uint64(n_followers * _UNIFORM_STREAMS) + offsets
-    bits = _splitmix64(_splitmix64(counter * _SPLITMIX_INCREMENT + keys[..., None]))
-    return ((bits >> np.uint64(11)).astype(np.float64) + 0.5) * 2.0**-53
+    by_tick = ticks.reshape(-1, ticks.shape[-1])  # (n_ticks, n_envs)
+    uniforms = np.empty((_UNIFORM_STREAMS, *by_tick.shape, n_followers))
+    _counter_uniforms_kernel(np.asarray(keys, dtype=np.uint64), by_tick, uniforms)
+    return uniforms.reshape((_UNIFORM_STREAMS, *ticks.shape, n_followers))
 
 
-@functools.cache
-def _offsets(n_followers: int) -> np.ndarray:
-    """Counter offset of each (stream, follower) within a tick, shape (3, n_followers)."""
-    follower = np.arange(n_followers, dtype=np.uint64)[None, :] * np.uint64(_UNIFORM_STREAMS)
-    return follower + np.arange(_UNIFORM_STREAMS, dtype=np.uint64)[:, None]
+@numba.njit(cache=True)
+def _counter_uniforms_kernel(keys, ticks, out):  # noqa: ANN001, ANN202
+    """Fill ``out`` (3, n_ticks, n_envs, n_followers): the uniform of counter
+    (tick, follower, stream) = tick * 3 n_followers + 3 follower + stream, hashed with the env's key."""
+    n_streams, n_ticks, n_envs, n_followers = out.shape
+    per_tick = np.uint64(n_streams * n_followers)
+    for k in range(n_ticks):
+        for e in range(n_envs):
+            for f in range(n_followers):
+                for stream in range(n_streams):
+                    counter = ticks[k, e] * per_tick + np.uint64(n_streams * f + stream)
+                    bits = _splitmix64(_splitmix64(counter * _SPLITMIX_INCREMENT + keys[e]))
+                    out[stream, k, e, f] = (float(bits >> np.uint64(11)) + 0.5) * 2.0**-53
+
+
+@numba.njit(cache=True)
+def _splitmix64(x):  # noqa: ANN001, ANN202
+    """SplitMix64 finaliser: a well-mixed uint64 hash of the uint64 ``x``."""
+    x = (x ^ (x >> np.uint64(30))) * _SPLITMIX_MULTIPLIERS[0]
+    x = (x ^ (x >> np.uint64(27))) * _SPLITMIX_MULTIPLIERS[1]
+    return x ^ (x >> np.uint64(31))
 
 
 def measure(
@@ -137,13 +147,16 @@ class MonitoredPlatoon:
 
         Only a real change moves anything: the simulator ramps to it, and that
         follower's prior and chart are re-centred on it (the chart's history is
-        cleared; its centre line then follows the ramp, see :meth:`tick`). The
+        cleared; its centre line then follows the ramp, see :meth:`run`). The
         chart holds its alarms off until the ramp is done plus ``settle_time``.
         """
         current = self.platoon.time_gap_setting
-        setting = np.broadcast_to(np.asarray(setting, dtype=float), current.shape)
-        selected = np.ones(current.shape, dtype=bool) if mask is None else np.broadcast_to(mask, current.shape)
-        changed = selected & ~np.isclose(setting, current)
+        setting = np.asarray(setting, dtype=float)
+        if setting.shape != current.shape:
+            setting = np.broadcast_to(setting, current.shape)
+        changed = ~(np.abs(setting - current) <= SAME_SETTING)  # NaN counts as a change, refused below
+        if mask is not None:
+            changed &= mask
         if changed.any():
             self.platoon.set_time_gap(setting, mask=changed)
             self.monitor.recenter(setting, changed)

@@ -178,8 +178,10 @@ class Platoon:
 
     def set_time_gap(self, setting: np.ndarray | float, mask: np.ndarray | None = None) -> None:
         """Ask for a new time gap setting [s] (broadcast to (n_envs, n_followers)); the controller ramps to it."""
-        setting = np.broadcast_to(np.asarray(setting, dtype=float), self.time_gap_setting.shape)
-        if not np.all(np.isfinite(setting)) or np.any(setting <= 0):
+        setting = np.asarray(setting, dtype=float)
+        if setting.shape != self.time_gap_setting.shape:
+            setting = np.broadcast_to(setting, self.time_gap_setting.shape)
+        if not (np.isfinite(setting).all() and (setting > 0).all()):
             raise ValueError(f"time_gap_setting = {setting}: every value must be finite and > 0")
         if mask is None:
             self.time_gap_setting[:] = setting
