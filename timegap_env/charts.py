@@ -155,7 +155,8 @@ class ControlChart:
         The statistic keeps updating meanwhile.
         """
         vehicles = vehicle_mask(mask, self.shape)
-        self.hold_off[vehicles] = np.broadcast_to(np.asarray(ticks, dtype=np.int64), self.shape)[vehicles]
+        ticks = np.asarray(ticks, dtype=np.int64)
+        self.hold_off[vehicles] = (ticks if ticks.shape == self.shape else np.broadcast_to(ticks, self.shape))[vehicles]
 
     def reset(self, mask: ArrayLike | None, time_gap: ArrayLike) -> None:
         """Restart the envs in ``mask`` ((n_envs,) bool, None = all), centred on ``time_gap`` [s]."""

@@ -246,13 +246,14 @@ class TimeGapMonitor:
             )
         cfg, precision = self.config, self._precision
         ticks = MonitorTicks(used=np.empty(speed.shape, dtype=bool), tau_mean=np.empty(speed.shape))
+        moments = np.empty((len(Moments._fields),) + self.shape)  # the posterior after the last tick
         self._slot = _update_kernel(
             speed, spacing, cfg.max_speed, cfg.max_spacing, cfg.forgetting,
             self._slots, self._slot, self._suffix_weight, self._age_weight,
             cfg.prior_standstill_spacing, self._prior_tau, precision[0, 0], precision[0, 1], precision[1, 1],
-            cfg.noise_variance, self._block_sum, self._window_stats, self.skipped, ticks.used, ticks.tau_mean,
+            cfg.noise_variance, self._block_sum, self._window_stats, self.skipped, ticks.used, ticks.tau_mean, moments,
         )
-        self._moments = None
+        self._moments = Moments(*moments)
         return ticks
 
     # ---- changes of setting ------------------------------------------------------------------
@@ -346,7 +347,7 @@ class TimeGapMonitor:
         """
         low, high = (np.asarray(limit, dtype=float) for limit in (lcl, ucl))
         low, high = (limit if limit.shape == self.shape else np.broadcast_to(limit, self.shape) for limit in (low, high))
-        if not np.all(low <= high):
+        if not (low <= high).all():
             raise ValueError(f"lcl = {lcl!r}, ucl = {ucl!r}: need lcl <= ucl everywhere")
         moments = self._latest()
         mean, scale = moments.mean_tau, np.sqrt(2.0 * moments.var_tau)
@@ -389,7 +390,7 @@ def time_gap_array(time_gap: ArrayLike, shape: tuple[int, int]) -> np.ndarray:
             array = np.broadcast_to(array, shape)
         except ValueError:
             raise ValueError(f"time_gap has shape {array.shape}: not broadcastable to {shape}") from None
-    valid = np.isfinite(array) & (array > 0)
+    valid = (array > 0) & (array < np.inf)  # NaN fails both
     if not valid.all():  # called every tick: find the culprit only when there is one
         bad = np.argwhere(~valid)
         index = tuple(int(i) for i in bad[0])
@@ -427,9 +428,12 @@ def _update_kernel(  # noqa: ANN202, PLR0913 -- the kernel takes the monitor's a
     speed, spacing, max_speed, max_spacing, forgetting,
     slots, slot, suffix_weight, age_weight,
     prior_s0, prior_tau, p00, p01, p11, sigma2,
-    block_sum, window_stats, skipped, out_used, out_tau_mean,
+    block_sum, window_stats, skipped, out_used, out_tau_mean, out_moments,
 ):
     """:meth:`TimeGapMonitor.update_block`, tick by tick and vehicle by vehicle, in place; returns the next slot.
+
+    ``out_tau_mean`` gets the posterior mean of tau after each tick, ``out_moments`` (5, n_envs,
+    n_vehicles) the whole posterior after the last one, in :class:`Moments` order.
 
     ``slot = -1`` means no window: the window sums are the block sums, which never close.
     The additions are those of the class docstring's drift guard, in the same order.
@@ -456,10 +460,14 @@ def _update_kernel(  # noqa: ANN202, PLR0913 -- the kernel takes the monitor's a
                     else:
                         slots[slot, c, e, i] = x[c]
                         window_stats[c, e, i] = slots[slot + 1, c, e, i] * suffix_weight[slot] + block_sum[c, e, i]
-                out_tau_mean[k, e, i] = _posterior_moments(
+                moments = _posterior_moments(
                     window_stats[0, e, i], window_stats[1, e, i], window_stats[2, e, i], window_stats[3, e, i],
                     window_stats[4, e, i], prior_s0, prior_tau[e, i], p00, p01, p11, sigma2,
-                )[1]
+                )
+                out_tau_mean[k, e, i] = moments[1]
+                if k == n_ticks - 1:
+                    for m in range(len(moments)):
+                        out_moments[m, e, i] = moments[m]
         if slot < 0:  # no window
             continue
         if slot < window_ticks - 1:

@@ -69,14 +69,38 @@ def measure(
 
     ``dropout_probability`` (n_envs,) is each env's chance per tick that a follower's measurement is missing.
     """
-    radius = np.sqrt(-2.0 * np.log(uniforms[0]))  # Box-Muller: two independent standard normals
-    angle = 2.0 * np.pi * uniforms[1]
-    measured_spacing = spacing + config.spacing_noise_std * radius * np.cos(angle)
-    measured_speed = speed + config.speed_noise_std * radius * np.sin(angle)
-    dropped = uniforms[2] < dropout_probability[:, None]  # broadcast over the envs axis
-    measured_spacing[dropped] = np.nan
-    measured_speed[dropped] = np.nan
+    shape = uniforms.shape[1:]  # (..., n_envs, n_followers)
+    blocks = (-1, *shape[-2:])  # (n_ticks, n_envs, n_followers)
+
+    def as_blocks(values: np.ndarray) -> np.ndarray:
+        values = np.asarray(values, dtype=float)
+        return np.ascontiguousarray(values if values.shape == shape else np.broadcast_to(values, shape)).reshape(blocks)
+
+    measured_spacing, measured_speed = np.empty(shape), np.empty(shape)
+    _measure_kernel(
+        as_blocks(spacing), as_blocks(speed), uniforms.reshape(_UNIFORM_STREAMS, *blocks),
+        np.asarray(dropout_probability, dtype=float), config.spacing_noise_std, config.speed_noise_std,
+        measured_spacing.reshape(blocks), measured_speed.reshape(blocks),
+    )
     return measured_spacing, measured_speed
+
+
+@numba.njit(cache=True)
+def _measure_kernel(  # noqa: ANN202 -- arrays (n_ticks, n_envs, n_followers), uniforms with a leading stream axis
+    spacing, speed, uniforms, dropout_probability, spacing_noise_std, speed_noise_std, out_spacing, out_speed
+):
+    """:func:`measure`, element by element."""
+    n_ticks, n_envs, n_followers = spacing.shape
+    for k in range(n_ticks):
+        for e in range(n_envs):
+            for f in range(n_followers):
+                if uniforms[2, k, e, f] < dropout_probability[e]:  # dropped: missing in both
+                    out_spacing[k, e, f] = out_speed[k, e, f] = np.nan
+                    continue
+                radius = np.sqrt(-2.0 * np.log(uniforms[0, k, e, f]))  # Box-Muller: two independent normals
+                angle = 2.0 * np.pi * uniforms[1, k, e, f]
+                out_spacing[k, e, f] = spacing[k, e, f] + spacing_noise_std * radius * np.cos(angle)
+                out_speed[k, e, f] = speed[k, e, f] + speed_noise_std * radius * np.sin(angle)
 
 
 @dataclasses.dataclass(frozen=True)

@@ -181,12 +181,14 @@ class Platoon:
         setting = np.asarray(setting, dtype=float)
         if setting.shape != self.time_gap_setting.shape:
             setting = np.broadcast_to(setting, self.time_gap_setting.shape)
-        if not (np.isfinite(setting).all() and (setting > 0).all()):
+        if not ((setting > 0) & (setting < np.inf)).all():  # NaN fails both
             raise ValueError(f"time_gap_setting = {setting}: every value must be finite and > 0")
         if mask is None:
             self.time_gap_setting[:] = setting
         else:
-            mask = np.broadcast_to(np.asarray(mask, dtype=bool), setting.shape)
+            mask = np.asarray(mask, dtype=bool)
+            if mask.shape != setting.shape:
+                mask = np.broadcast_to(mask, setting.shape)
             self.time_gap_setting[mask] = setting[mask]
 
     def set_v2v(self, enabled: np.ndarray | bool) -> None:

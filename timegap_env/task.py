@@ -72,6 +72,12 @@ class PlatoonTask:
         self._previous_accel = np.zeros((n_envs, self.n_followers))  # [m/s^2]
         self._min_ttc_step = np.full((n_envs, self.n_followers), np.inf)
         self._rms_jerk_step = np.zeros((n_envs, self.n_followers))
+        self._score_constants = (  # what _score_kernel needs of the config
+            config.platoon.dt, config.chart.limit_width * config.chart.baseline_std, config.ttc_threshold,
+            config.jerk_reference, self.levels[0], self.levels[-1] - self.levels[0], config.preferred_time_gap,
+            config.platoon.standstill_spacing + config.platoon.vehicle_length,
+            np.array([getattr(config.reward_weights, name) for name in REWARD_TERMS]),
+        )
         self.totals = {name: np.zeros(n_envs) for name in (
             "steps", "alarm_ticks", "exceedances", "max_deviation", "jerk_squared", "switches", "setting",
             "capacity", "collision")}
@@ -151,7 +157,7 @@ class PlatoonTask:
         expected = (self.n_envs,) if self.config.action_mode == "platoon" else (self.n_envs, self.n_followers)
         if action.shape != expected or not np.issubdtype(action.dtype, np.integer):
             raise ValueError(f"action = {action!r}: expected integer ladder indices of shape {expected}")
-        if np.any((action < 0) | (action >= self.levels.size)):
+        if ((action < 0) | (action >= self.levels.size)).any():
             raise ValueError(f"action = {action!r}: every index must be in [0, {self.levels.size - 1}]")
         settings = self.levels[action]
         return np.repeat(settings[:, None], self.n_followers, axis=1) if settings.ndim == 1 else settings
@@ -174,51 +180,31 @@ class PlatoonTask:
         if self.trace is not None:
             self.trace.extend(zip((ticks[:, 0] + 1) * cfg.platoon.dt, block.tau_mean[:, 0], chart.center[:, 0]))
 
-        collided = physics.collisions.any(axis=(0, 2))
-        ticks_out = _TickTotals.empty(self.n_envs, self.n_followers)
-        _tick_totals_kernel(block.tau_mean, chart.center, chart.alarm, chart.exceedance, leader_speed,
-                            physics.speed, physics.spacing, physics.accel, self._previous_accel, cfg.platoon.dt,
-                            *ticks_out)
-        deviation_sum, alarm_sum, jerk_squared = ticks_out.deviation_sum, ticks_out.alarm_ticks, ticks_out.jerk_squared
-        self._min_ttc_step = ticks_out.min_ttc
+        score = _StepScore.empty(self.n_envs, self.n_followers)
+        _score_kernel(
+            block.tau_mean, chart.center, chart.alarm, chart.exceedance, physics.collisions, leader_speed,
+            physics.speed, physics.spacing, physics.accel, self._previous_accel, platoon.time_gap_setting,
+            changed, self._score_constants, *score,
+        )
         self._previous_accel = physics.accel[-1].copy()
-        self.totals["alarm_ticks"] += alarm_sum
-        self.totals["exceedances"] += ticks_out.exceedances
-        np.maximum(self.totals["max_deviation"], ticks_out.max_deviation, out=self.totals["max_deviation"])
-
-        n = self.ticks_per_decision
-        follower_ticks = n * self.n_followers
-        setting = platoon.time_gap_setting
-        speed = platoon.v[:, 1:]
-        gap_per_vehicle = cfg.platoon.standstill_spacing + cfg.platoon.vehicle_length  # [m]
-        capacity = 3600.0 * speed / (speed * setting + gap_per_vehicle)  # [veh/h] at the current speed
-        capacity_ratio = (speed * self.levels[0] + gap_per_vehicle) / (speed * setting + gap_per_vehicle)
-        span = self.levels[-1] - self.levels[0]
-        terms = {
-            "tracking": -deviation_sum / follower_ticks / (cfg.chart.limit_width * cfg.chart.baseline_std),
-            "alarms": -alarm_sum / follower_ticks,
-            "safety": -_follower_mean(np.maximum(0.0, 1.0 - self._min_ttc_step / cfg.ttc_threshold)),
-            "collision": -collided.astype(float),
-            "comfort": -_follower_mean(jerk_squared / n) / cfg.jerk_reference**2,
-            "efficiency": -_follower_mean(1.0 - capacity_ratio),
-            "preference": -_follower_mean(np.abs(setting - cfg.preferred_time_gap)) / span,
-            "switching": -_follower_mean(changed),
-        }
-        weights = cfg.reward_weights
-        reward = sum(getattr(weights, name) * term for name, term in terms.items())
-        self._rms_jerk_step = np.sqrt(jerk_squared / n)
+        self._min_ttc_step = score.min_ttc
+        self._rms_jerk_step = np.sqrt(score.jerk_squared / self.ticks_per_decision)
+        terms = dict(zip(REWARD_TERMS, score.terms))
 
         totals = self.totals
         totals["steps"] += 1
-        totals["jerk_squared"] += _follower_mean(jerk_squared)
+        totals["alarm_ticks"] += score.alarm_ticks
+        totals["exceedances"] += score.exceedances
+        np.maximum(totals["max_deviation"], score.max_deviation, out=totals["max_deviation"])
+        totals["jerk_squared"] += score.mean_jerk_squared
         totals["switches"] += changed.sum(axis=1)
-        totals["setting"] += _follower_mean(setting)
-        totals["capacity"] += _follower_mean(capacity)
-        totals["collision"] = np.maximum(totals["collision"], collided)
-        np.minimum(totals["min_ttc"], self._min_ttc_step.min(axis=1), out=totals["min_ttc"])
+        totals["setting"] += score.mean_setting
+        totals["capacity"] += score.mean_capacity
+        totals["collision"] = np.maximum(totals["collision"], score.collided)
+        np.minimum(totals["min_ttc"], score.min_ttc.min(axis=1), out=totals["min_ttc"])
         terminated = platoon.collided.any(axis=1)
         truncated = (loop.ticks >= self.episode_ticks) & ~terminated
-        return StepResult(reward=reward, terms=terms, terminated=terminated, truncated=truncated)
+        return StepResult(reward=score.reward, terms=terms, terminated=terminated, truncated=truncated)
 
     # ------------------------------------------------------------------ read-outs
     def observation(self) -> np.ndarray:
@@ -226,18 +212,18 @@ class PlatoonTask:
         cfg, monitor, chart, platoon = self.config, self.loop.monitor, self.loop.chart, self.loop.platoon
         half_width = cfg.chart.limit_width * cfg.chart.baseline_std
         center = chart.center
-        features = (
-            np.clip((monitor.tau_mean - center) / DEVIATION_SCALE, -1.0, 1.0),
-            np.clip(monitor.tau_std / half_width, 0.0, 1.0),
-            monitor.prob_outside(center - half_width, center + half_width),
-            chart.alarm,
-            np.clip(chart.exceedances_in_window / (2 * cfg.chart.switch_exceedances), 0.0, 1.0),
-            np.clip(chart.run_length * cfg.platoon.dt / cfg.chart.exceedance_window, 0.0, 1.0),
-            (platoon.time_gap_setting - self.levels[0]) / (self.levels[-1] - self.levels[0]),
-            np.clip(platoon.v[:, 1:] / SPEED_SCALE, 0.0, 1.0),
-            platoon.v2v,
-        )
-        return np.stack(features, axis=-1).astype(np.float32)
+        features = np.empty((self.n_envs, self.n_followers, len(FEATURES)), dtype=np.float32)
+        features[..., 0] = (monitor.tau_mean - center) / DEVIATION_SCALE
+        features[..., 1] = monitor.tau_std / half_width
+        features[..., 2] = monitor.prob_outside(center - half_width, center + half_width)
+        features[..., 3] = chart.alarm
+        features[..., 4] = chart.exceedances_in_window / (2 * cfg.chart.switch_exceedances)
+        features[..., 5] = chart.run_length * cfg.platoon.dt / cfg.chart.exceedance_window
+        features[..., 6] = (platoon.time_gap_setting - self.levels[0]) / (self.levels[-1] - self.levels[0])
+        features[..., 7] = platoon.v[:, 1:] / SPEED_SCALE
+        features[..., 8] = platoon.v2v
+        np.maximum(features, OBSERVATION_LOW, out=features)  # clip, as two ufuncs: np.clip's wrapper costs more
+        return np.minimum(features, OBSERVATION_HIGH, out=features)
 
     def info(self) -> dict[str, np.ndarray]:
         """Per-step diagnostics, each (n_envs, n_followers) unless noted."""
@@ -278,35 +264,57 @@ class PlatoonTask:
         }
 
 
-class _TickTotals(NamedTuple):
-    """What a step's ticks add up to, filled by :func:`_tick_totals_kernel`."""
+class _StepScore(NamedTuple):
+    """A step's reward and what its ticks add up to, filled by :func:`_score_kernel`."""
 
-    deviation_sum: np.ndarray  # (n_envs,) sum over ticks and followers of |estimate - centre line| [s]
+    terms: np.ndarray  # (len(REWARD_TERMS), n_envs) the reward terms, each <= 0
+    reward: np.ndarray  # (n_envs,) weighted sum of the terms
+    collided: np.ndarray  # (n_envs,) a follower collided during the step [bool]
     max_deviation: np.ndarray  # (n_envs,) largest |estimate - centre line| [s]
     alarm_ticks: np.ndarray  # (n_envs,) follower-ticks in alarm [-]
     exceedances: np.ndarray  # (n_envs,) excursions started [-]
     min_ttc: np.ndarray  # (n_envs, n_followers) smallest time-to-collision, inf if never closing [s]
-    jerk_squared: np.ndarray  # (n_envs, n_followers) sum over ticks of jerk^2 [m^2/s^6]
+    jerk_squared: np.ndarray  # (n_envs, n_followers) sum over the ticks of jerk^2 [m^2/s^6]
+    mean_jerk_squared: np.ndarray  # (n_envs,) jerk_squared averaged over the followers [m^2/s^6]
+    mean_setting: np.ndarray  # (n_envs,) time gap setting averaged over the followers [s]
+    mean_capacity: np.ndarray  # (n_envs,) capacity implied by the settings at the current speeds [veh/h]
 
     @classmethod
-    def empty(cls, n_envs: int, n_followers: int) -> _TickTotals:
-        return cls(*(np.empty(n_envs) for _ in range(4)), np.empty((n_envs, n_followers)), np.empty((n_envs, n_followers)))
+    def empty(cls, n_envs: int, n_followers: int) -> _StepScore:
+        def per_env() -> np.ndarray:
+            return np.empty(n_envs)
+
+        def per_follower() -> np.ndarray:
+            return np.empty((n_envs, n_followers))
+
+        return cls(
+            terms=np.empty((len(REWARD_TERMS), n_envs)), reward=per_env(), collided=np.empty(n_envs, dtype=bool),
+            max_deviation=per_env(), alarm_ticks=per_env(), exceedances=per_env(), min_ttc=per_follower(),
+            jerk_squared=per_follower(), mean_jerk_squared=per_env(), mean_setting=per_env(), mean_capacity=per_env(),
+        )
 
 
 @numba.njit(cache=True)
-def _tick_totals_kernel(  # noqa: ANN202, PLR0913 -- the kernel takes the block's arrays one by one
-    tau_mean, center, alarm, exceedance, leader_speed, speed, spacing, accel, previous_accel, dt,
-    deviation_sum, max_deviation, alarm_ticks, exceedances, min_ttc, jerk_squared,
+def _score_kernel(  # noqa: ANN202, PLR0913 -- the kernel takes the step's arrays one by one
+    tau_mean, center, alarm, exceedance, collisions, leader_speed, speed, spacing, accel,
+    previous_accel, setting, changed, constants,
+    terms, reward, collided, max_deviation, alarm_ticks, exceedances, min_ttc, jerk_squared,
+    mean_jerk_squared, mean_setting, mean_capacity,
 ):
-    """Fill the :class:`_TickTotals` arrays from a block of ticks, arrays (n_ticks, n_envs, n_followers).
+    """Score a step: block arrays (n_ticks, n_envs, n_followers) in, :class:`_StepScore` arrays filled.
 
-    One pass in a fixed order, so one env gives the same sums alone as in a batch.
+    The reward terms, in REWARD_TERMS order, each <= 0 (see ``RewardWeights`` for their meaning):
+    tracking and alarms over every follower-tick; safety from each follower's smallest TTC;
+    comfort from its mean squared jerk; efficiency, preference and switching from the settings
+    at the end of the step. One pass in a fixed order, so one env scores the same alone as in a batch.
     """
+    (dt, half_width, ttc_threshold, jerk_reference, smallest_level, level_span, preferred_time_gap,
+     gap_per_vehicle, weights) = constants
     n_ticks, n_envs, n_followers = tau_mean.shape
+    follower_ticks = n_ticks * n_followers
     for e in range(n_envs):
-        deviation_sum[e] = max_deviation[e] = alarm_ticks[e] = exceedances[e] = 0.0
-        for f in range(n_followers):
-            min_ttc[e, f], jerk_squared[e, f] = np.inf, 0.0
+        deviation_sum = max_deviation[e] = alarm_ticks[e] = exceedances[e] = 0.0
+        collided[e] = False
         for k in range(n_ticks):
             tick_deviation = 0.0
             for f in range(n_followers):
@@ -315,16 +323,39 @@ def _tick_totals_kernel(  # noqa: ANN202, PLR0913 -- the kernel takes the block'
                 max_deviation[e] = max(max_deviation[e], deviation)
                 alarm_ticks[e] += alarm[k, e, f]
                 exceedances[e] += exceedance[k, e, f]
+                collided[e] = collided[e] or collisions[k, e, f]
+            deviation_sum += tick_deviation
+        safety = comfort = efficiency = preference = switching = 0.0
+        mean_jerk_squared[e] = mean_setting[e] = mean_capacity[e] = 0.0
+        for f in range(n_followers):
+            min_ttc[e, f], jerk_squared[e, f] = np.inf, 0.0
+            for k in range(n_ticks):
                 predecessor_speed = leader_speed[k, e] if f == 0 else speed[k, e, f - 1]
                 closing = speed[k, e, f] - predecessor_speed  # [m/s], > 0 when the gap shrinks
                 if closing > 0:
                     min_ttc[e, f] = min(min_ttc[e, f], spacing[k, e, f] / closing)
                 before = previous_accel[e, f] if k == 0 else accel[k - 1, e, f]
                 jerk_squared[e, f] += ((accel[k, e, f] - before) / dt) ** 2
-            deviation_sum[e] += tick_deviation
-
-
-def _follower_mean(values: np.ndarray) -> np.ndarray:
-    """Mean over the followers (axis 1) of (n_envs, n_followers) values; the ufunc directly, as
-    ``ndarray.mean`` costs several microseconds of Python per call, eight times a step."""
-    return np.add.reduce(values, axis=1, dtype=float) / values.shape[1]
+            v = speed[-1, e, f]  # the speed at the end of the step [m/s]
+            safety += max(0.0, 1.0 - min_ttc[e, f] / ttc_threshold)
+            comfort += jerk_squared[e, f] / n_ticks
+            efficiency += 1.0 - (v * smallest_level + gap_per_vehicle) / (v * setting[e, f] + gap_per_vehicle)
+            preference += abs(setting[e, f] - preferred_time_gap)
+            switching += changed[e, f]
+            mean_jerk_squared[e] += jerk_squared[e, f]
+            mean_setting[e] += setting[e, f]
+            mean_capacity[e] += 3600.0 * v / (v * setting[e, f] + gap_per_vehicle)
+        terms[0, e] = -deviation_sum / follower_ticks / half_width  # tracking
+        terms[1, e] = -alarm_ticks[e] / follower_ticks  # alarms
+        terms[2, e] = -(safety / n_followers)  # safety
+        terms[3, e] = -1.0 if collided[e] else -0.0  # collision
+        terms[4, e] = -(comfort / n_followers) / jerk_reference**2  # comfort
+        terms[5, e] = -(efficiency / n_followers)  # efficiency
+        terms[6, e] = -(preference / n_followers) / level_span  # preference
+        terms[7, e] = -(switching / n_followers)  # switching
+        reward[e] = 0.0
+        for t in range(terms.shape[0]):
+            reward[e] += weights[t] * terms[t, e]
+        mean_jerk_squared[e] /= n_followers
+        mean_setting[e] /= n_followers
+        mean_capacity[e] /= n_followers

@@ -4,9 +4,11 @@ Every figure is measured in this process, the same way, back to back, and the
 table reports ratios, which survive a busy machine better than absolute times:
 
 1. env steps/s of ``TimeGapMonitor-v0`` (one env, random actions) against
-   highway-env's ``highway-fast-v0`` and gymnasium's ``CartPole-v1``;
-2. vehicle-ticks/s of the batched simulator (``Platoon``) at 1, 64 and 1024
-   envs, and the native vector env against a ``SyncVectorEnv`` of single envs;
+   highway-env's ``highway-fast-v0`` and gymnasium's ``CartPole-v1``, the three
+   taking turns over several rounds (medians reported);
+2. vehicle-ticks/s of the batched simulator (``Platoon.advance``, a decision's
+   10 ticks per call) at 1, 64 and 1024 envs, and the native vector env against
+   a ``SyncVectorEnv`` of single envs;
 3. monitor updates/s, batched (1024 envs x 5 vehicles);
 4. PPO training steps/s on ``TimeGapMonitor-v0`` against PPO on ``CartPole-v1``
    with the same hyperparameters;
@@ -47,9 +49,10 @@ PPO_TRAINING = dict(n_envs=64, n_steps=64, batch_size=512, n_epochs=10, learning
 class Sizes:
     """How long each measurement runs."""
 
-    env_steps: int  # steps of TimeGapMonitor-v0 and CartPole-v1
-    highway_steps: int  # steps of highway-fast-v0 (about 100x slower)
-    ticks: dict[int, int]  # simulator ticks timed per batch size
+    rounds: int  # single-env measurements alternate between the envs this many times; medians are reported
+    env_steps: int  # steps of TimeGapMonitor-v0 and CartPole-v1 per round
+    highway_steps: int  # steps of highway-fast-v0 per round (it is about 100x slower)
+    ticks: dict[int, int]  # simulator ticks timed per batch size, in blocks of TICKS_PER_BLOCK
     vector_envs: int  # sub-envs of the vector env comparison
     vector_steps: int
     monitor_ticks: int
@@ -58,8 +61,10 @@ class Sizes:
     memory_envs: int
 
 
-FULL = Sizes(2000, 60, {1: 3000, 64: 2000, 1024: 500}, 64, 100, 300, 8192, 0, 1024)  # 0: each setting's n_steps
-QUICK = Sizes(20, 3, {1: 20, 64: 10, 1024: 5}, 4, 5, 5, 64, 1, 16)
+FULL = Sizes(5, 1000, 15, {1: 20000, 64: 5000, 1024: 1000}, 64, 100, 300, 8192, 0, 1024)  # 0: each setting's n_steps
+QUICK = Sizes(1, 20, 3, {1: 20, 64: 10, 1024: 10}, 4, 5, 5, 64, 1, 16)
+TICKS_PER_BLOCK = 10  # the simulator advances a decision's ticks in one call, as the env does
+WARM_UP_STEPS = 20  # untimed steps first: numba kernels load (or compile) on their first call
 
 
 def timed(run: Callable[[], int]) -> float:
@@ -70,9 +75,7 @@ def timed(run: Callable[[], int]) -> float:
 
 
 def env_steps_per_second(env: gym.Env, n_steps: int) -> float:
-    """Steps/s of one env under uniformly random actions, resets included."""
-    env.reset(seed=0)
-    env.action_space.seed(0)
+    """Steps/s of one env under uniformly random actions, resets included (the env carries on from where it was)."""
 
     def run() -> int:
         for _ in range(n_steps):
@@ -84,10 +87,25 @@ def env_steps_per_second(env: gym.Env, n_steps: int) -> float:
     return timed(run)
 
 
+def interleaved_steps_per_second(envs: dict[str, tuple[gym.Env, int]], rounds: int) -> dict[str, float]:
+    """Median steps/s of each env {name: (env, steps per round)}, the envs taking turns round by round,
+    so that a slow spell of a shared machine hits all of them rather than one."""
+    for env, _ in envs.values():
+        env.reset(seed=0)
+        env.action_space.seed(0)
+        env_steps_per_second(env, WARM_UP_STEPS)
+    rates: dict[str, list[float]] = {name: [] for name in envs}
+    for _ in range(rounds):
+        for name, (env, n_steps) in envs.items():
+            rates[name].append(env_steps_per_second(env, n_steps))
+    return {name: float(np.median(values)) for name, values in rates.items()}
+
+
 def vector_env_steps_per_second(envs: gym.vector.VectorEnv, n_steps: int) -> float:
     """Env-steps/s (sub-envs x steps) of a vector env under random actions."""
     envs.reset(seed=0)
     envs.action_space.seed(0)
+    envs.step(envs.action_space.sample())  # warm-up
 
     def run() -> int:
         for _ in range(n_steps):
@@ -98,15 +116,20 @@ def vector_env_steps_per_second(envs: gym.vector.VectorEnv, n_steps: int) -> flo
 
 
 def vehicle_ticks_per_second(n_envs: int, n_ticks: int) -> float:
-    """Vehicle-ticks/s of the batched simulator: n_envs platoons of 1 + 5 vehicles behind a braking leader."""
+    """Vehicle-ticks/s of the batched simulator: n_envs platoons of 1 + 5 vehicles behind a braking leader,
+    advanced TICKS_PER_BLOCK ticks per call."""
     platoon = Platoon(PlatoonConfig(), n_envs)
     platoon.reset(np.full(n_envs, 25.0))
-    speeds = 25.0 - 0.1 * np.arange(n_ticks + 1)  # a gentle 1 m/s^2 deceleration
+    n_blocks = max(n_ticks // TICKS_PER_BLOCK, 1)
+    speeds = 25.0 - 0.1 * np.arange(1, n_blocks * TICKS_PER_BLOCK + 1)  # a gentle 1 m/s^2 deceleration
+    speeds = np.repeat(speeds.reshape(n_blocks, TICKS_PER_BLOCK, 1), n_envs, axis=2)
+    accels = np.full(speeds.shape[1:], -1.0)
+    platoon.advance(speeds[0], accels)  # warm-up: the kernel loads on its first call
 
     def run() -> int:
-        for k in range(1, n_ticks + 1):
-            platoon.step(speeds[k], -1.0)
-        return n_ticks * n_envs * (platoon.n_followers + 1)
+        for block in speeds:
+            platoon.advance(block, accels)
+        return n_blocks * TICKS_PER_BLOCK * n_envs * (platoon.n_followers + 1)
 
     return timed(run)
 
@@ -151,9 +174,12 @@ def main() -> None:
 
     rows: list[tuple[str, str, str]] = []  # (measure, value, verdict)
 
-    ours = env_steps_per_second(gym.make(timegap_env.ENV_ID), sizes.env_steps)
-    highway = env_steps_per_second(gym.make("highway-fast-v0"), sizes.highway_steps)
-    cartpole = env_steps_per_second(gym.make("CartPole-v1"), sizes.env_steps)
+    single = interleaved_steps_per_second({
+        "ours": (gym.make(timegap_env.ENV_ID), sizes.env_steps),
+        "highway": (gym.make("highway-fast-v0"), sizes.highway_steps),
+        "cartpole": (gym.make("CartPole-v1"), sizes.env_steps),
+    }, sizes.rounds)
+    ours, highway, cartpole = single["ours"], single["highway"], single["cartpole"]
     rows += [
         ("TimeGapMonitor-v0, one env [steps/s]", f"{ours:,.0f}", ""),
         ("highway-fast-v0, one env [steps/s]", f"{highway:,.1f}", ""),
@@ -207,7 +233,8 @@ def main() -> None:
         f"# Benchmarks (`python -m train.bench{' --quick' if args.quick else ''}`)",
         "",
         f"Python {platform.python_version()}, NumPy {np.__version__}, {platform.machine()}; one process, "
-        "measured back to back. Ratios are the figures to compare; absolute rates move with the machine's load.",
+        "single envs take turns over several rounds (medians). Ratios are the figures to compare; absolute rates move "
+        "with the machine's load. Numba kernels are loaded (or compiled) before timing.",
         "PPO: each setting runs on both envs alike, MlpPolicy, CPU, one torch thread; "
         "TimeGapMonitor-v0 through the native vector env (`timegap_env.sb3.TimeGapVecEnv`), CartPole-v1 through DummyVecEnv.",
         "",
