@@ -138,13 +138,10 @@ class ControlChart:
         and ``run_length`` restarts at 0.
         """
         vehicles = vehicle_mask(mask, self.shape)
-        self.center[vehicles] = time_gap_array(time_gap, self.shape)[vehicles]
-        self.side[vehicles] = 0
-        self.exceedance[vehicles] = False
-        self.exceedances_in_window[vehicles] = 0
-        self.run_length[vehicles] = 0
-        self.hold_off[vehicles] = 0
-        self._starts[:, vehicles] = False
+        np.copyto(self.center, time_gap_array(time_gap, self.shape), where=vehicles)
+        for state in (self.side, self.exceedance, self.exceedances_in_window, self.run_length, self.hold_off):
+            np.copyto(state, 0, where=vehicles, casting="unsafe")  # 0, False
+        self._starts[:, vehicles] = False  # indexing touches only these vehicles' ring
         self._restart(vehicles)
 
     def hold(self, ticks: ArrayLike, mask: ArrayLike | None = None) -> None:
@@ -154,9 +151,7 @@ class ControlChart:
         new centre line; alarms in that time would only report the change itself.
         The statistic keeps updating meanwhile.
         """
-        vehicles = vehicle_mask(mask, self.shape)
-        ticks = np.asarray(ticks, dtype=np.int64)
-        self.hold_off[vehicles] = (ticks if ticks.shape == self.shape else np.broadcast_to(ticks, self.shape))[vehicles]
+        np.copyto(self.hold_off, np.asarray(ticks, dtype=np.int64), where=vehicle_mask(mask, self.shape))
 
     def reset(self, mask: ArrayLike | None, time_gap: ArrayLike) -> None:
         """Restart the envs in ``mask`` ((n_envs,) bool, None = all), centred on ``time_gap`` [s]."""

@@ -19,6 +19,7 @@ import dataclasses
 import math
 from pathlib import Path
 
+import numba
 import numpy as np
 
 from timegap_env.config import (
@@ -94,13 +95,9 @@ class LeaderProfile:
         clipped one, so speed and acceleration stay consistent.
         """
         accel = _series("accel", accel)
-        low, high = leader.speed_band
-        speed = np.empty_like(accel)
-        speed[0] = leader.initial_speed
-        for k in range(accel.size - 1):  # sequential: clipping depends on the path so far
-            speed[k + 1] = min(max(speed[k] + accel[k] * leader.dt, low), high)
-        after_last = min(max(speed[-1] + accel[-1] * leader.dt, low), high)
-        realised = np.diff(speed, append=after_last) / leader.dt
+        speed = _integrate_in_band(accel, leader.initial_speed, leader.dt, *leader.speed_band)  # one sample longer
+        realised = np.diff(speed) / leader.dt
+        speed = speed[:-1]
         return cls(speed=speed, accel=realised, dt=leader.dt, name=name)
 
     @classmethod
@@ -171,11 +168,9 @@ def aggressive_cycles(
             length = max(1, min(length, int(room / (magnitude * leader.dt))))
             target = sign * magnitude
             sign = -sign
-        for _ in range(min(length, leader.n_samples - k)):
-            current += min(max(target - current, -jerk_step), jerk_step)
-            accel[k] = current
-            speed += current * leader.dt
-            k += 1
+        ticks = min(length, leader.n_samples - k)
+        current, speed = _jerk_limited_phase(accel[k : k + ticks], current, target, jerk_step, speed, leader.dt)
+        k += ticks
     return LeaderProfile.from_acceleration(accel, leader, name="aggressive_cycles")
 
 
@@ -231,12 +226,43 @@ def stochastic_human(
     innovations = params.accel_std * np.sqrt(1.0 - decay**2) * rng.standard_normal(n)
     target_changes = rng.random(n) < dt / params.target_change_interval
     new_targets = rng.uniform(low, high, size=n)
-    accel = np.empty(n)
-    speed, target, noise = leader.initial_speed, leader.initial_speed, 0.0
-    for k in range(n):  # the speed feeds back into the acceleration, so this runs in order
+    accel = _pursue_targets(target_changes, new_targets, innovations, leader.initial_speed, decay,
+                            params.speed_gain, dt, low, high)
+    return LeaderProfile.from_acceleration(accel, leader, name="stochastic_human")
+
+
+# --------------------------------------------------------------------------- compiled loops
+# Each runs in order because every step depends on the speed reached so far.
+@numba.njit(cache=True)
+def _integrate_in_band(accel, initial_speed, dt, low, high):  # noqa: ANN001, ANN202
+    """Speeds [m/s] (accel.size + 1) integrated from ``initial_speed``, each step clipped to [low, high]."""
+    speed = np.empty(accel.size + 1)
+    speed[0] = initial_speed
+    for k in range(accel.size):
+        speed[k + 1] = min(max(speed[k] + accel[k] * dt, low), high)
+    return speed
+
+
+@numba.njit(cache=True)
+def _jerk_limited_phase(accel, current, target, jerk_step, speed, dt):  # noqa: ANN001, ANN202
+    """Fill ``accel`` [m/s^2] moving from ``current`` towards ``target`` by at most ``jerk_step`` a tick;
+    returns the final acceleration and the speed [m/s] reached from ``speed``."""
+    for k in range(accel.size):
+        current += min(max(target - current, -jerk_step), jerk_step)
+        accel[k] = current
+        speed += current * dt
+    return current, speed
+
+
+@numba.njit(cache=True)
+def _pursue_targets(target_changes, new_targets, innovations, initial_speed, decay, speed_gain, dt, low, high):  # noqa: ANN001, ANN202, PLR0913
+    """The stochastic human's acceleration [m/s^2]: speed_gain (target - v) plus an AR(1) noise."""
+    accel = np.empty(innovations.size)
+    speed, target, noise = initial_speed, initial_speed, 0.0
+    for k in range(innovations.size):
         if target_changes[k]:
             target = new_targets[k]
         noise = decay * noise + innovations[k]
-        accel[k] = params.speed_gain * (target - speed) + noise
+        accel[k] = speed_gain * (target - speed) + noise
         speed = min(max(speed + accel[k] * dt, low), high)
-    return LeaderProfile.from_acceleration(accel, leader, name="stochastic_human")
+    return accel

@@ -282,10 +282,10 @@ class TimeGapMonitor:
         """
         vehicles = vehicle_mask(mask, self.shape)
         tau = time_gap_array(time_gap, self.shape)
-        self._prior_tau[vehicles] = tau[vehicles]
-        self._block_sum[:, vehicles] = 0.0
-        self._window_stats[:, vehicles] = 0.0
-        self._slots[:, :, vehicles] = 0.0
+        np.copyto(self._prior_tau, tau, where=vehicles)
+        np.copyto(self._block_sum, 0.0, where=vehicles)
+        np.copyto(self._window_stats, 0.0, where=vehicles)
+        self._slots[:, :, vehicles] = 0.0  # indexing touches only these vehicles' slots
         self._moments = None  # the prior, recomputed when first read
 
     def _latest(self) -> Moments:

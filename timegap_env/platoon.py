@@ -183,13 +183,7 @@ class Platoon:
             setting = np.broadcast_to(setting, self.time_gap_setting.shape)
         if not ((setting > 0) & (setting < np.inf)).all():  # NaN fails both
             raise ValueError(f"time_gap_setting = {setting}: every value must be finite and > 0")
-        if mask is None:
-            self.time_gap_setting[:] = setting
-        else:
-            mask = np.asarray(mask, dtype=bool)
-            if mask.shape != setting.shape:
-                mask = np.broadcast_to(mask, setting.shape)
-            self.time_gap_setting[mask] = setting[mask]
+        np.copyto(self.time_gap_setting, setting, where=True if mask is None else np.asarray(mask, dtype=bool))
 
     def set_v2v(self, enabled: np.ndarray | bool) -> None:
         """Switch CACC (True) or ACC (False) per follower, broadcast to (n_envs, n_followers)."""

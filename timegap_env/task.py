@@ -10,6 +10,7 @@ agree step by step.
 from __future__ import annotations
 
 import dataclasses
+import math
 from collections.abc import Mapping, Sequence
 from typing import Any, NamedTuple
 
@@ -109,7 +110,7 @@ class PlatoonTask:
             else:
                 family = options.get("scenario") or self._families[rng.choice(len(self._families), p=self._family_probabilities)]
                 profile = make_leader(family, int(rng.integers(2**31)), cfg.leader)
-                if not np.isclose(profile.dt, cfg.platoon.dt):
+                if not math.isclose(profile.dt, cfg.platoon.dt, rel_tol=1e-9):
                     raise ValueError(f"scenario {family!r} has dt = {profile.dt} s; the env runs at {cfg.platoon.dt} s")
             self._load_leader(env, profile)
             self._draw_disturbances(env, rng)
