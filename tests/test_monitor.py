@@ -10,7 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from timegap_env.config import MONITOR_PRESETS, MonitorConfig, PlatoonConfig
-from timegap_env.monitor import TimeGapMonitor, erfc, posterior
+from timegap_env.monitor import TimeGapMonitor, outside_probability, posterior
 
 PAPER_PRIOR_COV = np.array([[1e-4, -1e-5], [-1e-5, 0.125]])
 
@@ -321,16 +321,16 @@ def test_prob_outside_matches_the_normal_marginal():
         m, s = monitor.tau_mean[e, i], monitor.tau_std[e, i]
         scale = s * math.sqrt(2)
         expected = 0.5 * math.erfc((m - lcl) / scale) + 0.5 * math.erfc((ucl[e, i] - m) / scale)
-        assert value == pytest.approx(expected, rel=1e-6, abs=1e-12)
+        assert value == pytest.approx(expected, rel=1e-12, abs=1e-15)
     np.testing.assert_array_equal(monitor.prob_outside(-np.inf, np.inf), 0.0)
     np.testing.assert_allclose(monitor.prob_outside(monitor.tau_mean, monitor.tau_mean), 1.0, rtol=1e-6)
 
 
-def test_erfc_relative_accuracy():
-    x = np.concatenate([np.linspace(-6, 6, 4001), np.linspace(6, 26, 201)])
-    exact = np.array([math.erfc(v) for v in x])
-    np.testing.assert_allclose(erfc(x), exact, rtol=1.2e-7)
-    assert erfc(40.0) == 0.0 and erfc(-40.0) == 2.0
+def test_outside_probability_of_a_normal():
+    assert outside_probability(0.0, 1.0, -1.0, 1.0) == pytest.approx(0.31731050786291415, rel=1e-14)  # 2 (1 - Phi(1))
+    assert outside_probability(0.0, 4.0, -2.0, np.inf) == pytest.approx(0.15865525393145707, rel=1e-14)  # sd 2
+    assert outside_probability(0.0, 1.0, -40.0, 40.0) == 0.0  # both tails underflow cleanly
+    assert outside_probability(0.0, 1.0, 40.0, 50.0) == 1.0  # mean far below the band
 
 
 def test_sufficient_statistics_are_exposed():

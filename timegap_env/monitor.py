@@ -33,7 +33,7 @@ from numpy.typing import ArrayLike
 
 from timegap_env.config import MonitorConfig
 
-__all__ = ["posterior", "prior_precision", "TimeGapMonitor", "MonitorTicks", "erfc"]
+__all__ = ["posterior", "prior_precision", "TimeGapMonitor", "MonitorTicks", "Moments", "outside_probability"]
 
 N_STATS = 5  # channels of the sufficient statistics: n, sum V, sum V^2, sum S, sum V S
 
@@ -320,6 +320,11 @@ class TimeGapMonitor:
         return self._latest().mean_tau.copy()
 
     @property
+    def moments(self) -> Moments:
+        """The posterior after the last tick, channel by channel (the monitor's own arrays: read, do not write)."""
+        return self._latest()
+
+    @property
     def tau_std(self) -> np.ndarray:
         """Posterior standard deviation of tau (n_envs, n_vehicles) [s]."""
         return np.sqrt(self._latest().var_tau)
@@ -350,14 +355,14 @@ class TimeGapMonitor:
         if not (low <= high).all():
             raise ValueError(f"lcl = {lcl!r}, ucl = {ucl!r}: need lcl <= ucl everywhere")
         moments = self._latest()
-        mean, scale = moments.mean_tau, np.sqrt(2.0 * moments.var_tau)
-        return 0.5 * (erfc((mean - low) / scale) + erfc((high - mean) / scale))
+        return outside_probability(moments.mean_tau, moments.var_tau, low, high)
 
 
-@numba.vectorize(["float64(float64)"], cache=True)
-def erfc(x: float) -> float:
-    """Complementary error function as a NumPy ufunc (the C library's, compiled by numba)."""
-    return math.erfc(x)
+@numba.vectorize(["float64(float64, float64, float64, float64)"], cache=True)
+def outside_probability(mean: float, variance: float, low: float, high: float) -> float:
+    """P(X < low or X > high) for X ~ N(mean, variance), as a NumPy ufunc (also callable inside kernels)."""
+    scale = math.sqrt(2.0 * variance)
+    return 0.5 * (math.erfc((mean - low) / scale) + math.erfc((high - mean) / scale))
 
 
 # ---- batch argument checks (shared with charts.py) ---------------------------------------------

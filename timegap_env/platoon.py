@@ -121,6 +121,10 @@ class Platoon:
         # Predecessor accelerations of the last v2v_delay_ticks + 1 ticks, for the delayed feed-forward.
         self._feedforward_buffer = np.zeros((config.v2v_delay_ticks + 1, *follower_shape))
         self.set_dynamics(config.per_follower("actuation_lag"), config.per_follower("actuation_gain"))
+        self._constants = (  # what the kernel needs of the config
+            config.dt, config.k_s, config.k_v, config.k_a, config.k_f, config.accel_min, config.accel_max,
+            config.standstill_spacing, config.vehicle_length, config.time_gap_ramp_rate * config.dt,
+        )
 
     # ----------------------------------------------------------------- setup
     def set_dynamics(self, lag: np.ndarray, gain: np.ndarray) -> None:
@@ -213,7 +217,6 @@ class Platoon:
         ``v2v`` (n_ticks, n_envs, n_followers) bool, optional: CACC status during each tick
         (default: keep the current ``v2v``); ``v2v`` is left at its last row.
         """
-        cfg = self.config
         leader_speed = self._per_tick("leader_speed", leader_speed)
         n_ticks = leader_speed.shape[0]
         leader_accel = self._per_tick("leader_accel", leader_accel, n_ticks)
@@ -227,9 +230,7 @@ class Platoon:
         _advance(
             self.x, self.v, self.a, self.u, self.time_gap, self.time_gap_setting, self.collided,
             self._feedforward_buffer, self.tick, leader_speed, leader_accel, np.ascontiguousarray(v2v, dtype=bool),
-            zoh.a_from_a, zoh.a_from_u, zoh.v_from_a, zoh.v_from_u, zoh.x_from_a, zoh.x_from_u,
-            (cfg.dt, cfg.k_s, cfg.k_v, cfg.k_a, cfg.k_f, cfg.accel_min, cfg.accel_max,
-             cfg.standstill_spacing, cfg.vehicle_length, cfg.time_gap_ramp_rate * cfg.dt),
+            zoh.a_from_a, zoh.a_from_u, zoh.v_from_a, zoh.v_from_u, zoh.x_from_a, zoh.x_from_u, self._constants,
             ticks.spacing, ticks.speed, ticks.accel, ticks.time_gap, ticks.collisions,
         )
         self.v2v[:] = v2v[-1]

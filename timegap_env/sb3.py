@@ -50,7 +50,7 @@ class TimeGapVecEnv(VecEnv):
     ) -> None:
         limit = {} if max_episode_steps is None else {"max_episode_steps": max_episode_steps}
         self.venv = gym.make_vec(ENV_ID, num_envs=n_envs, vectorization_mode="vector_entry_point", config=config,
-                                 **limit)
+                                 step_diagnostics=False, **limit)
         super().__init__(n_envs, self.venv.single_observation_space, self.venv.single_action_space)
         self.config = self.venv.config
         self._actions: np.ndarray | None = None

@@ -19,6 +19,7 @@ import numpy as np
 
 from timegap_env.config import EnvConfig
 from timegap_env.leaders import LeaderProfile
+from timegap_env.monitor import outside_probability
 from timegap_env.monitored import MonitoredPlatoon
 from timegap_env.scenarios import SCENARIOS, make_leader
 
@@ -73,6 +74,10 @@ class PlatoonTask:
         self._previous_accel = np.zeros((n_envs, self.n_followers))  # [m/s^2]
         self._min_ttc_step = np.full((n_envs, self.n_followers), np.inf)
         self._rms_jerk_step = np.zeros((n_envs, self.n_followers))
+        self._observation_constants = (  # what _observation_kernel needs of the config
+            config.chart.limit_width * config.chart.baseline_std, 2 * config.chart.switch_exceedances,
+            config.platoon.dt, config.chart.exceedance_window, self.levels[0], self.levels[-1] - self.levels[0],
+        )
         self._score_constants = (  # what _score_kernel needs of the config
             config.platoon.dt, config.chart.limit_width * config.chart.baseline_std, config.ttc_threshold,
             config.jerk_reference, self.levels[0], self.levels[-1] - self.levels[0], config.preferred_time_gap,
@@ -210,21 +215,13 @@ class PlatoonTask:
     # ------------------------------------------------------------------ read-outs
     def observation(self) -> np.ndarray:
         """Observations (n_envs, n_followers, len(FEATURES)) float32, the features in FEATURES order."""
-        cfg, monitor, chart, platoon = self.config, self.loop.monitor, self.loop.chart, self.loop.platoon
-        half_width = cfg.chart.limit_width * cfg.chart.baseline_std
-        center = chart.center
+        monitor, chart, platoon = self.loop.monitor, self.loop.chart, self.loop.platoon
         features = np.empty((self.n_envs, self.n_followers, len(FEATURES)), dtype=np.float32)
-        features[..., 0] = (monitor.tau_mean - center) / DEVIATION_SCALE
-        features[..., 1] = monitor.tau_std / half_width
-        features[..., 2] = monitor.prob_outside(center - half_width, center + half_width)
-        features[..., 3] = chart.alarm
-        features[..., 4] = chart.exceedances_in_window / (2 * cfg.chart.switch_exceedances)
-        features[..., 5] = chart.run_length * cfg.platoon.dt / cfg.chart.exceedance_window
-        features[..., 6] = (platoon.time_gap_setting - self.levels[0]) / (self.levels[-1] - self.levels[0])
-        features[..., 7] = platoon.v[:, 1:] / SPEED_SCALE
-        features[..., 8] = platoon.v2v
-        np.maximum(features, OBSERVATION_LOW, out=features)  # clip, as two ufuncs: np.clip's wrapper costs more
-        return np.minimum(features, OBSERVATION_HIGH, out=features)
+        moments = monitor.moments
+        _observation_kernel(moments.mean_tau, moments.var_tau, chart.center, chart.side, chart.exceedances_in_window,
+                            chart.run_length, platoon.time_gap_setting, platoon.v, platoon.v2v,
+                            self._observation_constants, features)
+        return features
 
     def info(self) -> dict[str, np.ndarray]:
         """Per-step diagnostics, each (n_envs, n_followers) unless noted."""
@@ -360,3 +357,27 @@ def _score_kernel(  # noqa: ANN202, PLR0913 -- the kernel takes the step's array
         mean_jerk_squared[e] /= n_followers
         mean_setting[e] /= n_followers
         mean_capacity[e] /= n_followers
+
+
+@numba.njit(cache=True)
+def _observation_kernel(  # noqa: ANN202, PLR0913 -- the kernel takes the state arrays one by one
+    tau_mean, tau_var, center, side, exceedances_in_window, run_length, setting, speed, v2v, constants, out
+):
+    """Fill ``out`` (n_envs, n_followers, len(FEATURES)) float32 with the features, in FEATURES order, clipped
+    to [OBSERVATION_LOW, OBSERVATION_HIGH]; ``speed`` (n_envs, n_vehicles) includes the leader."""
+    half_width, exceedance_scale, dt, exceedance_window, smallest_level, level_span = constants
+    n_envs, n_followers, n_features = out.shape
+    for e in range(n_envs):
+        for f in range(n_followers):
+            mean, variance, line = tau_mean[e, f], tau_var[e, f], center[e, f]
+            out[e, f, 0] = (mean - line) / DEVIATION_SCALE
+            out[e, f, 1] = math.sqrt(variance) / half_width
+            out[e, f, 2] = outside_probability(mean, variance, line - half_width, line + half_width)
+            out[e, f, 3] = side[e, f] != 0
+            out[e, f, 4] = exceedances_in_window[e, f] / exceedance_scale
+            out[e, f, 5] = run_length[e, f] * dt / exceedance_window
+            out[e, f, 6] = (setting[e, f] - smallest_level) / level_span
+            out[e, f, 7] = speed[e, f + 1] / SPEED_SCALE
+            out[e, f, 8] = v2v[e, f]
+            for i in range(n_features):
+                out[e, f, i] = min(max(out[e, f, i], OBSERVATION_LOW[i]), OBSERVATION_HIGH[i])

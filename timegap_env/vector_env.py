@@ -26,13 +26,19 @@ class TimeGapMonitorVectorEnv(VectorEnv):
     When a sub-env's episode ends, it is reset in the same step: the returned
     observation is the new episode's, the last one is in ``infos["final_obs"]``
     and its summary in ``infos["episode_summary"]`` (masks ``_final_obs`` and
-    ``_episode_summary``).
+    ``_episode_summary``). ``step_diagnostics=False`` leaves the per-step
+    diagnostics (estimates, limits, reward terms, ...) out of ``step``'s infos,
+    for learners that never read them; they cost about as much as the physics.
     """
 
     metadata = {"autoreset_mode": AutoresetMode.SAME_STEP, "render_modes": []}
 
     def __init__(
-        self, num_envs: int = 1, config: Mapping[str, Any] | None = None, max_episode_steps: int | None = None
+        self,
+        num_envs: int = 1,
+        config: Mapping[str, Any] | None = None,
+        max_episode_steps: int | None = None,
+        step_diagnostics: bool = True,
     ) -> None:
         if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) or num_envs < 1:
             raise ValueError(f"num_envs = {num_envs!r}: must be an integer >= 1")
@@ -46,6 +52,7 @@ class TimeGapMonitorVectorEnv(VectorEnv):
         self.action_space = batch_space(self.single_action_space, self.num_envs)
         self._rngs = [seeding.np_random()[0] for _ in range(self.num_envs)]
         self._steps = np.zeros(self.num_envs, dtype=np.int64)
+        self.step_diagnostics = bool(step_diagnostics)
 
     def reset(
         self, *, seed: int | list[int | None] | None = None, options: dict[str, Any] | None = None
@@ -69,8 +76,10 @@ class TimeGapMonitorVectorEnv(VectorEnv):
         result = self.task.step(np.asarray(actions))  # checks them against the action space
         self._steps += 1
         truncated = result.truncated | ((self._steps >= self.max_episode_steps) & ~result.terminated)
-        infos = self._infos()
-        infos["rewards"] = result.terms
+        infos: dict[str, Any] = {}
+        if self.step_diagnostics:
+            infos = self._infos()
+            infos["rewards"] = result.terms
         done = result.terminated | truncated
         if done.any():
             infos["final_obs"] = np.array(list(self._observations()), dtype=object)

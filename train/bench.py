@@ -11,7 +11,7 @@ table reports ratios, which survive a busy machine better than absolute times:
    a ``SyncVectorEnv`` of single envs;
 3. monitor updates/s, batched (1024 envs x 5 vehicles);
 4. PPO training steps/s on ``TimeGapMonitor-v0`` against PPO on ``CartPole-v1``
-   with the same hyperparameters;
+   with the same hyperparameters, the two taking turns (medians);
 5. peak memory of a 1024-env vector env (tracemalloc: NumPy allocations included).
 
 Writes ``results/bench.md``.
@@ -49,7 +49,7 @@ PPO_TRAINING = dict(n_envs=64, n_steps=64, batch_size=512, n_epochs=10, learning
 class Sizes:
     """How long each measurement runs."""
 
-    rounds: int  # single-env measurements alternate between the envs this many times; medians are reported
+    rounds: int  # single-env and PPO measurements alternate between the envs this many times; medians reported
     env_steps: int  # steps of TimeGapMonitor-v0 and CartPole-v1 per round
     highway_steps: int  # steps of highway-fast-v0 per round (it is about 100x slower)
     ticks: dict[int, int]  # simulator ticks timed per batch size, in blocks of TICKS_PER_BLOCK
@@ -134,16 +134,28 @@ def vehicle_ticks_per_second(n_envs: int, n_ticks: int) -> float:
     return timed(run)
 
 
-def ppo_steps_per_second(make_venv: Callable[[int], object], setting: dict, timesteps: int, n_steps: int) -> float:
-    """Environment steps/s of PPO learning with ``setting``, after one warm-up update (torch start-up excluded)."""
+def ppo_steps_per_second(
+    make_venvs: dict[str, Callable[[int], object]], setting: dict, timesteps: int, n_steps: int, rounds: int
+) -> dict[str, float]:
+    """Median environment steps/s of PPO learning with ``setting`` on each env {name: make_venv(n_envs)}.
+
+    Each model first learns one rollout (torch start-up and kernel loading excluded); then the
+    models take turns, ``timesteps`` each per round, so machine noise hits them alike.
+    """
     from stable_baselines3 import PPO
 
     settings = {key: value for key, value in setting.items() if key != "n_envs"}
     settings["n_steps"] = n_steps or setting["n_steps"]
     settings["batch_size"] = min(settings["batch_size"], settings["n_steps"] * setting["n_envs"])
-    model = PPO("MlpPolicy", make_venv(setting["n_envs"]), seed=0, device="cpu", verbose=0, **settings)
-    model.learn(setting["n_envs"] * settings["n_steps"])
-    return timed(lambda: (model.learn(timesteps, reset_num_timesteps=False), timesteps)[1])
+    models = {name: PPO("MlpPolicy", make(setting["n_envs"]), seed=0, device="cpu", verbose=0, **settings)
+              for name, make in make_venvs.items()}
+    for model in models.values():
+        model.learn(setting["n_envs"] * settings["n_steps"])
+    rates: dict[str, list[float]] = {name: [] for name in models}
+    for _ in range(rounds):
+        for name, model in models.items():
+            rates[name].append(timed(lambda: (model.learn(timesteps, reset_num_timesteps=False), timesteps)[1]))
+    return {name: float(np.median(values)) for name, values in rates.items()}
 
 
 def peak_memory_mib(n_envs: int, n_steps: int = 10) -> float:
@@ -216,9 +228,11 @@ def main() -> None:
     torch.set_num_threads(1)  # as train_ppo does
     for label, setting in (("small setting", PPO_SMALL), ("training setting", PPO_TRAINING)):
         timesteps = max(sizes.ppo_timesteps, 2 * setting["n_envs"] * (sizes.ppo_n_steps or setting["n_steps"]))
-        ppo_ours = ppo_steps_per_second(lambda n: TimeGapVecEnv(n_envs=n), setting, timesteps, sizes.ppo_n_steps)
-        ppo_cartpole = ppo_steps_per_second(lambda n: make_vec_env("CartPole-v1", n_envs=n, seed=0), setting,
-                                            timesteps, sizes.ppo_n_steps)
+        ppo = ppo_steps_per_second({
+            "ours": lambda n: TimeGapVecEnv(n_envs=n),
+            "cartpole": lambda n: make_vec_env("CartPole-v1", n_envs=n, seed=0),
+        }, setting, timesteps, sizes.ppo_n_steps, sizes.rounds)
+        ppo_ours, ppo_cartpole = ppo["ours"], ppo["cartpole"]
         ratio = ppo_ours / ppo_cartpole
         rows += [
             (f"PPO, {label} {setting}: TimeGapMonitor-v0 [steps/s]", f"{ppo_ours:,.0f}", ""),
