@@ -247,3 +247,19 @@ def test_rgb_array_frames_are_drawn_and_change():
     assert len(np.unique(first.reshape(-1, 3), axis=0)) > 50 and first.mean() > 40  # not a blank or black frame
     assert np.abs(first.astype(int) - second.astype(int)).sum() > 0
     env.close()
+
+
+def test_vector_env_without_step_diagnostics_steps_the_same():
+    config = {"episode_duration": 4.0}
+    full = gym.make_vec("TimeGapMonitor-v0", num_envs=2, vectorization_mode="vector_entry_point", config=config)
+    lean = gym.make_vec("TimeGapMonitor-v0", num_envs=2, vectorization_mode="vector_entry_point", config=config,
+                        step_diagnostics=False)
+    full.reset(seed=3)
+    lean.reset(seed=3)
+    for step in range(6):  # past the end of the 4-step episodes
+        actions = np.array([step % len(LEVELS), 2])
+        got, want = lean.step(actions), full.step(actions)
+        for a, b in zip(got[:4], want[:4]):
+            np.testing.assert_array_equal(a, b)
+        assert "estimate" in want[4] and "estimate" not in got[4]
+        assert ("episode_summary" in got[4]) == ("episode_summary" in want[4])

@@ -71,3 +71,68 @@ def test_a_commanded_change_raises_no_alarm_but_a_real_excursion_after_it_does()
     assert not any(loop.tick(25.0, 0.0)[1].alarm.any() for _ in range(300))
     loop.platoon.x[0, 0] += 15.0  # the leader jumps 15 m ahead: a real gap excursion
     assert any(loop.tick(25.0, 0.0)[1].alarm.any() for _ in range(20))
+
+
+def test_counter_noise_of_a_block_is_its_ticks_stacked():
+    keys = np.array([5, 11], dtype=np.uint64)
+    ticks = np.array([[3, 8], [4, 9], [5, 10]])
+    block = counter_uniforms(keys, ticks, 5)
+    assert block.shape == (3, 3, 2, 5)
+    for k, row in enumerate(ticks):
+        np.testing.assert_array_equal(block[:, k], counter_uniforms(keys, row, 5))
+
+
+@pytest.mark.parametrize("kind", ["shewhart", "ewma", "cusum"])
+def test_a_block_of_ticks_equals_the_same_ticks_one_by_one(kind):
+    """run() with compiled physics and block-wise sensors, monitor and chart gives, bit for bit,
+    what tick() gives tick by tick, through a ramp, a V2V loss, dropouts and excursions."""
+    from timegap_env.config import ChartConfig
+
+    def make() -> MonitoredPlatoon:
+        loop = MonitoredPlatoon(chart=ChartConfig(kind=kind), sensors=SensorConfig(dropout_probability=0.05),
+                                n_envs=3, seed=4)
+        loop.reset([25.0, 15.0, 30.0])
+        loop.change_time_gap(np.array([[1.0] * 5, [1.6] * 5, [2.2] * 5]))
+        return loop
+
+    rng = np.random.default_rng(0)
+    n_ticks = 60
+    speed = np.array([25.0, 15.0, 30.0]) + np.cumsum(rng.normal(0, 0.3, (n_ticks, 3)), axis=0)
+    accel = rng.normal(0, 1.0, (n_ticks, 3))
+    v2v = np.ones((n_ticks, 3, 5), dtype=bool)
+    v2v[20:40, 1] = False
+    by_block, by_tick = make(), make()
+    blocks, states = [], []
+    for k in range(0, n_ticks, 10):
+        if k == 30:  # env 1's leader (no change of setting, so no hold-off) jumps 15 m ahead: excursions
+            by_block.platoon.x[1, 0] += 15.0
+            by_tick.platoon.x[1, 0] += 15.0
+        blocks.append(by_block.run(speed[k : k + 10], accel[k : k + 10], v2v[k : k + 10]))
+        for j in range(k, k + 10):
+            by_tick.platoon.set_v2v(v2v[j])
+            states.append(by_tick.tick(speed[j], accel[j])[1])
+    alarm = np.concatenate([block.chart.alarm for block in blocks])
+    assert alarm[:, 1].any() and not alarm[:, [0, 2]].any()
+    np.testing.assert_array_equal(alarm, [state.alarm for state in states])
+    np.testing.assert_array_equal(np.concatenate([block.chart.exceedances_in_window for block in blocks]),
+                                  [state.exceedances_in_window for state in states])
+    for name in ("x", "v", "a", "u", "time_gap"):
+        np.testing.assert_array_equal(getattr(by_block.platoon, name), getattr(by_tick.platoon, name))
+    np.testing.assert_array_equal(by_block.monitor.mean, by_tick.monitor.mean)
+    np.testing.assert_array_equal(by_block.monitor.cov, by_tick.monitor.cov)
+    np.testing.assert_array_equal(by_block.monitor.skipped, by_tick.monitor.skipped)
+    assert by_block.monitor.skipped.sum() > 0
+
+
+def test_the_loop_measures_what_measure_gives_for_counter_uniforms():
+    """The fused sensor kernel of run() draws the same noise as the public counter_uniforms + measure."""
+    loop = MonitoredPlatoon(sensors=SensorConfig(dropout_probability=0.2), n_envs=4, seed=9)
+    loop.reset(np.array([10.0, 20.0, 25.0, 30.0]))
+    loop.run(np.full((7, 4), 20.0), np.zeros((7, 4)))  # the ticks no longer start at 0
+    block = loop.run(np.full((10, 4), 20.0), np.zeros((10, 4)))
+    ticks = 7 + np.arange(1, 11)[:, None] + np.zeros(4, dtype=np.int64)
+    uniforms = counter_uniforms(loop.noise_keys, ticks, 5)
+    spacing, speed = measure(block.physics.spacing, block.physics.speed, loop.sensors, uniforms, loop.dropout_probability)
+    np.testing.assert_array_equal(block.measured_spacing, spacing)
+    np.testing.assert_array_equal(block.measured_speed, speed)
+    assert np.isnan(spacing).any()

@@ -40,17 +40,21 @@ def counter_uniforms(keys: np.ndarray, ticks: np.ndarray, n_followers: int) -> n
 
 @numba.njit(cache=True)
 def _counter_uniforms_kernel(keys, ticks, out):  # noqa: ANN001, ANN202
-    """Fill ``out`` (3, n_ticks, n_envs, n_followers): the uniform of counter
-    (tick, follower, stream) = tick * 3 n_followers + 3 follower + stream, hashed with the env's key."""
+    """Fill ``out`` (3, n_ticks, n_envs, n_followers) with :func:`_uniform` of each (env, tick, follower, stream)."""
     n_streams, n_ticks, n_envs, n_followers = out.shape
-    per_tick = np.uint64(n_streams * n_followers)
     for k in range(n_ticks):
         for e in range(n_envs):
             for f in range(n_followers):
                 for stream in range(n_streams):
-                    counter = ticks[k, e] * per_tick + np.uint64(n_streams * f + stream)
-                    bits = _splitmix64(_splitmix64(counter * _SPLITMIX_INCREMENT + keys[e]))
-                    out[stream, k, e, f] = (float(bits >> np.uint64(11)) + 0.5) * 2.0**-53
+                    out[stream, k, e, f] = _uniform(keys[e], ticks[k, e], f, stream, n_followers)
+
+
+@numba.njit(cache=True)
+def _uniform(key, tick, follower, stream, n_followers):  # noqa: ANN001, ANN202
+    """The uniform in (0, 1) of counter tick * 3 n_followers + 3 follower + stream, hashed with the env's key."""
+    counter = np.uint64(tick) * np.uint64(_UNIFORM_STREAMS * n_followers) + np.uint64(_UNIFORM_STREAMS * follower + stream)
+    bits = _splitmix64(_splitmix64(counter * _SPLITMIX_INCREMENT + key))
+    return (float(bits >> np.uint64(11)) + 0.5) * 2.0**-53
 
 
 @numba.njit(cache=True)
@@ -94,13 +98,37 @@ def _measure_kernel(  # noqa: ANN202 -- arrays (n_ticks, n_envs, n_followers), u
     for k in range(n_ticks):
         for e in range(n_envs):
             for f in range(n_followers):
-                if uniforms[2, k, e, f] < dropout_probability[e]:  # dropped: missing in both
-                    out_spacing[k, e, f] = out_speed[k, e, f] = np.nan
-                    continue
-                radius = np.sqrt(-2.0 * np.log(uniforms[0, k, e, f]))  # Box-Muller: two independent normals
-                angle = 2.0 * np.pi * uniforms[1, k, e, f]
-                out_spacing[k, e, f] = spacing[k, e, f] + spacing_noise_std * radius * np.cos(angle)
-                out_speed[k, e, f] = speed[k, e, f] + speed_noise_std * radius * np.sin(angle)
+                out_spacing[k, e, f], out_speed[k, e, f] = _sensor_reading(
+                    spacing[k, e, f], speed[k, e, f], uniforms[0, k, e, f], uniforms[1, k, e, f],
+                    uniforms[2, k, e, f], dropout_probability[e], spacing_noise_std, speed_noise_std,
+                )
+
+
+@numba.njit(cache=True)
+def _sensor_kernel(  # noqa: ANN202, PLR0913 -- :func:`measure` of :func:`counter_uniforms`, fused for the hot path
+    spacing, speed, keys, first_tick, dropout_probability, spacing_noise_std, speed_noise_std, out_spacing, out_speed
+):
+    """Readings of ticks first_tick[e] + 1 + k, arrays (n_ticks, n_envs, n_followers), noise drawn on the fly."""
+    n_ticks, n_envs, n_followers = spacing.shape
+    for k in range(n_ticks):
+        for e in range(n_envs):
+            tick = first_tick[e] + 1 + k
+            for f in range(n_followers):
+                out_spacing[k, e, f], out_speed[k, e, f] = _sensor_reading(
+                    spacing[k, e, f], speed[k, e, f], _uniform(keys[e], tick, f, 0, n_followers),
+                    _uniform(keys[e], tick, f, 1, n_followers), _uniform(keys[e], tick, f, 2, n_followers),
+                    dropout_probability[e], spacing_noise_std, speed_noise_std,
+                )
+
+
+@numba.njit(cache=True)
+def _sensor_reading(spacing, speed, u0, u1, u2, dropout_probability, spacing_noise_std, speed_noise_std):  # noqa: ANN001, ANN202, PLR0913
+    """One follower's noisy (spacing [m], speed [m/s]) from three uniforms; (NaN, NaN) if dropped (u2 < p)."""
+    if u2 < dropout_probability:
+        return np.nan, np.nan
+    radius = np.sqrt(-2.0 * np.log(u0))  # Box-Muller: two independent standard normals
+    angle = 2.0 * np.pi * u1
+    return spacing + spacing_noise_std * radius * np.cos(angle), speed + speed_noise_std * radius * np.sin(angle)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -210,11 +238,10 @@ class MonitoredPlatoon:
         the whole block at once, with the same result as tick by tick.
         """
         physics = self.platoon.advance(leader_speed, leader_accel, v2v)
-        n_ticks = len(physics.spacing)
-        ticks = self.ticks + np.arange(1, n_ticks + 1)[:, None]  # (n_ticks, n_envs)
-        self.ticks += n_ticks
-        uniforms = counter_uniforms(self.noise_keys, ticks, self.platoon.n_followers)
-        spacing, speed = measure(physics.spacing, physics.speed, self.sensors, uniforms, self.dropout_probability)
+        spacing, speed = np.empty_like(physics.spacing), np.empty_like(physics.speed)
+        _sensor_kernel(physics.spacing, physics.speed, self.noise_keys, self.ticks, self.dropout_probability,
+                       self.sensors.spacing_noise_std, self.sensors.speed_noise_std, spacing, speed)
+        self.ticks += len(spacing)
         self.measured_spacing, self.measured_speed = spacing[-1], speed[-1]
         tau_mean = self.monitor.update_block(speed, spacing).tau_mean
         # Unchecked: the estimates are finite by construction. The limits follow a ramping setting.

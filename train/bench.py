@@ -61,7 +61,7 @@ class Sizes:
     memory_envs: int
 
 
-FULL = Sizes(5, 1000, 15, {1: 20000, 64: 5000, 1024: 1000}, 64, 100, 300, 8192, 0, 1024)  # 0: each setting's n_steps
+FULL = Sizes(5, 2000, 40, {1: 20000, 64: 5000, 1024: 1000}, 64, 100, 300, 8192, 0, 1024)  # 0: each setting's n_steps
 QUICK = Sizes(1, 20, 3, {1: 20, 64: 10, 1024: 10}, 4, 5, 5, 64, 1, 16)
 TICKS_PER_BLOCK = 10  # the simulator advances a decision's ticks in one call, as the env does
 WARM_UP_STEPS = 20  # untimed steps first: numba kernels load (or compile) on their first call
