@@ -1,8 +1,13 @@
-"""The monitored platoon: simulator -> sensors -> Bayesian monitor -> control chart, one tick at a time.
+"""The monitored platoon: simulator -> sensors -> Bayesian monitor -> control chart.
 
 This is the loop of the paper and of the environment, for ``n_envs`` platoons at
-once. Changing a follower's time gap setting ramps it in the simulator and
+once, a tick (:meth:`MonitoredPlatoon.tick`) or a block of ticks
+(:meth:`MonitoredPlatoon.run`, what an env step uses) at a time, with the same
+result. Changing a follower's time gap setting ramps it in the simulator and
 re-centres that follower's prior and chart on the new setting.
+
+Sensor noise is counter-based (:func:`counter_uniforms`): a hash of (env key,
+tick, follower, stream), so no random generator state is carried between ticks.
 """
 
 from __future__ import annotations
