@@ -117,11 +117,10 @@ class ControlChart:
         return self._update_block(estimates, centers)
 
     def _update_block(self, estimates: np.ndarray, centers: np.ndarray) -> ChartState:
-        sides = self._sides(estimates, centers).astype(np.int8)
-        block = ChartState(center=centers, alarm=np.empty(sides.shape, dtype=bool), side=sides,
-                           exceedance=np.empty(sides.shape, dtype=bool),
-                           exceedances_in_window=np.empty(sides.shape, dtype=np.int64),
-                           run_length=np.empty(sides.shape, dtype=np.int64))
+        sides = self._sides(estimates, centers).astype(np.int8, copy=False)
+        flags, counts = np.empty((2, *sides.shape), dtype=bool), np.empty((2, *sides.shape), dtype=np.int64)
+        block = ChartState(center=centers, alarm=flags[0], side=sides, exceedance=flags[1],
+                           exceedances_in_window=counts[0], run_length=counts[1])
         self._slot = _excursions_kernel(
             self.hold_off, self.side, self.exceedance, self.exceedances_in_window, self.run_length,
             self._starts, self._slot, block.side, block.alarm, block.exceedance, block.exceedances_in_window,
@@ -137,8 +136,11 @@ class ControlChart:
         history is cleared (it was measured against the old limits), their statistic restarts
         and ``run_length`` restarts at 0.
         """
-        vehicles = vehicle_mask(mask, self.shape)
-        np.copyto(self.center, time_gap_array(time_gap, self.shape), where=vehicles)
+        self._recenter(time_gap_array(time_gap, self.shape), vehicle_mask(mask, self.shape))
+
+    def _recenter(self, tau: np.ndarray, vehicles: np.ndarray) -> None:
+        """:meth:`recenter` with ``tau`` and ``vehicles`` already checked and broadcast."""
+        np.copyto(self.center, tau, where=vehicles)
         for state in (self.side, self.exceedance, self.exceedances_in_window, self.run_length, self.hold_off):
             np.copyto(state, 0, where=vehicles, casting="unsafe")  # 0, False
         self._starts[:, vehicles] = False  # indexing touches only these vehicles' ring
@@ -175,9 +177,10 @@ def _check_finite(name: str, values: np.ndarray) -> None:
         raise ValueError(f"{name}{list(index)} = {values[index]}: must be finite [s]")
 
 
-def _outside(value: np.ndarray, low: np.ndarray, high: np.ndarray) -> np.ndarray:
-    """-1 where value < low, +1 where value > high, else 0 (int8)."""
-    return (value > high).astype(np.int8) - (value < low).astype(np.int8)
+@numba.vectorize(["int8(float64, float64, float64)"], cache=True)
+def _outside(value: float, low: float, high: float) -> int:
+    """-1 where value < low, +1 where value > high, else 0 (an int8 ufunc)."""
+    return 1 if value > high else (-1 if value < low else 0)
 
 
 class ShewhartChart(ControlChart):

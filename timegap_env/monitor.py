@@ -280,8 +280,10 @@ class TimeGapMonitor:
         stale estimate as excursions (e.g. 1.6 s against limits 0.75-1.25 s) and count them
         towards the next switch. ``skipped`` is sensor health and is kept.
         """
-        vehicles = vehicle_mask(mask, self.shape)
-        tau = time_gap_array(time_gap, self.shape)
+        self._recenter(time_gap_array(time_gap, self.shape), vehicle_mask(mask, self.shape))
+
+    def _recenter(self, tau: np.ndarray, vehicles: np.ndarray) -> None:
+        """:meth:`recenter` with ``tau`` and ``vehicles`` already checked and broadcast."""
         np.copyto(self._prior_tau, tau, where=vehicles)
         np.copyto(self._block_sum, 0.0, where=vehicles)
         np.copyto(self._window_stats, 0.0, where=vehicles)

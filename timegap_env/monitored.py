@@ -215,9 +215,9 @@ class MonitoredPlatoon:
         if mask is not None:
             changed &= mask
         if changed.any():
-            self.platoon.set_time_gap(setting, mask=changed)
-            self.monitor.recenter(setting, changed)
-            self.chart.recenter(self.platoon.time_gap, changed)
+            self.platoon.set_time_gap(setting, mask=changed)  # checks the settings
+            self.monitor._recenter(setting, changed)  # noqa: SLF001 -- checked just above
+            self.chart._recenter(self.platoon.time_gap, changed)  # noqa: SLF001
             config, chart_config = self.platoon.config, self.chart.config
             ramp_ticks = np.ceil(np.abs(setting - self.platoon.time_gap) / (config.time_gap_ramp_rate * config.dt))
             self.chart.hold(ramp_ticks + round(chart_config.settle_time / config.dt), changed)

@@ -225,7 +225,7 @@ class Platoon:
             v2v = np.broadcast_to(self.v2v, follower_shape)
         elif np.shape(v2v) != follower_shape:
             raise ValueError(f"v2v has shape {np.shape(v2v)}: expected {follower_shape} (n_ticks, n_envs, n_followers)")
-        ticks = PlatoonTicks(*(np.empty(follower_shape) for _ in range(4)), np.empty(follower_shape, dtype=bool))
+        ticks = PlatoonTicks(*np.empty((4, *follower_shape)), np.empty(follower_shape, dtype=bool))
         zoh = self._zoh
         _advance(
             self.x, self.v, self.a, self.u, self.time_gap, self.time_gap_setting, self.collided,

@@ -39,6 +39,8 @@ SPEED_SCALE = 40.0  # [m/s], above the 80 mph band
 OBSERVATION_LOW = np.array([-1, 0, 0, 0, 0, 0, 0, 0, 0], dtype=np.float32)
 OBSERVATION_HIGH = np.ones(len(FEATURES), dtype=np.float32)
 REWARD_TERMS = ("tracking", "alarms", "safety", "collision", "comfort", "efficiency", "preference", "switching")
+TOTALS = ("steps", "alarm_ticks", "exceedances", "max_deviation", "jerk_squared", "switches", "setting", "capacity",
+          "collision", "min_ttc")  # what an episode adds up, per env
 
 
 @dataclasses.dataclass(frozen=True)
@@ -84,10 +86,8 @@ class PlatoonTask:
             config.platoon.standstill_spacing + config.platoon.vehicle_length,
             np.array([getattr(config.reward_weights, name) for name in REWARD_TERMS]),
         )
-        self.totals = {name: np.zeros(n_envs) for name in (
-            "steps", "alarm_ticks", "exceedances", "max_deviation", "jerk_squared", "switches", "setting",
-            "capacity", "collision")}
-        self.totals["min_ttc"] = np.full(n_envs, np.inf)
+        self.totals = {name: np.zeros(n_envs) for name in TOTALS}  # this episode's, see episode_summary
+        self.totals["min_ttc"][:] = np.inf
         self.trace: list[tuple[float, np.ndarray, np.ndarray]] | None = None  # env 0 per tick, for rendering:
         # (t [s], posterior means of tau [s], chart centre lines [s])
         families = list(config.scenario_weights)
@@ -190,24 +190,12 @@ class PlatoonTask:
         _score_kernel(
             block.tau_mean, chart.center, chart.alarm, chart.exceedance, physics.collisions, leader_speed,
             physics.speed, physics.spacing, physics.accel, self._previous_accel, platoon.time_gap_setting,
-            changed, self._score_constants, *score,
+            changed, self._score_constants, *score, *(self.totals[name] for name in TOTALS),
         )
         self._previous_accel = physics.accel[-1].copy()
         self._min_ttc_step = score.min_ttc
         self._rms_jerk_step = np.sqrt(score.jerk_squared / self.ticks_per_decision)
         terms = dict(zip(REWARD_TERMS, score.terms))
-
-        totals = self.totals
-        totals["steps"] += 1
-        totals["alarm_ticks"] += score.alarm_ticks
-        totals["exceedances"] += score.exceedances
-        np.maximum(totals["max_deviation"], score.max_deviation, out=totals["max_deviation"])
-        totals["jerk_squared"] += score.mean_jerk_squared
-        totals["switches"] += changed.sum(axis=1)
-        totals["setting"] += score.mean_setting
-        totals["capacity"] += score.mean_capacity
-        totals["collision"] = np.maximum(totals["collision"], score.collided)
-        np.minimum(totals["min_ttc"], score.min_ttc.min(axis=1), out=totals["min_ttc"])
         terminated = platoon.collided.any(axis=1)
         truncated = (loop.ticks >= self.episode_ticks) & ~terminated
         return StepResult(reward=score.reward, terms=terms, terminated=terminated, truncated=truncated)
@@ -263,43 +251,29 @@ class PlatoonTask:
 
 
 class _StepScore(NamedTuple):
-    """A step's reward and what its ticks add up to, filled by :func:`_score_kernel`."""
+    """A step's reward and per-follower safety and comfort, filled by :func:`_score_kernel`."""
 
     terms: np.ndarray  # (len(REWARD_TERMS), n_envs) the reward terms, each <= 0
     reward: np.ndarray  # (n_envs,) weighted sum of the terms
-    collided: np.ndarray  # (n_envs,) a follower collided during the step [bool]
-    max_deviation: np.ndarray  # (n_envs,) largest |estimate - centre line| [s]
-    alarm_ticks: np.ndarray  # (n_envs,) follower-ticks in alarm [-]
-    exceedances: np.ndarray  # (n_envs,) excursions started [-]
     min_ttc: np.ndarray  # (n_envs, n_followers) smallest time-to-collision, inf if never closing [s]
     jerk_squared: np.ndarray  # (n_envs, n_followers) sum over the ticks of jerk^2 [m^2/s^6]
-    mean_jerk_squared: np.ndarray  # (n_envs,) jerk_squared averaged over the followers [m^2/s^6]
-    mean_setting: np.ndarray  # (n_envs,) time gap setting averaged over the followers [s]
-    mean_capacity: np.ndarray  # (n_envs,) capacity implied by the settings at the current speeds [veh/h]
 
     @classmethod
     def empty(cls, n_envs: int, n_followers: int) -> _StepScore:
-        def per_env() -> np.ndarray:
-            return np.empty(n_envs)
-
-        def per_follower() -> np.ndarray:
-            return np.empty((n_envs, n_followers))
-
-        return cls(
-            terms=np.empty((len(REWARD_TERMS), n_envs)), reward=per_env(), collided=np.empty(n_envs, dtype=bool),
-            max_deviation=per_env(), alarm_ticks=per_env(), exceedances=per_env(), min_ttc=per_follower(),
-            jerk_squared=per_follower(), mean_jerk_squared=per_env(), mean_setting=per_env(), mean_capacity=per_env(),
-        )
+        per_follower = np.empty((2, n_envs, n_followers))
+        return cls(np.empty((len(REWARD_TERMS), n_envs)), np.empty(n_envs), per_follower[0], per_follower[1])
 
 
 @numba.njit(cache=True)
 def _score_kernel(  # noqa: ANN202, PLR0913 -- the kernel takes the step's arrays one by one
     tau_mean, center, alarm, exceedance, collisions, leader_speed, speed, spacing, accel,
     previous_accel, setting, changed, constants,
-    terms, reward, collided, max_deviation, alarm_ticks, exceedances, min_ttc, jerk_squared,
-    mean_jerk_squared, mean_setting, mean_capacity,
+    terms, reward, min_ttc, jerk_squared,
+    steps, alarm_ticks, exceedances, max_deviation, total_jerk_squared, switches, total_setting, capacity,
+    collision, total_min_ttc,
 ):
-    """Score a step: block arrays (n_ticks, n_envs, n_followers) in, :class:`_StepScore` arrays filled.
+    """Score a step: block arrays (n_ticks, n_envs, n_followers) in, :class:`_StepScore` arrays filled,
+    and the episode totals (``PlatoonTask.totals``, in TOTALS order, each (n_envs,)) carried on.
 
     The reward terms, in REWARD_TERMS order, each <= 0 (see ``RewardWeights`` for their meaning):
     tracking and alarms over every follower-tick; safety from each follower's smallest TTC;
@@ -311,20 +285,21 @@ def _score_kernel(  # noqa: ANN202, PLR0913 -- the kernel takes the step's array
     n_ticks, n_envs, n_followers = tau_mean.shape
     follower_ticks = n_ticks * n_followers
     for e in range(n_envs):
-        deviation_sum = max_deviation[e] = alarm_ticks[e] = exceedances[e] = 0.0
-        collided[e] = False
+        deviation_sum = step_max_deviation = step_alarm_ticks = step_exceedances = 0.0
+        collided = False
         for k in range(n_ticks):
             tick_deviation = 0.0
             for f in range(n_followers):
                 deviation = abs(tau_mean[k, e, f] - center[k, e, f])
                 tick_deviation += deviation
-                max_deviation[e] = max(max_deviation[e], deviation)
-                alarm_ticks[e] += alarm[k, e, f]
-                exceedances[e] += exceedance[k, e, f]
-                collided[e] = collided[e] or collisions[k, e, f]
+                step_max_deviation = max(step_max_deviation, deviation)
+                step_alarm_ticks += alarm[k, e, f]
+                step_exceedances += exceedance[k, e, f]
+                collided = collided or collisions[k, e, f]
             deviation_sum += tick_deviation
         safety = comfort = efficiency = preference = switching = 0.0
-        mean_jerk_squared[e] = mean_setting[e] = mean_capacity[e] = 0.0
+        jerk_sum = setting_sum = capacity_sum = 0.0
+        step_min_ttc = np.inf
         for f in range(n_followers):
             min_ttc[e, f], jerk_squared[e, f] = np.inf, 0.0
             for k in range(n_ticks):
@@ -340,13 +315,14 @@ def _score_kernel(  # noqa: ANN202, PLR0913 -- the kernel takes the step's array
             efficiency += 1.0 - (v * smallest_level + gap_per_vehicle) / (v * setting[e, f] + gap_per_vehicle)
             preference += abs(setting[e, f] - preferred_time_gap)
             switching += changed[e, f]
-            mean_jerk_squared[e] += jerk_squared[e, f]
-            mean_setting[e] += setting[e, f]
-            mean_capacity[e] += 3600.0 * v / (v * setting[e, f] + gap_per_vehicle)
+            step_min_ttc = min(step_min_ttc, min_ttc[e, f])
+            jerk_sum += jerk_squared[e, f]
+            setting_sum += setting[e, f]
+            capacity_sum += 3600.0 * v / (v * setting[e, f] + gap_per_vehicle)  # [veh/h] at the current speed
         terms[0, e] = -deviation_sum / follower_ticks / half_width  # tracking
-        terms[1, e] = -alarm_ticks[e] / follower_ticks  # alarms
+        terms[1, e] = -step_alarm_ticks / follower_ticks  # alarms
         terms[2, e] = -(safety / n_followers)  # safety
-        terms[3, e] = -1.0 if collided[e] else -0.0  # collision
+        terms[3, e] = -1.0 if collided else -0.0  # collision
         terms[4, e] = -(comfort / n_followers) / jerk_reference**2  # comfort
         terms[5, e] = -(efficiency / n_followers)  # efficiency
         terms[6, e] = -(preference / n_followers) / level_span  # preference
@@ -354,9 +330,16 @@ def _score_kernel(  # noqa: ANN202, PLR0913 -- the kernel takes the step's array
         reward[e] = 0.0
         for t in range(terms.shape[0]):
             reward[e] += weights[t] * terms[t, e]
-        mean_jerk_squared[e] /= n_followers
-        mean_setting[e] /= n_followers
-        mean_capacity[e] /= n_followers
+        steps[e] += 1
+        alarm_ticks[e] += step_alarm_ticks
+        exceedances[e] += step_exceedances
+        max_deviation[e] = max(max_deviation[e], step_max_deviation)
+        total_jerk_squared[e] += jerk_sum / n_followers
+        switches[e] += switching
+        total_setting[e] += setting_sum / n_followers
+        capacity[e] += capacity_sum / n_followers
+        collision[e] = max(collision[e], 1.0 if collided else 0.0)
+        total_min_ttc[e] = min(total_min_ttc[e], step_min_ttc)
 
 
 @numba.njit(cache=True)
