@@ -1,7 +1,7 @@
 """Batched platoon physics: a human leader and automated followers at 10 Hz.
 
 State arrays are shaped (n_envs, n_vehicles) with column 0 the leader, so many
-platoons advance in the same NumPy operations. Followers obey the generalised
+platoons advance in the same call. Followers obey the generalised
 linear vehicle dynamics (GLVD) T da/dt = -a + K u under the constant time
 headway (CTH) controller
 
@@ -13,8 +13,8 @@ over the tick, not with Euler. The feed-forward term comes over V2V with a
 delay of ``v2v_delay_ticks`` ticks; a follower without V2V (ACC mode) drops it.
 
 The tick loop is a compiled kernel (numba): a tick is a recurrence through the
-feedback, so it cannot be vectorised over time, and as ~40 NumPy calls per tick
-it cost about 50 us even for one platoon (``make bench`` reports the result).
+feedback, so it cannot be vectorised over time, and as a few dozen NumPy calls
+per tick its cost for small batches was call overhead, not arithmetic.
 :meth:`Platoon.advance` runs a whole block of ticks in one call.
 """
 

@@ -1,4 +1,4 @@
-"""A native vector ``TimeGapMonitor-v0``: N platoons stepped in the same NumPy operations.
+"""A native vector ``TimeGapMonitor-v0``: N platoons stepped in the same calls.
 
 ``gym.make_vec("TimeGapMonitor-v0", num_envs=N, vectorization_mode="vector_entry_point")``.
 Sub-env i seeded with ``seed + i`` equals a single env seeded with ``seed + i``,
