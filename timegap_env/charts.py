@@ -73,8 +73,11 @@ class ControlChart:
         self.exceedances_in_window = np.zeros(self.shape, dtype=np.int64)
         self.run_length = np.zeros(self.shape, dtype=np.int64)  # [ticks]
         self.hold_off = np.zeros(self.shape, dtype=np.int64)  # ticks left in which alarms are held off [ticks]
-        self._starts = np.zeros((config.exceedance_window_ticks,) + self.shape, dtype=bool)  # ring of start flags
-        self._slot = 0  # ring slot of this tick
+        # Ring of excursion starts over the trailing window: the chart tick of a start, -1 for none. A start
+        # counts only if it is no older than the vehicle's last (re)start, so re-centring never clears the ring.
+        self._starts = np.full((config.exceedance_window_ticks,) + self.shape, -1, dtype=np.int64)
+        self._restarted = np.zeros(self.shape, dtype=np.int64)  # chart tick of each vehicle's last (re)start
+        self._tick = 0  # ticks charted so far; this tick's ring slot is _tick % window
         self._allocate()
         self.reset(None, time_gap)
 
@@ -121,11 +124,12 @@ class ControlChart:
         flags, counts = np.empty((2, *sides.shape), dtype=bool), np.empty((2, *sides.shape), dtype=np.int64)
         block = ChartState(center=centers, alarm=flags[0], side=sides, exceedance=flags[1],
                            exceedances_in_window=counts[0], run_length=counts[1])
-        self._slot = _excursions_kernel(
+        _excursions_kernel(
             self.hold_off, self.side, self.exceedance, self.exceedances_in_window, self.run_length,
-            self._starts, self._slot, block.side, block.alarm, block.exceedance, block.exceedances_in_window,
+            self._starts, self._restarted, self._tick, block.side, block.alarm, block.exceedance, block.exceedances_in_window,
             block.run_length,
         )
+        self._tick += len(sides)
         self.center = centers[-1].copy()
         return block
 
@@ -143,7 +147,7 @@ class ControlChart:
         np.copyto(self.center, tau, where=vehicles)
         for state in (self.side, self.exceedance, self.exceedances_in_window, self.run_length, self.hold_off):
             np.copyto(state, 0, where=vehicles, casting="unsafe")  # 0, False
-        self._starts[:, vehicles] = False  # indexing touches only these vehicles' ring
+        np.copyto(self._restarted, self._tick, where=vehicles)  # their earlier starts no longer count
         self._restart(vehicles)
 
     def hold(self, ticks: ArrayLike, mask: ArrayLike | None = None) -> None:
@@ -273,30 +277,32 @@ class CusumChart(ControlChart):
 
 @numba.njit(cache=True)
 def _excursions_kernel(  # noqa: ANN202, PLR0913 -- the kernel takes the chart's arrays one by one
-    hold_off, side, exceedance, exceedances_in_window, run_length, starts, slot,
+    hold_off, side, exceedance, exceedances_in_window, run_length, starts, restarted, first_tick,
     sides, out_alarm, out_exceedance, out_in_window, out_run_length,
 ):
     """What every chart does with its statistic's sides (n_ticks, n_envs, n_vehicles), tick by tick, in place.
 
     ``sides`` comes in as the statistic's side and leaves as the charted side (0 while alarms
-    are held off); returns the ring slot of the next tick.
+    are held off). Chart tick t uses ring slot t % window; the start it overwrites leaves the
+    window, and counts down only if it was recorded since the vehicle's last restart.
     """
     n_ticks, n_envs, n_vehicles = sides.shape
     ring_length = starts.shape[0]
     for k in range(n_ticks):
+        tick = first_tick + k
+        slot = tick % ring_length
         for e in range(n_envs):
             for i in range(n_vehicles):
                 now = sides[k, e, i] if hold_off[e, i] == 0 else 0
                 hold_off[e, i] = max(hold_off[e, i] - 1, 0)
                 started = now != 0 and now != side[e, i]  # a new excursion
                 side[e, i], exceedance[e, i] = now, started
-                exceedances_in_window[e, i] += int(started) - int(starts[slot, e, i])
-                starts[slot, e, i] = started
+                leaving = starts[slot, e, i] >= restarted[e, i]  # -1 (no start) never counts
+                exceedances_in_window[e, i] += int(started) - int(leaving)
+                starts[slot, e, i] = tick if started else -1
                 run_length[e, i] = 0 if now != 0 else run_length[e, i] + 1
                 sides[k, e, i], out_alarm[k, e, i], out_exceedance[k, e, i] = now, now != 0, started
                 out_in_window[k, e, i], out_run_length[k, e, i] = exceedances_in_window[e, i], run_length[e, i]
-        slot = (slot + 1) % ring_length
-    return slot
 
 
 CHARTS: dict[str, type[ControlChart]] = {"shewhart": ShewhartChart, "ewma": EwmaChart, "cusum": CusumChart}
