@@ -285,9 +285,8 @@ class TimeGapMonitor:
     def _recenter(self, tau: np.ndarray, vehicles: np.ndarray) -> None:
         """:meth:`recenter` with ``tau`` and ``vehicles`` already checked and broadcast."""
         np.copyto(self._prior_tau, tau, where=vehicles)
-        np.copyto(self._block_sum, 0.0, where=vehicles)
-        np.copyto(self._window_stats, 0.0, where=vehicles)
-        self._slots[:, :, vehicles] = 0.0  # indexing touches only these vehicles' slots
+        for stats in (self._block_sum, self._window_stats, self._slots):  # (..., n_envs, n_vehicles)
+            np.copyto(stats, 0.0, where=vehicles)
         self._moments = None  # the prior, recomputed when first read
 
     def _latest(self) -> Moments:
