@@ -5,13 +5,13 @@ table reports ratios, which survive a busy machine better than absolute times:
 
 1. env steps/s of ``TimeGapMonitor-v0`` (one env, random actions) against
    highway-env's ``highway-fast-v0`` and gymnasium's ``CartPole-v1``, the three
-   taking turns over several rounds (medians reported);
+   taking turns over several rounds;
 2. vehicle-ticks/s of the batched simulator (``Platoon.advance``, a decision's
    10 ticks per call) at 1, 64 and 1024 envs, and the native vector env against
    a ``SyncVectorEnv`` of single envs;
 3. monitor updates/s, batched (1024 envs x 5 vehicles);
 4. PPO training steps/s on ``TimeGapMonitor-v0`` against PPO on ``CartPole-v1``
-   with the same hyperparameters, the two taking turns (medians);
+   with the same hyperparameters, the two taking turns;
 5. peak memory of a 1024-env vector env (tracemalloc: NumPy allocations included).
 
 Writes ``results/bench.md``.
@@ -49,7 +49,7 @@ PPO_TRAINING = dict(n_envs=64, n_steps=64, batch_size=512, n_epochs=10, learning
 class Sizes:
     """How long each measurement runs."""
 
-    rounds: int  # single-env and PPO measurements alternate between the envs this many times; medians reported
+    rounds: int  # single-env and PPO measurements alternate between the envs this many times
     env_steps: int  # steps of TimeGapMonitor-v0 and CartPole-v1 per round
     highway_steps: int  # steps of highway-fast-v0 per round (it is about 100x slower)
     ticks: dict[int, int]  # simulator ticks timed per batch size, in blocks of TICKS_PER_BLOCK
@@ -61,7 +61,7 @@ class Sizes:
     memory_envs: int
 
 
-FULL = Sizes(5, 2000, 40, {1: 20000, 64: 5000, 1024: 1000}, 64, 100, 300, 8192, 0, 1024)  # 0: each setting's n_steps
+FULL = Sizes(10, 1000, 25, {1: 20000, 64: 5000, 1024: 1000}, 64, 100, 300, 4096, 0, 1024)  # 0: each setting's n_steps
 QUICK = Sizes(1, 20, 3, {1: 20, 64: 10, 1024: 10}, 4, 5, 5, 64, 1, 16)
 TICKS_PER_BLOCK = 10  # the simulator advances a decision's ticks in one call, as the env does
 WARM_UP_STEPS = 20  # untimed steps first: numba kernels load (or compile) on their first call
@@ -88,17 +88,17 @@ def env_steps_per_second(env: gym.Env, n_steps: int) -> float:
 
 
 def interleaved_steps_per_second(envs: dict[str, tuple[gym.Env, int]], rounds: int) -> dict[str, float]:
-    """Median steps/s of each env {name: (env, steps per round)}, the envs taking turns round by round,
-    so that a slow spell of a shared machine hits all of them rather than one."""
+    """Steps/s of each env {name: (env, steps per round)} over all its rounds, the envs taking turns round
+    by round, so that a slow spell of a shared machine hits all of them rather than one."""
     for env, _ in envs.values():
         env.reset(seed=0)
         env.action_space.seed(0)
         env_steps_per_second(env, WARM_UP_STEPS)
-    rates: dict[str, list[float]] = {name: [] for name in envs}
+    seconds = dict.fromkeys(envs, 0.0)
     for _ in range(rounds):
         for name, (env, n_steps) in envs.items():
-            rates[name].append(env_steps_per_second(env, n_steps))
-    return {name: float(np.median(values)) for name, values in rates.items()}
+            seconds[name] += n_steps / env_steps_per_second(env, n_steps)
+    return {name: rounds * n_steps / seconds[name] for name, (_, n_steps) in envs.items()}
 
 
 def vector_env_steps_per_second(envs: gym.vector.VectorEnv, n_steps: int) -> float:
@@ -137,7 +137,7 @@ def vehicle_ticks_per_second(n_envs: int, n_ticks: int) -> float:
 def ppo_steps_per_second(
     make_venvs: dict[str, Callable[[int], object]], setting: dict, timesteps: int, n_steps: int, rounds: int
 ) -> dict[str, float]:
-    """Median environment steps/s of PPO learning with ``setting`` on each env {name: make_venv(n_envs)}.
+    """Environment steps/s of PPO learning with ``setting`` on each env {name: make_venv(n_envs)}, over all rounds.
 
     Each model first learns one rollout (torch start-up and kernel loading excluded); then the
     models take turns, ``timesteps`` each per round, so machine noise hits them alike.
@@ -151,11 +151,11 @@ def ppo_steps_per_second(
               for name, make in make_venvs.items()}
     for model in models.values():
         model.learn(setting["n_envs"] * settings["n_steps"])
-    rates: dict[str, list[float]] = {name: [] for name in models}
+    seconds = dict.fromkeys(models, 0.0)
     for _ in range(rounds):
         for name, model in models.items():
-            rates[name].append(timed(lambda: (model.learn(timesteps, reset_num_timesteps=False), timesteps)[1]))
-    return {name: float(np.median(values)) for name, values in rates.items()}
+            seconds[name] += timesteps / timed(lambda: (model.learn(timesteps, reset_num_timesteps=False), timesteps)[1])
+    return {name: rounds * timesteps / seconds[name] for name in models}
 
 
 def peak_memory_mib(n_envs: int, n_steps: int = 10) -> float:
@@ -247,7 +247,7 @@ def main() -> None:
         f"# Benchmarks (`python -m train.bench{' --quick' if args.quick else ''}`)",
         "",
         f"Python {platform.python_version()}, NumPy {np.__version__}, {platform.machine()}; one process, "
-        "single envs take turns over several rounds (medians). Ratios are the figures to compare; absolute rates move "
+        "single envs and PPO runs take turns over several rounds. Ratios are the figures to compare; absolute rates move "
         "with the machine's load. Numba kernels are loaded (or compiled) before timing.",
         "PPO: each setting runs on both envs alike, MlpPolicy, CPU, one torch thread; "
         "TimeGapMonitor-v0 through the native vector env (`timegap_env.sb3.TimeGapVecEnv`), CartPole-v1 through DummyVecEnv.",
