@@ -154,7 +154,9 @@ def ppo_steps_per_second(
     seconds = dict.fromkeys(models, 0.0)
     for _ in range(rounds):
         for name, model in models.items():
-            seconds[name] += timesteps / timed(lambda: (model.learn(timesteps, reset_num_timesteps=False), timesteps)[1])
+            start = time.perf_counter()
+            model.learn(timesteps, reset_num_timesteps=False)
+            seconds[name] += time.perf_counter() - start
     return {name: rounds * timesteps / seconds[name] for name in models}
 
 
