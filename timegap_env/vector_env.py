@@ -28,7 +28,7 @@ class TimeGapMonitorVectorEnv(VectorEnv):
     and its summary in ``infos["episode_summary"]`` (masks ``_final_obs`` and
     ``_episode_summary``). ``step_diagnostics=False`` leaves the per-step
     diagnostics (estimates, limits, reward terms, ...) out of ``step``'s infos,
-    for learners that never read them; they cost about as much as the physics.
+    for learners that never read them.
     """
 
     metadata = {"autoreset_mode": AutoresetMode.SAME_STEP, "render_modes": []}
