@@ -52,6 +52,10 @@ class ChartState:
     exceedances_in_window: np.ndarray  # excursions started within the trailing exceedance_window [-]
     run_length: np.ndarray  # ticks since the last alarm or (re)start [ticks]
 
+    def tick(self, k: int) -> ChartState:
+        """The state after tick ``k`` of a block (views into this one)."""
+        return ChartState(*(getattr(self, field.name)[k] for field in dataclasses.fields(self)))
+
 
 class ControlChart:
     """What every chart shares: excursions, their windowed count, run length, re-centring.
@@ -103,7 +107,7 @@ class ControlChart:
         estimate = batch_array("tau_estimate", tau_estimate, self.shape)
         _check_finite("tau_estimate", estimate)
         block = self._update_block(estimate[None], self.center[None])
-        return ChartState(*(getattr(block, field.name)[0] for field in dataclasses.fields(ChartState)))
+        return block.tick(0)
 
     def update_block(self, tau_estimates: ArrayLike, centers: ArrayLike) -> ChartState:
         """Chart n_ticks estimates of tau (n_ticks, n_envs, n_vehicles) [s], tick k against centre line
@@ -126,8 +130,8 @@ class ControlChart:
                            exceedances_in_window=counts[0], run_length=counts[1])
         _excursions_kernel(
             self.hold_off, self.side, self.exceedance, self.exceedances_in_window, self.run_length,
-            self._starts, self._restarted, self._tick, block.side, block.alarm, block.exceedance, block.exceedances_in_window,
-            block.run_length,
+            self._starts, self._restarted, self._tick,
+            block.side, block.alarm, block.exceedance, block.exceedances_in_window, block.run_length,
         )
         self._tick += len(sides)
         self.center = centers[-1].copy()

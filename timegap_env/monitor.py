@@ -177,9 +177,9 @@ class TimeGapMonitor:
     """Streaming posterior of [s0, tau] for every vehicle of every env, O(1) work per measurement.
 
     Arrays are shaped (n_envs, n_vehicles); one tick (``config.dt``) brings one measurement
-    per vehicle. :meth:`update` takes one tick, :meth:`update_block` several at once, with
-    every vehicle and env in the same NumPy operations; the result does not depend on how
-    the ticks are grouped. Read-outs (after the last tick): ``mean`` (..., 2) and ``cov``
+    per vehicle. :meth:`update` takes one tick, :meth:`update_block` several at once, every
+    vehicle and env in one compiled pass; the result does not depend on how the ticks are
+    grouped. Read-outs (after the last tick): ``mean`` (..., 2) and ``cov``
     (..., 2, 2) of [s0, tau], ``tau_mean``, ``tau_std``, :meth:`prob_outside`, ``skipped``,
     ``n_measurements``, ``ztz``, ``zts``.
 
@@ -203,8 +203,8 @@ class TimeGapMonitor:
     slots k..W-1). The window total is then the running sum plus one suffix slot: only
     additions of at most 2W terms, so the error is bounded and does not grow with time. When
     a block is full it is turned into suffix sums in place: O(W) work every W ticks,
-    amortised O(1) per tick. A block of ticks is added as a few array operations per ring
-    block it touches, with the same additions in the same order as tick by tick.
+    amortised O(1) per tick. A block of ticks makes the same additions in the same order as
+    tick by tick.
     """
 
     def __init__(

@@ -231,8 +231,7 @@ class MonitoredPlatoon:
         n_envs = self.platoon.n_envs
         speed, accel = per_env("leader_speed", leader_speed, n_envs), per_env("leader_accel", leader_accel, n_envs)
         block = self.run(speed[None], accel[None])
-        chart = ChartState(*(getattr(block.chart, field.name)[0] for field in dataclasses.fields(ChartState)))
-        return block.physics.collisions[0], chart
+        return block.physics.collisions[0], block.chart.tick(0)
 
     def run(self, leader_speed: np.ndarray, leader_accel: np.ndarray, v2v: np.ndarray | None = None) -> MonitoredTicks:
         """A block of ticks: move the platoons, measure, update monitors and charts.
