@@ -1,24 +1,44 @@
 """TimeGapMonitor: a platoon simulator, a Bayesian time-gap monitor, control charts, and the
 Gymnasium environment ``TimeGapMonitor-v0`` built from them (registered on import).
 
-``simulate(...)`` runs a whole scenario without the environment and returns its :class:`Trajectory`.
+The package follows the data flow, one folder a stage:
+
+- :mod:`timegap_env.config`: every default, with units (the one source of truth);
+- :mod:`timegap_env.leaders`: the human-driven leader (synthetic families, NGSIM, highway-env's IDM);
+- :mod:`timegap_env.sim`: the platoon's physics, string stability, ``simulate(...) -> Trajectory``;
+- :mod:`timegap_env.monitoring`: sensors, the Bayesian monitor, control charts, the monitored loop;
+- :mod:`timegap_env.envs`: the task, observation, reward, the env and vector env, rendering, the SB3 adapter.
+
+What users call is importable from here.
 """
 
 from gymnasium.envs.registration import register, registry
 
-from timegap_env.config import EnvConfig
-from timegap_env.leaders import LeaderProfile
-from timegap_env.scenarios import SCENARIOS, make_leader
-from timegap_env.simulation import Trajectory, simulate
+from timegap_env.config import (
+    MONITOR_PRESETS, AggressiveCyclesConfig, ChartConfig, EnvConfig, HardBrakingConfig, HumanLeaderConfig,
+    LeaderConfig, MonitorConfig, PlatoonConfig, RewardWeights, SensorConfig, SinusoidConfig, StochasticHumanConfig,
+)
+from timegap_env.leaders import (
+    SCENARIOS, LeaderProfile, aggressive_cycles, default_ngsim_path, hard_braking, idm_leader, make_leader, read_ngsim,
+    sinusoid, stochastic_human, vehicle_ids, vehicle_profile,
+)
+from timegap_env.monitoring import TimeGapMonitor, posterior
+from timegap_env.sim import Trajectory, platoon_string_stability, simulate, string_stability
 
 ENV_ID = "TimeGapMonitor-v0"
 
 if ENV_ID not in registry:
-    register(
+    register(  # no max_episode_steps: the env truncates itself at EnvConfig.episode_duration
         id=ENV_ID,
-        entry_point="timegap_env.env:TimeGapMonitorEnv",
-        vector_entry_point="timegap_env.vector_env:TimeGapMonitorVectorEnv",
-        max_episode_steps=EnvConfig().max_episode_steps,
+        entry_point="timegap_env.envs.env:TimeGapMonitorEnv",
+        vector_entry_point="timegap_env.envs.vector_env:TimeGapMonitorVectorEnv",
     )
 
-__all__ = ["ENV_ID", "SCENARIOS", "LeaderProfile", "Trajectory", "make_leader", "simulate"]
+__all__ = [
+    "ENV_ID", "MONITOR_PRESETS", "SCENARIOS", "AggressiveCyclesConfig", "ChartConfig", "EnvConfig",
+    "HardBrakingConfig", "HumanLeaderConfig", "LeaderConfig", "LeaderProfile", "MonitorConfig", "PlatoonConfig",
+    "RewardWeights", "SensorConfig", "SinusoidConfig", "StochasticHumanConfig", "TimeGapMonitor", "Trajectory",
+    "aggressive_cycles", "default_ngsim_path", "hard_braking", "idm_leader", "make_leader",
+    "platoon_string_stability", "posterior", "read_ngsim", "simulate", "sinusoid", "stochastic_human",
+    "string_stability", "vehicle_ids", "vehicle_profile",
+]

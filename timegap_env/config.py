@@ -16,6 +16,8 @@ from typing import Any, Self
 import numpy as np
 
 MPH = 0.44704  # [m/s per mph]
+ACTION_MODES = ("platoon", "per_vehicle")  # one setting for all followers, or one each
+CHART_KINDS = ("shewhart", "ewma", "cusum")  # the charts of timegap_env.monitoring.charts.CHARTS
 
 
 class ConfigMixin:
@@ -70,8 +72,8 @@ class PlatoonConfig(ConfigMixin):
     dt: float = 0.1  # simulator tick [s] (10 Hz)
     actuation_lag: float | tuple[float, ...] = 0.45  # GLVD lag T, one value or one per follower [s]
     actuation_gain: float | tuple[float, ...] = 1.0  # GLVD gain K, one value or one per follower [-]
-    time_gap: float = 1.6  # initial time gap setting tau* [s]
-    time_gap_ramp_rate: float = 0.2  # rate at which the applied tau* follows a new setting [s/s]
+    initial_setting: float = 1.6  # time gap setting tau* at reset [s]
+    setting_ramp_rate: float = 0.2  # rate at which the applied setting follows a new setting [s/s]
     standstill_spacing: float = 5.0  # s0 of the CTH policy [m]
     vehicle_length: float = 5.0  # bumper to bumper length of every vehicle [m]
     k_s: float = 0.2  # gain on the spacing error [1/s^2]
@@ -88,7 +90,7 @@ class PlatoonConfig(ConfigMixin):
             self._fail("n_followers", self.n_followers, "must be an integer")
         if self.n_followers < 1:
             self._fail("n_followers", self.n_followers, "must be >= 1")
-        self._positive("dt", "time_gap", "time_gap_ramp_rate", "vehicle_length")
+        self._positive("dt", "initial_setting", "setting_ramp_rate", "vehicle_length")
         for field in ("standstill_spacing", "v2v_delay"):
             if self._finite(field) < 0:
                 self._fail(field, getattr(self, field), "must be >= 0")
@@ -246,7 +248,7 @@ class MonitorConfig(ConfigMixin):
     """
 
     noise_variance: float = 0.01  # sigma^2 of the spacing model S = s0 + tau V + eps [m^2]
-    prior_standstill_spacing: float = PlatoonConfig.standstill_spacing  # prior mean of s0 [m]; the prior mean of tau is tau*
+    prior_standstill_spacing: float = PlatoonConfig.standstill_spacing  # prior mean of s0 [m]; tau's is the setting
     prior_cov: tuple[tuple[float, float], tuple[float, float]] = ((1e-4, -1e-5), (-1e-5, 0.125))  # Sigma_b of [s0 [m], tau [s]]
     window: float | None = 2.0  # sliding window, a multiple of dt; chosen by train/choose_window.py [s]; None keeps all
     forgetting: float = 1.0  # exponential forgetting factor per tick, 1 = none [-]
@@ -279,7 +281,7 @@ class MonitorConfig(ConfigMixin):
 class ChartConfig(ConfigMixin):
     """Control chart on the posterior mean of tau (Shewhart, EWMA or CUSUM), and the paper's switching rule."""
 
-    kind: str = "shewhart"  # chart used by make_chart: "shewhart", "ewma" or "cusum"
+    kind: str = "shewhart"  # chart used by make_chart, one of CHART_KINDS
     baseline_std: float = 0.125  # sigma_desired of the baseline N(tau*, sigma_desired^2) [s]
     limit_width: float = 2.0  # L: Shewhart limits at tau* -/+ L sigma_desired [-]
     ewma_lambda: float = 0.2  # EWMA weight of the newest estimate [-]
@@ -290,12 +292,12 @@ class ChartConfig(ConfigMixin):
     switch_exceedances: int = 3  # paper's rule: this many exceedances within the window ... [-]
     switch_to: float = 1.0  # ... switch the setting to this time gap [s]
     settle_time: float = 8.0  # alarms wait this long after a commanded change has ramped in; long enough
-    # for the slowest change of the default ladder, 0.6 -> 2.2 s (tests/test_monitored.py) [s]
+    # for the slowest change of the default ladder, 0.6 -> 2.2 s (tests/monitoring/test_loop.py) [s]
     dt: float = PlatoonConfig.dt  # chart tick, one estimate per tick [s]
 
     def __post_init__(self) -> None:
-        if self.kind not in ("shewhart", "ewma", "cusum"):
-            self._fail("kind", self.kind, 'must be "shewhart", "ewma" or "cusum"')
+        if self.kind not in CHART_KINDS:
+            self._fail("kind", self.kind, f"must be one of {CHART_KINDS}")
         self._positive("baseline_std", "limit_width", "ewma_width", "cusum_h", "exceedance_window", "switch_to", "dt")
         if not 0 < self._finite("ewma_lambda") <= 1:
             self._fail("ewma_lambda", self.ewma_lambda, "must be in (0, 1]")
@@ -326,16 +328,20 @@ MONITOR_PRESETS: dict[str, MonitorConfig] = {
 
 @dataclasses.dataclass(frozen=True)
 class RewardWeights(ConfigMixin):
-    """Weight of each reward term of ``TimeGapMonitor-v0``; each term is <= 0 and about -1 at its worst."""
+    """Weight of each reward term of ``TimeGapMonitor-v0``, one field per term in the order they are summed.
 
-    tracking: float = 1.0  # -|estimate - tau*| / (L sigma_desired), mean over followers and ticks
-    alarms: float = 1.0  # -share of follower-ticks whose estimate is outside the control limits
-    safety: float = 2.0  # -mean max(0, 1 - TTC / ttc_threshold)
-    collision: float = 1000.0  # -1 on the step a collision ends the episode; outweighs any whole episode
-    comfort: float = 0.05  # -mean (jerk / jerk_reference)^2
-    efficiency: float = 1.0  # -(1 - capacity(tau*) / capacity(smallest level)) at the current speed
-    preference: float = 0.5  # -|tau* - preferred_time_gap| / span of the levels
-    switching: float = 0.2  # -share of followers whose setting changed this step
+    The terms themselves (each <= 0, about -1 at its worst) and the reasons for these weights are in
+    :mod:`timegap_env.envs.reward`, whose ``RewardTerms`` takes its field names from this class.
+    """
+
+    tracking: float = 1.0  # [-]
+    alarms: float = 1.0  # [-]
+    safety: float = 2.0  # [-]
+    collision: float = 1000.0  # [-], outweighs any whole episode of the other terms
+    comfort: float = 0.05  # [-]
+    efficiency: float = 1.0  # [-]
+    preference: float = 0.5  # [-]
+    switching: float = 0.2  # [-]
 
     def __post_init__(self) -> None:
         for field in dataclasses.fields(self):
@@ -362,9 +368,9 @@ class EnvConfig(ConfigMixin):
     reward_weights: RewardWeights = RewardWeights()
     decision_interval: float = 1.0  # time between two actions, a multiple of platoon.dt [s]
     episode_duration: float = 250.0  # [s]
-    action_mode: str = "platoon"  # "platoon": one setting for all followers; "per_vehicle": one each
-    time_gap_levels: tuple[float, ...] = (0.6, 0.8, 1.0, 1.2, 1.4, 1.6, 1.8, 2.0, 2.2)  # settings to choose from [s]
-    preferred_time_gap: float = 1.6  # the setting the driver chose [s]
+    action_mode: str = "platoon"  # one of ACTION_MODES: one setting for all followers, or one each
+    setting_levels: tuple[float, ...] = (0.6, 0.8, 1.0, 1.2, 1.4, 1.6, 1.8, 2.0, 2.2)  # settings to choose from [s]
+    preferred_setting: float = 1.6  # the setting the driver chose [s]
     scenario_weights: dict[str, float] = dataclasses.field(default_factory=_default_scenario_weights)  # family -> weight
     v2v_loss_probability: float = 0.5  # chance per episode that some followers fall back from CACC to ACC [-]
     v2v_loss_duration_range: tuple[float, float] = (20.0, 80.0)  # how long such a V2V loss lasts [s]
@@ -379,7 +385,7 @@ class EnvConfig(ConfigMixin):
         for field, kind in nested.items():
             if not isinstance(getattr(self, field), kind):
                 self._fail(field, getattr(self, field), f"must be a {kind.__name__} (or a dict of its fields)")
-        self._positive("decision_interval", "episode_duration", "preferred_time_gap", "ttc_threshold", "jerk_reference")
+        self._positive("decision_interval", "episode_duration", "preferred_setting", "ttc_threshold", "jerk_reference")
         dt = self.platoon.dt
         for field in ("decision_interval", "episode_duration"):
             ticks = getattr(self, field) / dt
@@ -388,15 +394,15 @@ class EnvConfig(ConfigMixin):
         for name, config in (("monitor", self.monitor), ("chart", self.chart), ("leader", self.leader)):
             if not math.isclose(config.dt, dt):
                 self._fail(f"{name}.dt", config.dt, f"must equal platoon.dt = {dt}")
-        if self.action_mode not in ("platoon", "per_vehicle"):
-            self._fail("action_mode", self.action_mode, "must be 'platoon' or 'per_vehicle'")
-        levels = np.asarray(self.time_gap_levels, dtype=float)
+        if self.action_mode not in ACTION_MODES:
+            self._fail("action_mode", self.action_mode, f"must be one of {ACTION_MODES}")
+        levels = np.asarray(self.setting_levels, dtype=float)
         if levels.ndim != 1 or levels.size < 2 or not np.all(np.isfinite(levels)) or np.any(levels <= 0):
-            self._fail("time_gap_levels", self.time_gap_levels, "must be at least two finite settings > 0")
+            self._fail("setting_levels", self.setting_levels, "must be at least two finite settings > 0")
         if np.any(np.diff(levels) <= 0):
-            self._fail("time_gap_levels", self.time_gap_levels, "must increase strictly")
-        if not np.any(np.isclose(levels, self.platoon.time_gap)):
-            self._fail("platoon.time_gap", self.platoon.time_gap, f"the initial setting must be one of {self.time_gap_levels}")
+            self._fail("setting_levels", self.setting_levels, "must increase strictly")
+        if not np.any(np.isclose(levels, self.platoon.initial_setting)):
+            self._fail("platoon.initial_setting", self.platoon.initial_setting, f"must be one of {self.setting_levels}")
         if not isinstance(self.scenario_weights, Mapping) or not self.scenario_weights:
             self._fail("scenario_weights", self.scenario_weights, "must be a non-empty dict family -> weight")
         weights = list(self.scenario_weights.values())
@@ -419,8 +425,8 @@ class EnvConfig(ConfigMixin):
             value = overrides.get(field.name)
             if isinstance(value, Mapping) and isinstance(getattr(default, field.name), ConfigMixin):
                 overrides[field.name] = getattr(default, field.name).with_overrides(value)
-        if "time_gap_levels" in overrides:
-            overrides["time_gap_levels"] = tuple(overrides["time_gap_levels"])
+        if "setting_levels" in overrides:
+            overrides["setting_levels"] = tuple(overrides["setting_levels"])
         return default.with_overrides(overrides)
 
     @property

@@ -2,6 +2,7 @@
 
     python -m train.record_behaviour --out /tmp/before.pkl                       # record
     python -m train.record_behaviour --out /tmp/after.pkl --compare /tmp/before.pkl  # record again and compare
+    python -m train.record_behaviour --out /tmp/after.pkl --compare /tmp/old.pkl --rename time_gap=actual_time_gap
 
 Records, through ``gym.make``, ``gym.make_vec`` and ``timegap_env.simulate`` only:
 
@@ -15,7 +16,8 @@ Records, through ``gym.make``, ``gym.make_vec`` and ``timegap_env.simulate`` onl
 
 Actions come from a seeded generator, so they exercise changes of setting. The recording is a
 pickle of nested dicts and lists of NumPy arrays; ``--compare`` reports every path whose dtype,
-shape or bytes differ (NaN included) and exits 1 if any does.
+shape or bytes differ (NaN included) and exits 1 if any does. ``--rename old=new`` reads the
+earlier recording's dict key ``old`` as ``new``, for a key the API has renamed.
 """
 
 from __future__ import annotations
@@ -44,8 +46,9 @@ EPISODES: list[dict[str, Any]] = [  # gym.make config, reset seed and options, a
      "seed": 6, "options": {"scenario": "stochastic_human"}, "actions": 106},
     {"config": None, "seed": 7, "options": {"leader_speed": 20.0 + 3.0 * np.sin(np.arange(1500) * 0.02)},
      "actions": 107},
-    {"config": {"platoon": {"actuation_lag": 1.0, "actuation_gain": 0.6, "time_gap": 0.6}, "v2v_loss_probability": 1.0,
-                "time_gap_levels": (0.6, 0.7)}, "seed": 0, "options": {"scenario": "hard_braking"}, "actions": 108},
+    {"config": {"platoon": {"actuation_lag": 1.0, "actuation_gain": 0.6, "initial_setting": 0.6},
+                "v2v_loss_probability": 1.0, "setting_levels": (0.6, 0.7)},
+     "seed": 0, "options": {"scenario": "hard_braking"}, "actions": 108},
 ]
 VECTOR_ENVS, VECTOR_STEPS = 4, 300
 SWITCH_CHANCE = 0.15  # chance per step that the action generator picks a new setting [-]
@@ -76,7 +79,7 @@ def record_episode(spec: dict[str, Any]) -> dict[str, Any]:
     env = gym.make(timegap_env.ENV_ID, config=spec["config"])
     obs, info = env.reset(seed=spec["seed"], options=spec["options"])
     steps = [{"obs": obs, "info": info}]
-    levels = len(env.unwrapped.config.time_gap_levels)
+    levels = len(env.unwrapped.config.setting_levels)
     for action in actions(levels, env.action_space.shape, spec["actions"]):
         obs, reward, terminated, truncated, info = env.step(action)
         steps.append({"action": action, "obs": obs, "reward": reward, "terminated": terminated,
@@ -92,7 +95,7 @@ def record_vector_env() -> dict[str, Any]:
                         config={"action_mode": "per_vehicle"})
     obs, infos = envs.reset(seed=20)
     steps = [{"obs": obs, "infos": infos}]
-    generator = actions(len(envs.unwrapped.config.time_gap_levels), envs.action_space.shape, 200)
+    generator = actions(len(envs.unwrapped.config.setting_levels), envs.action_space.shape, 200)
     for _ in range(VECTOR_STEPS):
         obs, reward, terminated, truncated, infos = envs.step(next(generator))
         steps.append({"obs": obs, "reward": reward, "terminated": terminated, "truncated": truncated,
@@ -116,11 +119,11 @@ def record_simulations() -> dict[str, Any]:
     n_ticks = 2501
     settings = np.where(np.arange(n_ticks)[:, None] < 1000, 1.6, 1.0) * np.ones(5)
     v2v = ~((np.arange(n_ticks)[:, None] >= 500) & (np.arange(n_ticks)[:, None] < 900)) & np.ones(5, dtype=bool)
-    runs["schedule"] = timegap_env.simulate("hard_braking", seed=3, time_gap_setting=settings, v2v=v2v)
-    fields = ("t", "x", "v", "a", "u", "time_gap_setting", "v2v", "leader_name", "spacing")
+    runs["schedule"] = timegap_env.simulate("hard_braking", seed=3, setting=settings, v2v=v2v)
+    fields = ("t", "x", "v", "a", "u", "setting", "v2v", "leader_name", "spacing")
     return {
         name: canonical({**{field: getattr(run, field) for field in fields},
-                         "applied": run.time_gap_applied, "actual": run.time_gap,
+                         "applied": run.applied_setting, "actual": run.actual_time_gap,
                          "collision": str(run.collision)})
         for name, run in runs.items()
     }
@@ -135,22 +138,24 @@ def record() -> dict[str, Any]:
     }
 
 
-def differences(before: Any, after: Any, path: str = "") -> Iterator[str]:
-    """Paths where ``after`` differs from ``before`` in structure, dtype, shape or bytes."""
+def differences(before: Any, after: Any, renamed: dict[str, str], path: str = "") -> Iterator[str]:
+    """Paths where ``after`` differs from ``before`` (its dict keys read through ``renamed``) in structure,
+    key order, dtype, shape or bytes."""
     if isinstance(before, dict) or isinstance(after, dict):
         if not (isinstance(before, dict) and isinstance(after, dict)):
             yield f"{path}: a dict on one side only"
             return
+        before = {renamed.get(key, key): value for key, value in before.items()}
         if list(before) != list(after):
             yield f"{path}: keys {list(before)} -> {list(after)}"
         for key in before.keys() & after.keys():
-            yield from differences(before[key], after[key], f"{path}/{key}")
+            yield from differences(before[key], after[key], renamed, f"{path}/{key}")
     elif isinstance(before, list) or isinstance(after, list):
         if not (isinstance(before, list) and isinstance(after, list)) or len(before) != len(after):
             yield f"{path}: list lengths {len(before)} -> {len(after)}"
             return
         for i, (a, b) in enumerate(zip(before, after)):
-            yield from differences(a, b, f"{path}[{i}]")
+            yield from differences(a, b, renamed, f"{path}[{i}]")
     elif before.dtype != after.dtype or before.shape != after.shape:
         yield f"{path}: {before.dtype}{before.shape} -> {after.dtype}{after.shape}"
     elif before.tobytes() != after.tobytes():
@@ -161,12 +166,15 @@ def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(prog="python -m train.record_behaviour", description=__doc__.split("\n")[0])
     parser.add_argument("--out", type=Path, required=True, help="where to write the recording (a pickle)")
     parser.add_argument("--compare", type=Path, help="an earlier recording to compare this one with")
+    parser.add_argument("--rename", action="append", default=[], metavar="OLD=NEW",
+                        help="read the earlier recording's dict key OLD as NEW (repeatable)")
     args = parser.parse_args(argv)
+    renamed = dict(pair.split("=", 1) for pair in args.rename)
     recording = record()
     args.out.write_bytes(pickle.dumps(recording))
     print(f"wrote {args.out}")
     if args.compare is not None:
-        found = list(differences(pickle.loads(args.compare.read_bytes()), recording))
+        found = list(differences(pickle.loads(args.compare.read_bytes()), recording, renamed))
         for line in found[:50]:
             print(line)
         print(f"{len(found)} difference(s) from {args.compare}")

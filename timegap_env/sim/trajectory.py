@@ -7,9 +7,9 @@ import dataclasses
 import numpy as np
 
 from timegap_env.config import PlatoonConfig
-from timegap_env.leaders import LeaderProfile
-from timegap_env.platoon import Platoon
-from timegap_env.scenarios import get_scenario, make_leader
+from timegap_env.leaders.profile import LeaderProfile
+from timegap_env.leaders.scenarios import make_leader
+from timegap_env.sim.platoon import Platoon
 
 # Below this speed the time gap (s - s0) / v is not meaningful and is reported as NaN [m/s].
 TIME_GAP_MIN_SPEED = 1.0
@@ -33,8 +33,8 @@ class Trajectory:
     v: np.ndarray  # speed [m/s]
     a: np.ndarray  # acceleration [m/s^2]
     u: np.ndarray  # commanded acceleration [m/s^2]; the leader's is its acceleration
-    time_gap_setting: np.ndarray  # (n_ticks, n_followers) setting asked for [s]
-    time_gap_applied: np.ndarray  # (n_ticks, n_followers) ramped setting the controller used [s]
+    setting: np.ndarray  # (n_ticks, n_followers) time gap setting asked for [s]
+    applied_setting: np.ndarray  # (n_ticks, n_followers) ramped setting the controller used [s]
     v2v: np.ndarray  # (n_ticks, n_followers) CACC on [bool]
     config: PlatoonConfig
     leader_name: str
@@ -46,7 +46,7 @@ class Trajectory:
         return self.x[:, :-1] - self.x[:, 1:] - self.config.vehicle_length
 
     @property
-    def time_gap(self) -> np.ndarray:
+    def actual_time_gap(self) -> np.ndarray:
         """Actual time gap (s - s0) / v of each follower, NaN below ``TIME_GAP_MIN_SPEED`` [s]."""
         speed = self.v[:, 1:]
         with np.errstate(divide="ignore", invalid="ignore"):
@@ -56,7 +56,7 @@ class Trajectory:
     @property
     def spacing_error(self) -> np.ndarray:
         """Controller spacing error s - s0 - tau* v of each follower, (n_ticks, n_followers) [m]."""
-        return self.spacing - self.config.standstill_spacing - self.time_gap_applied * self.v[:, 1:]
+        return self.spacing - self.config.standstill_spacing - self.applied_setting * self.v[:, 1:]
 
 
 def _schedule(name: str, value: object, n_ticks: int, n_followers: int, dtype: type) -> np.ndarray:
@@ -76,40 +76,38 @@ def simulate(
     config: PlatoonConfig | None = None,
     *,
     seed: int | None = 0,
-    time_gap_setting: float | np.ndarray | None = None,
+    setting: float | np.ndarray | None = None,
     v2v: bool | np.ndarray | None = None,
 ) -> Trajectory:
     """Simulate one platoon behind a leader and return its trajectory.
 
-    ``scenario``: a scenario name (see ``timegap_env.scenarios.SCENARIOS``), a
-    :class:`LeaderProfile`, or a leader speed series [m/s] at ``config.dt``.
-    ``config``: the platoon; default the scenario's (``PlatoonConfig()`` for a profile).
-    ``time_gap_setting`` [s] and ``v2v`` may be a scalar, one value per
+    ``scenario``: a scenario name (see ``timegap_env.SCENARIOS``; its leader is built with the
+    default :class:`~timegap_env.config.LeaderConfig`), a :class:`LeaderProfile`, or a leader
+    speed series [m/s] at ``config.dt``.
+    ``config``: the platoon, default ``PlatoonConfig()`` (the paper's).
+    ``setting`` (the time gap setting tau* [s]) and ``v2v`` may be a scalar, one value per
     follower, or an (n_ticks, n_followers) schedule, so that a setting can
     change (it is ramped) and V2V can drop out during the run.
     The run stops at the first collision, which ``Trajectory.collision`` reports.
     """
+    config = config or PlatoonConfig()
     if isinstance(scenario, str):
-        config = config or get_scenario(scenario).platoon
         leader = make_leader(scenario, seed)
     elif isinstance(scenario, LeaderProfile):
-        config = config or PlatoonConfig()
         leader = scenario
     else:
-        config = config or PlatoonConfig()
         leader = LeaderProfile.from_speed(scenario, dt=config.dt)
     if not np.isclose(leader.dt, config.dt):
         raise ValueError(f"leader dt = {leader.dt} s differs from PlatoonConfig.dt = {config.dt} s")
 
     n_ticks, n_followers = leader.speed.size, config.n_followers
-    settings = _schedule("time_gap_setting", config.time_gap if time_gap_setting is None else time_gap_setting,
-                         n_ticks, n_followers, float)
+    settings = _schedule("setting", config.initial_setting if setting is None else setting, n_ticks, n_followers, float)
     if not np.all(np.isfinite(settings)) or np.any(settings <= 0):
-        raise ValueError(f"time_gap_setting = {time_gap_setting!r}: every value must be finite and > 0")
+        raise ValueError(f"setting = {setting!r}: every value must be finite and > 0 [s]")
     v2v_schedule = _schedule("v2v", config.v2v if v2v is None else v2v, n_ticks, n_followers, bool)
 
     platoon = Platoon(config)
-    platoon.reset(leader.speed[0], leader.accel[0], time_gap=settings[0])
+    platoon.reset(leader.speed[0], leader.accel[0], setting=settings[0])
     shape = (n_ticks, n_followers + 1)
     record = {name: np.empty(shape) for name in ("x", "v", "a", "u")}
     applied = np.empty((n_ticks, n_followers))
@@ -118,10 +116,10 @@ def simulate(
     for k in range(n_ticks):
         for name, array in record.items():
             array[k] = getattr(platoon, name)[0]
-        applied[k] = platoon.time_gap[0]
+        applied[k] = platoon.applied_setting[0]
         if k == last:
             break
-        platoon.set_time_gap(settings[k])  # row k is in force from t_k to t_{k+1}
+        platoon.request_setting(settings[k])  # row k is in force from t_k to t_{k+1}
         platoon.set_v2v(v2v_schedule[k])
         collided = platoon.step(leader.speed[k + 1], leader.accel[k + 1])[0]
         if collided.any():
@@ -133,8 +131,8 @@ def simulate(
     return Trajectory(
         t=np.arange(n) * config.dt,
         **{name: array[:n] for name, array in record.items()},
-        time_gap_setting=np.array(settings[:n]),
-        time_gap_applied=applied[:n],
+        setting=np.array(settings[:n]),
+        applied_setting=applied[:n],
         v2v=np.array(v2v_schedule[:n]),
         config=config,
         leader_name=leader.name,

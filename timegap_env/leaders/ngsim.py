@@ -27,7 +27,7 @@ from typing import TextIO
 import numpy as np
 
 from timegap_env.config import LeaderConfig
-from timegap_env.leaders import LeaderProfile
+from timegap_env.leaders.profile import LeaderProfile
 
 FOOT = 0.3048  # [m per ft]
 FRAME_DT = 0.1  # time between two NGSIM frames [s]
@@ -40,7 +40,7 @@ def default_ngsim_path() -> Path:
     """``$TIMEGAP_NGSIM_PATH`` if set, else the shared I-80 subset beside the repository."""
     if os.environ.get(PATH_VARIABLE):
         return Path(os.environ[PATH_VARIABLE])
-    repo_root = Path(__file__).resolve().parent.parent
+    repo_root = Path(__file__).resolve().parents[2]  # timegap_env/leaders/ngsim.py -> the repository
     return repo_root.parent / SHARED_SUBSET
 
 

@@ -1,9 +1,13 @@
-"""Named scenarios: a leader family plus the platoon and leader configs it runs with.
+"""Named scenarios: which leader family a name stands for.
 
-``make_leader(name, seed)`` builds the leader profile of a scenario;
-``SCENARIOS`` lists them. ``paper`` follows the paper's Table 1: 250 s at
-0.1 s ticks, T = 0.45 s, K = 1, tau* = 1.6 s, s0 = 5 m, five followers, and
-the aggressive acceleration/deceleration leader in 20-80 mph.
+``make_leader(name, seed, leader)`` builds the leader profile of a scenario;
+``SCENARIOS`` lists them. ``paper`` is the paper's leader (aggressive
+acceleration/deceleration cycles in 20-80 mph, 250 s at 0.1 s ticks); the rest of
+the paper's Table 1 (T = 0.45 s, K = 1, tau* = 1.6 s, s0 = 5 m, five followers) is
+the default :class:`~timegap_env.config.PlatoonConfig`.
+
+A scenario names a leader only: the platoon, the tick and the length of a profile
+are the caller's (``simulate``'s ``config``, the env's ``EnvConfig``).
 """
 
 from __future__ import annotations
@@ -15,9 +19,9 @@ from pathlib import Path
 
 import numpy as np
 
-from timegap_env import human_leader, leaders, ngsim
-from timegap_env.config import LeaderConfig, PlatoonConfig
-from timegap_env.leaders import LeaderProfile
+from timegap_env.config import LeaderConfig
+from timegap_env.leaders import idm, ngsim, synthetic
+from timegap_env.leaders.profile import LeaderProfile
 
 LeaderFamily = Callable[[int | None, LeaderConfig], LeaderProfile]
 
@@ -41,43 +45,35 @@ def ngsim_leader(seed: int | None, leader: LeaderConfig, *, within_band: bool) -
 
 
 LEADER_FAMILIES: dict[str, LeaderFamily] = {
-    "aggressive_cycles": lambda seed, leader: leaders.aggressive_cycles(seed, leader=leader),
-    "sinusoid": lambda seed, leader: leaders.sinusoid(seed, leader=leader),
-    "hard_braking": lambda seed, leader: leaders.hard_braking(seed, leader=leader),
-    "stochastic_human": lambda seed, leader: leaders.stochastic_human(seed, leader=leader),
+    "aggressive_cycles": lambda seed, leader: synthetic.aggressive_cycles(seed, leader=leader),
+    "sinusoid": lambda seed, leader: synthetic.sinusoid(seed, leader=leader),
+    "hard_braking": lambda seed, leader: synthetic.hard_braking(seed, leader=leader),
+    "stochastic_human": lambda seed, leader: synthetic.stochastic_human(seed, leader=leader),
     "ngsim": lambda seed, leader: ngsim_leader(seed, leader, within_band=False),
     "ngsim_in_band": lambda seed, leader: ngsim_leader(seed, leader, within_band=True),
     # highway-env's IDM driver reacting to scripted hard braking ahead of it
-    "idm": lambda seed, leader: human_leader.idm_leader(leaders.hard_braking(seed, leader=leader), seed=seed),
+    "idm": lambda seed, leader: idm.idm_leader(synthetic.hard_braking(seed, leader=leader), seed=seed),
 }
 
 
 @dataclasses.dataclass(frozen=True)
 class Scenario:
-    """A leader family with the configs it runs with."""
+    """A name for a leader family."""
 
     name: str
-    leader_family: str
+    leader_family: str  # a key of LEADER_FAMILIES
     description: str
-    platoon: PlatoonConfig = PlatoonConfig()
-    leader: LeaderConfig = LeaderConfig()
 
-
-PAPER_PLATOON = PlatoonConfig(
-    n_followers=5, dt=0.1, actuation_lag=0.45, actuation_gain=1.0, time_gap=1.6, standstill_spacing=5.0
-)
-PAPER_LEADER = LeaderConfig(dt=0.1, duration=250.0)
 
 SCENARIOS: dict[str, Scenario] = {
     "paper": Scenario(
         "paper",
         "aggressive_cycles",
-        "The paper's experiment: aggressive cycles in 20-80 mph, 250 s, five CACC followers at tau* = 1.6 s.",
-        PAPER_PLATOON,
-        PAPER_LEADER,
+        "The paper's experiment: aggressive cycles in 20-80 mph, 250 s, behind the default platoon "
+        "(five CACC followers at tau* = 1.6 s).",
     ),
     **{
-        family: Scenario(family, family, f"The {family.replace('_', ' ')} leader family with default configs.")
+        family: Scenario(family, family, f"The {family.replace('_', ' ')} leader family.")
         for family in LEADER_FAMILIES
     },
 }
@@ -90,7 +86,7 @@ def get_scenario(name: str) -> Scenario:
     return SCENARIOS[name]
 
 
-def make_leader(name: str, seed: int | None = 0, leader: LeaderConfig | None = None) -> LeaderProfile:
-    """The leader profile of scenario ``name`` for ``seed`` (same seed, identical profile)."""
-    scenario = get_scenario(name)
-    return LEADER_FAMILIES[scenario.leader_family](seed, leader or scenario.leader)
+def make_leader(name: str, seed: int | None = 0, leader: LeaderConfig = LeaderConfig()) -> LeaderProfile:
+    """The leader profile of scenario ``name`` for ``seed`` (same seed, identical profile) with ``leader``'s
+    tick, length and speed band."""
+    return LEADER_FAMILIES[get_scenario(name).leader_family](seed, leader)

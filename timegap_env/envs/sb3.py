@@ -36,7 +36,7 @@ class TimeGapVecEnv(VecEnv):
     """``n_envs`` platoons of ``TimeGapMonitor-v0`` behind SB3's ``VecEnv`` API.
 
     ``config`` overrides the env's :class:`~timegap_env.config.EnvConfig` as in ``gym.make``;
-    ``max_episode_steps`` defaults to the registered limit (250), as ``gym.make`` applies it.
+    ``max_episode_steps``, optional, cuts episodes shorter than ``episode_duration``.
 
     The sub-envs are rows of one native vector env, not objects of their own:
     ``get_attr``, ``set_attr`` and ``env_method`` reach that shared vector env

@@ -7,26 +7,13 @@ from typing import Any
 
 import gymnasium as gym
 import numpy as np
-from gymnasium import spaces
 
 from timegap_env.config import EnvConfig
-from timegap_env.task import OBSERVATION_HIGH, OBSERVATION_LOW, PlatoonTask
+from timegap_env.envs.action import action_space
+from timegap_env.envs.observation import observation_space
+from timegap_env.envs.task import PlatoonTask
 
 RENDER_HISTORY = 60.0  # seconds of chart history drawn by the renderer [s]
-
-
-def observation_space(config: EnvConfig) -> spaces.Box:
-    """Box (n_followers * len(FEATURES),) float32: follower 1's features, then follower 2's, ..."""
-    n = config.platoon.n_followers
-    return spaces.Box(np.tile(OBSERVATION_LOW, n), np.tile(OBSERVATION_HIGH, n), dtype=np.float32)
-
-
-def action_space(config: EnvConfig) -> spaces.Space:
-    """Discrete(L) for one platoon-wide setting, MultiDiscrete([L] * N) for one setting per follower."""
-    levels = len(config.time_gap_levels)
-    if config.action_mode == "platoon":
-        return spaces.Discrete(levels)
-    return spaces.MultiDiscrete([levels] * config.platoon.n_followers)
 
 
 class TimeGapMonitorEnv(gym.Env):
@@ -45,10 +32,10 @@ class TimeGapMonitorEnv(gym.Env):
 
     ## Action Space
 
-    An index into ``time_gap_levels`` (default 0.6, 0.8, ..., 2.2 s).
+    An index into ``setting_levels`` (default 0.6, 0.8, ..., 2.2 s).
     ``action_mode="platoon"``: ``Discrete(L)``, one setting for every follower;
     ``action_mode="per_vehicle"``: ``MultiDiscrete([L] * N)``. A new setting is
-    ramped by the controller (``platoon.time_gap_ramp_rate``) and re-centres that
+    ramped by the controller (``platoon.setting_ramp_rate``) and re-centres that
     follower's prior and chart. An action outside the space raises ``ValueError``.
 
     ## Observation Space
@@ -68,30 +55,16 @@ class TimeGapMonitorEnv(gym.Env):
     | 7   | speed            | own speed / 40 m/s                                         | 0   | 1   |
     | 8   | v2v              | 1 in CACC (V2V on), 0 in ACC                                | 0   | 1   |
 
-    Values are clipped to these bounds.
+    Values are clipped to these bounds; ``timegap_env.envs.observation`` encodes them
+    and ``decode_observation`` reads them back.
 
     ## Rewards
 
-    A weighted sum (``reward_weights``) of terms, each <= 0 and near -1 at its
-    worst, all returned in ``info["rewards"]``:
-
-    - ``tracking`` (1.0): mean |estimate - tau*| / (L sigma): keep the actual gap at its setting;
-    - ``alarms`` (1.0): share of follower-ticks in alarm;
-    - ``safety`` (2.0): max(0, 1 - TTC / 4 s) at the step's worst moment, mean over followers;
-    - ``collision`` (1000): on the step a collision ends the episode;
-    - ``comfort`` (0.05): mean (jerk / 2 m/s^3)^2;
-    - ``efficiency`` (1.0): 1 - capacity(tau*) / capacity(smallest level): a smaller setting moves more vehicles per hour;
-    - ``preference`` (0.5): |tau* - preferred setting| / ladder span: the driver chose 1.6 s;
-    - ``switching`` (0.2): share of followers whose setting changed.
-
-    Rationale: a collision costs more than four whole episodes of everything else
-    (each term is at most about -1 per step over 250 steps), so no efficiency gain
-    pays for one, and ending an episode early never pays; efficiency and preference
-    pull in opposite directions, so neither the smallest nor the largest setting
-    wins; tracking and alarms make the monitor's view matter; switching and
-    comfort keep the policy from chattering. Measured on 30 episodes of the default
-    mix (``tests/test_env.py``): always 0.6 s and always 2.2 s both score below a
-    policy that keeps 1.0 s while V2V is up and 1.6 s (string stable in ACC) without it.
+    A weighted sum of named terms, each <= 0 and about -1 at its worst, all returned in
+    ``info["rewards"]``: ``tracking``, ``alarms``, ``safety``, ``collision``, ``comfort``,
+    ``efficiency``, ``preference`` and ``switching``. Their formulas and the reasons for the
+    default weights are in :mod:`timegap_env.envs.reward`; the weights are
+    ``config["reward_weights"]`` (:class:`timegap_env.config.RewardWeights`).
 
     ## Starting State
 
@@ -99,7 +72,7 @@ class TimeGapMonitorEnv(gym.Env):
     sinusoid, hard braking, stochastic human driving, 250 s in 20-80 mph), a V2V
     outage (probability 0.5: by default every follower falls back to ACC for 20-80 s)
     and a sensor dropout rate (0-5 %), all from the env's seed. The followers start in equilibrium
-    at the preferred setting. ``reset(options={"scenario": name})`` picks a family
+    at ``platoon.initial_setting`` (1.6 s). ``reset(options={"scenario": name})`` picks a family
     (see ``timegap_env.SCENARIOS``, e.g. ``"ngsim_in_band"``, ``"idm"``);
     ``reset(options={"leader_speed": array})`` runs your own leader speed series
     [m/s at 10 Hz].
@@ -107,15 +80,15 @@ class TimeGapMonitorEnv(gym.Env):
     ## Episode End
 
     Terminated when a follower's gap reaches 0 (collision). Truncated when the
-    leader profile or ``episode_duration`` (250 s = 250 steps) runs out.
+    leader profile or ``episode_duration`` (default 250 s = 250 steps) runs out; the env
+    truncates itself, so a longer ``episode_duration`` needs nothing else.
 
     ## Arguments
 
     ``gym.make("TimeGapMonitor-v0", config={...}, render_mode=None | "rgb_array" | "human")``;
     ``config`` overrides :class:`timegap_env.config.EnvConfig` (units in its comments), nested
     configs as dicts, e.g. ``{"action_mode": "per_vehicle", "platoon": {"n_followers": 3}}``.
-    Unknown keys and bad values raise ``ValueError``. A longer ``episode_duration`` needs
-    ``gym.make(..., max_episode_steps=...)`` too.
+    Unknown keys and bad values raise ``ValueError``.
 
     ## Version History
 
@@ -131,7 +104,7 @@ class TimeGapMonitorEnv(gym.Env):
         self.render_mode = render_mode
         self.task = PlatoonTask(self.config, n_envs=1)
         if render_mode is not None:
-            self.task.trace = []
+            self.task.start_trace()
         self.observation_space = observation_space(self.config)
         self.action_space = action_space(self.config)
         self._renderer = None
@@ -167,34 +140,11 @@ class TimeGapMonitorEnv(gym.Env):
         if self.render_mode is None:
             gym.logger.warn("render() called without a render_mode; pass render_mode='rgb_array' or 'human'")
             return None
-        from timegap_env.rendering import PlatoonRenderer, RenderFrame
+        from timegap_env.envs.rendering import PlatoonRenderer
 
         if self._renderer is None:
             self._renderer = PlatoonRenderer(self.config.platoon.n_followers, time_window=RENDER_HISTORY)
-        platoon, chart = self.task.loop.platoon, self.task.loop.chart
-        now = self.task.loop.ticks[0] * self.config.platoon.dt
-        n = self.config.platoon.n_followers
-        recent = [entry for entry in self.task.trace if entry[0] >= now - RENDER_HISTORY]
-        estimates = np.array([estimate for _, estimate, _ in recent]).reshape(-1, n)
-        centers = np.array([center for _, _, center in recent]).reshape(-1, n)
-        half_width = self.config.chart.limit_width * self.config.chart.baseline_std
-        frame = RenderFrame(
-            t=now,
-            x=platoon.x[0].copy(),
-            v=platoon.v[0].copy(),
-            vehicle_length=self.config.platoon.vehicle_length,
-            history_t=np.array([t for t, _, _ in recent]),
-            estimate_history=estimates,
-            lcl=chart.center[0] - half_width,
-            ucl=chart.center[0] + half_width,
-            setting=chart.center[0].copy(),
-            alarm=chart.alarm[0].copy(),
-            v2v=platoon.v2v[0].copy(),
-            collided=platoon.collided[0].copy(),
-            lcl_history=centers - half_width,
-            ucl_history=centers + half_width,
-            setting_history=centers,
-        )
+        frame = self.task.render_frame(history=RENDER_HISTORY)
         if self.render_mode == "human":
             self._renderer.show(frame)
             return None

@@ -41,15 +41,15 @@ def transfer_gain(
     k_v: float,
     k_a: float,
     k_f: float,
-    time_gap: float,
+    setting: float,
     lag: float,
     gain: float,
     delay: float,
 ) -> np.ndarray:
-    """|G(jw)| at each ``frequency`` w [rad/s]; ``time_gap`` tau* [s], ``lag`` T [s], ``gain`` K, ``delay`` theta [s]."""
+    """|G(jw)| at each ``frequency`` w [rad/s]; ``setting`` tau* [s], ``lag`` T [s], ``gain`` K, ``delay`` theta [s]."""
     s = 1j * np.asarray(frequency, dtype=float)
     numerator = gain * (k_f * s**2 * np.exp(-delay * s) + k_v * s + k_s)
-    denominator = lag * s**3 + (1 - gain * k_a) * s**2 + gain * (k_v + k_s * time_gap) * s + gain * k_s
+    denominator = lag * s**3 + (1 - gain * k_a) * s**2 + gain * (k_v + k_s * setting) * s + gain * k_s
     return np.abs(numerator / denominator)
 
 
@@ -59,7 +59,7 @@ def string_stability(
     k_v: float,
     k_a: float,
     k_f: float,
-    time_gap: float,
+    setting: float,
     lag: float,
     gain: float,
     delay: float,
@@ -68,17 +68,17 @@ def string_stability(
 
     ``k_f = 0`` is ACC (no V2V); the other arguments are as in :func:`transfer_gain`.
     """
-    for name, value in (("time_gap", time_gap), ("lag", lag), ("gain", gain)):
+    for name, value in (("setting", setting), ("lag", lag), ("gain", gain)):
         if not np.isfinite(value) or value <= 0:
             raise ValueError(f"{name} = {value!r}: must be finite and > 0")
     if not np.isfinite(delay) or delay < 0:
         raise ValueError(f"delay = {delay!r}: must be finite and >= 0")
     gains = transfer_gain(
-        FREQUENCY_GRID, k_s=k_s, k_v=k_v, k_a=k_a, k_f=k_f, time_gap=time_gap, lag=lag, gain=gain, delay=delay
+        FREQUENCY_GRID, k_s=k_s, k_v=k_v, k_a=k_a, k_f=k_f, setting=setting, lag=lag, gain=gain, delay=delay
     )
     peak = int(np.argmax(gains))
     damping = 1 - gain * k_a
-    velocity_term = gain * (k_v + k_s * time_gap)
+    velocity_term = gain * (k_v + k_s * setting)
     locally_stable = bool(
         damping > 0 and gain * k_s > 0 and velocity_term > 0 and damping * velocity_term > lag * gain * k_s
     )
@@ -90,9 +90,10 @@ def string_stability(
     )
 
 
-def platoon_string_stability(config: PlatoonConfig, *, time_gap: float | None = None, v2v: bool | None = None) -> list[StabilityReport]:
-    """One :class:`StabilityReport` per follower of ``config`` (its own T and K), at ``time_gap`` [s] and V2V state."""
-    time_gap = config.time_gap if time_gap is None else time_gap
+def platoon_string_stability(config: PlatoonConfig, *, setting: float | None = None, v2v: bool | None = None) -> list[StabilityReport]:
+    """One :class:`StabilityReport` per follower of ``config`` (its own T and K), at ``setting`` tau* [s]
+    (default ``config.initial_setting``) and V2V state."""
+    setting = config.initial_setting if setting is None else setting
     v2v = config.v2v if v2v is None else v2v
     return [
         string_stability(
@@ -100,7 +101,7 @@ def platoon_string_stability(config: PlatoonConfig, *, time_gap: float | None = 
             k_v=config.k_v,
             k_a=config.k_a,
             k_f=config.k_f if v2v else 0.0,
-            time_gap=time_gap,
+            setting=setting,
             lag=float(lag),
             gain=float(gain),
             delay=config.v2v_delay,

@@ -3,7 +3,7 @@
 The scene is a straight single-lane highway-env road with two vehicles:
 
 - ahead, a scripted *disturbance* vehicle whose speed follows a given
-  :class:`~timegap_env.leaders.LeaderProfile` exactly (a braking event, a
+  :class:`~timegap_env.leaders.profile.LeaderProfile` exactly (a braking event, a
   synthetic family, recorded data);
 - behind it, a :class:`highway_env.vehicle.behavior.IDMVehicle`, the human
   driver, with lane changes off.
@@ -33,7 +33,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from timegap_env.config import HumanLeaderConfig
-from timegap_env.leaders import LeaderProfile
+from timegap_env.leaders.profile import LeaderProfile
 
 if TYPE_CHECKING:  # highway-env takes about a second to import: only when an IDM leader is built
     from highway_env.road.road import Road

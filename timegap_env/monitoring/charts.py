@@ -8,13 +8,17 @@ and keeps, per vehicle:
   ticks on one side, so it counts once however long it lasts; jumping straight from above
   the upper limit to below the lower one starts a new excursion;
 - ``exceedances_in_window``: excursions started within the trailing ``exceedance_window``
-  seconds, this tick included (a ring buffer of start flags, O(1) per tick);
+  seconds, this tick included (a ring buffer of start ticks, O(1) per tick);
 - ``run_length``: ticks since the last alarm tick (0 on an alarm tick) or since the chart was
   last (re)started [ticks].
 
+The centre line is the setting tau*: while a new setting ramps in, the line (and the limits)
+follow the applied setting tick by tick.
+
 Charts: :class:`ShewhartChart` (the paper's), and the two standard SPC alternatives on the same
-estimate, :class:`EwmaChart` and :class:`CusumChart`. :func:`switch_rule` is the paper's rule
-(3 exceedances within 35 s -> switch to 1.0 s) as a pure function of a chart's state.
+estimate, :class:`EwmaChart` and :class:`CusumChart`, registered by kind in :data:`CHARTS`.
+:func:`switch_rule` is the paper's rule (3 exceedances within 35 s -> switch to 1.0 s) as a pure
+function of the exceedance count and the setting, for the charts and the policies alike.
 
 Caveat: at 10 Hz the estimate is a sliding-window posterior mean, strongly autocorrelated
 from tick to tick (consecutive windows share all but one measurement), and the chart's
@@ -26,24 +30,23 @@ by simulation if false-alarm rates matter.
 
 from __future__ import annotations
 
-import dataclasses
+from typing import NamedTuple
 
 import numba
 import numpy as np
 from numpy.typing import ArrayLike
 
-from timegap_env.config import ChartConfig
-from timegap_env.monitor import batch_array, batch_shape, env_mask, time_gap_array, vehicle_mask
+from timegap_env.config import CHART_KINDS, ChartConfig
+from timegap_env.monitoring.batch import batch_array, batch_shape, check_finite, env_mask, setting_array, vehicle_mask
 
 __all__ = [
     "ChartState", "ControlChart", "ShewhartChart", "EwmaChart", "CusumChart", "CHARTS", "make_chart", "switch_rule",
 ]
 
 
-@dataclasses.dataclass(frozen=True)
-class ChartState:
-    """A chart after a tick: copies of its arrays, each (n_envs, n_vehicles); from
-    :meth:`ControlChart.update_block`, one per tick, each (n_ticks, n_envs, n_vehicles)."""
+class ChartState(NamedTuple):
+    """A chart after a tick, arrays (n_envs, n_vehicles); from :meth:`ControlChart.update_block`,
+    one per tick, arrays (n_ticks, n_envs, n_vehicles)."""
 
     center: np.ndarray  # tau* the chart is centred on [s]
     alarm: np.ndarray  # charted statistic outside its limits now [bool]
@@ -54,36 +57,62 @@ class ChartState:
 
     def tick(self, k: int) -> ChartState:
         """The state after tick ``k`` of a block (views into this one)."""
-        return ChartState(*(getattr(self, field.name)[k] for field in dataclasses.fields(self)))
+        return ChartState(*(field[k] for field in self))
+
+
+class ChartMemory(NamedTuple):
+    """What every chart carries from tick to tick besides its statistic, arrays (n_envs, n_vehicles) unless noted."""
+
+    side: np.ndarray  # int8, the charted side after the last tick [-]
+    exceedance: np.ndarray  # an excursion started at the last tick [bool]
+    exceedances_in_window: np.ndarray  # int64 [-]
+    run_length: np.ndarray  # int64 [ticks]
+    hold_off: np.ndarray  # int64 ticks left in which alarms are held off [ticks]
+    starts: np.ndarray  # (window ticks, n_envs, n_vehicles) int64 ring: chart tick of an excursion start, -1 none
+    restarted: np.ndarray  # int64 chart tick of each vehicle's last (re)start; older starts do not count
 
 
 class ControlChart:
     """What every chart shares: excursions, their windowed count, run length, re-centring.
 
-    A subclass defines ``_sides(estimates, centers)``: update its statistic through a block of
-    ticks and say on which side of its limits it lies after each (-1, 0, +1); ``_restart(mask)``:
-    restart its statistic for those vehicles; and, if it has a statistic, ``_allocate()`` to
-    create it.
+    A subclass names its ``kind`` (its key in :data:`CHARTS`) and defines
+    ``_sides(estimates, centers)``: update its statistic through a block of ticks and say on which
+    side of its limits it lies after each (-1, 0, +1); ``_restart(mask)``: restart its statistic
+    for those vehicles; and, if it has a statistic, ``_allocate()`` to create it.
+
+    Public state, arrays (n_envs, n_vehicles): ``center`` [s], ``side``, ``alarm``,
+    ``exceedance``, ``exceedances_in_window``, ``run_length`` [ticks], ``hold_off`` [ticks].
     """
 
+    kind = ""
+
     def __init__(
-        self, n_envs: int, n_vehicles: int, time_gap: ArrayLike, config: ChartConfig = ChartConfig()
+        self, n_envs: int, n_vehicles: int, center: ArrayLike, config: ChartConfig = ChartConfig()
     ) -> None:
         self.config = config
         self.shape = batch_shape(n_envs, n_vehicles)
         self.center = np.empty(self.shape)  # tau* [s]
-        self.side = np.zeros(self.shape, dtype=np.int8)
-        self.exceedance = np.zeros(self.shape, dtype=bool)
-        self.exceedances_in_window = np.zeros(self.shape, dtype=np.int64)
-        self.run_length = np.zeros(self.shape, dtype=np.int64)  # [ticks]
-        self.hold_off = np.zeros(self.shape, dtype=np.int64)  # ticks left in which alarms are held off [ticks]
-        # Ring of excursion starts over the trailing window: the chart tick of a start, -1 for none. A start
-        # counts only if it is no older than the vehicle's last (re)start, so re-centring never clears the ring.
-        self._starts = np.full((config.exceedance_window_ticks,) + self.shape, -1, dtype=np.int64)
-        self._restarted = np.zeros(self.shape, dtype=np.int64)  # chart tick of each vehicle's last (re)start
+        # A start counts only if it is no older than the vehicle's last (re)start, so re-centring never clears the ring.
+        self._memory = ChartMemory(
+            side=np.zeros(self.shape, dtype=np.int8),
+            exceedance=np.zeros(self.shape, dtype=bool),
+            exceedances_in_window=np.zeros(self.shape, dtype=np.int64),
+            run_length=np.zeros(self.shape, dtype=np.int64),
+            hold_off=np.zeros(self.shape, dtype=np.int64),
+            starts=np.full((config.exceedance_window_ticks,) + self.shape, -1, dtype=np.int64),
+            restarted=np.zeros(self.shape, dtype=np.int64),
+        )
         self._tick = 0  # ticks charted so far; this tick's ring slot is _tick % window
         self._allocate()
-        self.reset(None, time_gap)
+        self.reset(None, center)
+
+    side = property(lambda self: self._memory.side, doc="-1 below, +1 above the limits, 0 inside (n_envs, n_vehicles).")
+    exceedance = property(lambda self: self._memory.exceedance, doc="An excursion started at the last tick.")
+    exceedances_in_window = property(
+        lambda self: self._memory.exceedances_in_window, doc="Excursions started within the trailing window [-]."
+    )
+    run_length = property(lambda self: self._memory.run_length, doc="Ticks since the last alarm or (re)start.")
+    hold_off = property(lambda self: self._memory.hold_off, doc="Ticks left in which alarms are held off.")
 
     @property
     def alarm(self) -> np.ndarray:
@@ -105,9 +134,8 @@ class ControlChart:
     def update(self, tau_estimate: ArrayLike) -> ChartState:
         """Chart one tick's estimate of tau (n_envs, n_vehicles) [s]; return the new state."""
         estimate = batch_array("tau_estimate", tau_estimate, self.shape)
-        _check_finite("tau_estimate", estimate)
-        block = self._update_block(estimate[None], self.center[None])
-        return block.tick(0)
+        check_finite("tau_estimate", estimate)
+        return self.update_block(estimate[None], self.center[None]).tick(0)
 
     def update_block(self, tau_estimates: ArrayLike, centers: ArrayLike) -> ChartState:
         """Chart n_ticks estimates of tau (n_ticks, n_envs, n_vehicles) [s], tick k against centre line
@@ -116,42 +144,34 @@ class ControlChart:
         estimates = np.asarray(tau_estimates, dtype=float)
         if estimates.ndim != 3 or estimates.shape[1:] != self.shape or not len(estimates):
             raise ValueError(f"tau_estimates has shape {estimates.shape}: expected (n_ticks >= 1, *{self.shape})")
-        _check_finite("tau_estimates", estimates)
+        check_finite("tau_estimates", estimates)
         centers = np.asarray(centers, dtype=float)
         if centers.shape != estimates.shape:
             raise ValueError(f"centers has shape {centers.shape}: expected {estimates.shape} like tau_estimates")
-        _check_finite("centers", centers)
-        return self._update_block(estimates, centers)
-
-    def _update_block(self, estimates: np.ndarray, centers: np.ndarray) -> ChartState:
+        check_finite("centers", centers)
         sides = self._sides(estimates, centers).astype(np.int8, copy=False)
         flags, counts = np.empty((2, *sides.shape), dtype=bool), np.empty((2, *sides.shape), dtype=np.int64)
         block = ChartState(center=centers, alarm=flags[0], side=sides, exceedance=flags[1],
                            exceedances_in_window=counts[0], run_length=counts[1])
-        _excursions_kernel(
-            self.hold_off, self.side, self.exceedance, self.exceedances_in_window, self.run_length,
-            self._starts, self._restarted, self._tick,
-            block.side, block.alarm, block.exceedance, block.exceedances_in_window, block.run_length,
-        )
+        _count_excursions(self._memory, self._tick, block)
         self._tick += len(sides)
         self.center = centers[-1].copy()
         return block
 
-    def recenter(self, time_gap: ArrayLike, mask: ArrayLike | None = None) -> None:
-        """Centre the chart on a new tau* ``time_gap`` [s] for the vehicles in ``mask``.
+    def recenter(self, center: ArrayLike, mask: ArrayLike | None = None) -> None:
+        """Centre the chart on a new tau* ``center`` [s] for the vehicles in ``mask``.
 
         ``mask``: bool, broadcastable to (n_envs, n_vehicles), None = all. Their excursion
         history is cleared (it was measured against the old limits), their statistic restarts
         and ``run_length`` restarts at 0.
         """
-        self._recenter(time_gap_array(time_gap, self.shape), vehicle_mask(mask, self.shape))
-
-    def _recenter(self, tau: np.ndarray, vehicles: np.ndarray) -> None:
-        """:meth:`recenter` with ``tau`` and ``vehicles`` already checked and broadcast."""
-        np.copyto(self.center, tau, where=vehicles)
-        for state in (self.side, self.exceedance, self.exceedances_in_window, self.run_length, self.hold_off):
+        center, vehicles = setting_array(center, self.shape), vehicle_mask(mask, self.shape)
+        memory = self._memory
+        np.copyto(self.center, center, where=vehicles)
+        for state in (memory.side, memory.exceedance, memory.exceedances_in_window, memory.run_length,
+                      memory.hold_off):
             np.copyto(state, 0, where=vehicles, casting="unsafe")  # 0, False
-        np.copyto(self._restarted, self._tick, where=vehicles)  # their earlier starts no longer count
+        np.copyto(memory.restarted, self._tick, where=vehicles)  # their earlier starts no longer count
         self._restart(vehicles)
 
     def hold(self, ticks: ArrayLike, mask: ArrayLike | None = None) -> None:
@@ -161,12 +181,12 @@ class ControlChart:
         new centre line; alarms in that time would only report the change itself.
         The statistic keeps updating meanwhile.
         """
-        np.copyto(self.hold_off, np.asarray(ticks, dtype=np.int64), where=vehicle_mask(mask, self.shape))
+        np.copyto(self._memory.hold_off, np.asarray(ticks, dtype=np.int64), where=vehicle_mask(mask, self.shape))
 
-    def reset(self, mask: ArrayLike | None, time_gap: ArrayLike) -> None:
-        """Restart the envs in ``mask`` ((n_envs,) bool, None = all), centred on ``time_gap`` [s]."""
+    def reset(self, mask: ArrayLike | None, center: ArrayLike) -> None:
+        """Restart the envs in ``mask`` ((n_envs,) bool, None = all), centred on ``center`` [s]."""
         vehicles = np.broadcast_to(env_mask(mask, self.shape[0])[:, None], self.shape)
-        self.recenter(time_gap, vehicles)
+        self.recenter(center, vehicles)
 
     def _allocate(self) -> None:
         """Create the chart's own statistic arrays (none by default)."""
@@ -176,13 +196,6 @@ class ControlChart:
 
     def _restart(self, mask: np.ndarray) -> None:
         raise NotImplementedError
-
-
-def _check_finite(name: str, values: np.ndarray) -> None:
-    """ValueError naming the first non-finite value; called every tick, so it searches only when there is one."""
-    if not np.isfinite(values).all():
-        index = tuple(int(i) for i in np.argwhere(~np.isfinite(values))[0])
-        raise ValueError(f"{name}{list(index)} = {values[index]}: must be finite [s]")
 
 
 @numba.vectorize(["int8(float64, float64, float64)"], cache=True)
@@ -196,6 +209,8 @@ class ShewhartChart(ControlChart):
 
     Paper: N(1.6, 0.125), L = 2 -> LCL / CL / UCL = 1.35 / 1.6 / 1.85 s; at tau* = 1.0: 0.75 / 1.0 / 1.25 s.
     """
+
+    kind = "shewhart"
 
     @property
     def lcl(self) -> np.ndarray:
@@ -221,6 +236,8 @@ class EwmaChart(ControlChart):
     Asymptotic limits tau* -/+ width sigma_desired sqrt(lambda / (2 - lambda))
     (defaults lambda = 0.2, width = 3). Note that x_t is already a smoothed estimate.
     """
+
+    kind = "ewma"
 
     def _allocate(self) -> None:
         self.ewma = np.zeros(self.shape)  # z [s]
@@ -259,6 +276,8 @@ class CusumChart(ControlChart):
     alarm: a sustained shift stays one contiguous excursion until the sums fall back below h.
     """
 
+    kind = "cusum"
+
     def _allocate(self) -> None:
         self.upper_sum = np.zeros(self.shape)  # C+ [sigma_desired]
         self.lower_sum = np.zeros(self.shape)  # C- [sigma_desired]
@@ -280,50 +299,53 @@ class CusumChart(ControlChart):
 
 
 @numba.njit(cache=True)
-def _excursions_kernel(  # noqa: ANN202, PLR0913 -- the kernel takes the chart's arrays one by one
-    hold_off, side, exceedance, exceedances_in_window, run_length, starts, restarted, first_tick,
-    sides, out_alarm, out_exceedance, out_in_window, out_run_length,
-):
-    """What every chart does with its statistic's sides (n_ticks, n_envs, n_vehicles), tick by tick, in place.
+def _count_excursions(memory, first_tick, block):  # noqa: ANN001, ANN202
+    """What every chart does with its statistic's sides, tick by tick, in place.
 
-    ``sides`` comes in as the statistic's side and leaves as the charted side (0 while alarms
-    are held off). Chart tick t uses ring slot t % window; the start it overwrites leaves the
-    window, and counts down only if it was recorded since the vehicle's last restart.
+    ``block`` (:class:`ChartState` of (n_ticks, n_envs, n_vehicles) arrays) comes in with the
+    statistic's sides in ``block.side``; they leave as the charted sides (0 while alarms are held
+    off) and the rest of ``block`` is filled; ``memory`` (:class:`ChartMemory`) carries on. Chart
+    tick t uses ring slot t % window; the start it overwrites leaves the window, and counts down
+    only if it was recorded since the vehicle's last restart.
     """
-    n_ticks, n_envs, n_vehicles = sides.shape
-    ring_length = starts.shape[0]
+    side, hold_off, in_window, run_length = memory.side, memory.hold_off, memory.exceedances_in_window, memory.run_length
+    n_ticks, n_envs, n_vehicles = block.side.shape
+    ring_length = memory.starts.shape[0]
     for k in range(n_ticks):
         tick = first_tick + k
         slot = tick % ring_length
         for e in range(n_envs):
             for i in range(n_vehicles):
-                now = sides[k, e, i] if hold_off[e, i] == 0 else 0
+                now = block.side[k, e, i] if hold_off[e, i] == 0 else 0
                 hold_off[e, i] = max(hold_off[e, i] - 1, 0)
                 started = now != 0 and now != side[e, i]  # a new excursion
-                side[e, i], exceedance[e, i] = now, started
-                leaving = starts[slot, e, i] >= restarted[e, i]  # -1 (no start) never counts
-                exceedances_in_window[e, i] += int(started) - int(leaving)
-                starts[slot, e, i] = tick if started else -1
+                side[e, i], memory.exceedance[e, i] = now, started
+                leaving = memory.starts[slot, e, i] >= memory.restarted[e, i]  # -1 (no start) never counts
+                in_window[e, i] += int(started) - int(leaving)
+                memory.starts[slot, e, i] = tick if started else -1
                 run_length[e, i] = 0 if now != 0 else run_length[e, i] + 1
-                sides[k, e, i], out_alarm[k, e, i], out_exceedance[k, e, i] = now, now != 0, started
-                out_in_window[k, e, i], out_run_length[k, e, i] = exceedances_in_window[e, i], run_length[e, i]
+                block.side[k, e, i], block.alarm[k, e, i], block.exceedance[k, e, i] = now, now != 0, started
+                block.exceedances_in_window[k, e, i], block.run_length[k, e, i] = in_window[e, i], run_length[e, i]
 
 
-CHARTS: dict[str, type[ControlChart]] = {"shewhart": ShewhartChart, "ewma": EwmaChart, "cusum": CusumChart}
+CHARTS: dict[str, type[ControlChart]] = {chart.kind: chart for chart in (ShewhartChart, EwmaChart, CusumChart)}
+if tuple(CHARTS) != CHART_KINDS:  # the config validates ChartConfig.kind against CHART_KINDS
+    raise ImportError(f"charts {tuple(CHARTS)} differ from timegap_env.config.CHART_KINDS {CHART_KINDS}")
 
 
-def make_chart(n_envs: int, n_vehicles: int, time_gap: ArrayLike, config: ChartConfig = ChartConfig()) -> ControlChart:
-    """The chart named by ``config.kind``."""
-    return CHARTS[config.kind](n_envs, n_vehicles, time_gap, config)
+def make_chart(n_envs: int, n_vehicles: int, center: ArrayLike, config: ChartConfig = ChartConfig()) -> ControlChart:
+    """The chart of kind ``config.kind``, centred on ``center`` [s]."""
+    return CHARTS[config.kind](n_envs, n_vehicles, center, config)
 
 
-def switch_rule(state: ChartState, config: ChartConfig = ChartConfig()) -> np.ndarray:
+def switch_rule(exceedances_in_window: ArrayLike, setting: ArrayLike, config: ChartConfig = ChartConfig()) -> np.ndarray:
     """The paper's rule: which vehicles should switch their setting to ``config.switch_to``.
 
-    True (n_envs, n_vehicles) where at least ``config.switch_exceedances`` excursions started
-    within the trailing ``config.exceedance_window`` (paper: 3 within 35 s) and the chart is not
-    already centred on ``switch_to``. Pure: the caller applies the switch (tau* <- switch_to)
-    and re-centres the monitor and the chart, which clears the count.
+    True where at least ``config.switch_exceedances`` excursions started within the trailing
+    ``config.exceedance_window`` (paper: 3 within 35 s) and the ``setting`` [s] (a chart's centre
+    line, or a policy's reading of the setting) is not ``switch_to`` already; arrays of one shape.
+    Pure: the caller applies the switch (tau* <- switch_to) and re-centres the monitor and the
+    chart, which clears the count.
     """
-    enough = state.exceedances_in_window >= config.switch_exceedances
-    return enough & ~np.isclose(state.center, config.switch_to)
+    enough = np.asarray(exceedances_in_window) >= config.switch_exceedances
+    return enough & ~np.isclose(setting, config.switch_to)

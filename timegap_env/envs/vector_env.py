@@ -16,12 +16,13 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from timegap_env.config import EnvConfig
-from timegap_env.env import TimeGapMonitorEnv, action_space, observation_space
-from timegap_env.task import PlatoonTask
+from timegap_env.envs.action import action_space
+from timegap_env.envs.observation import observation_space
+from timegap_env.envs.task import PlatoonTask
 
 
 class TimeGapMonitorVectorEnv(VectorEnv):
-    """``num_envs`` copies of :class:`TimeGapMonitorEnv` in one batched task.
+    """``num_envs`` copies of :class:`~timegap_env.envs.env.TimeGapMonitorEnv` in one batched task.
 
     When a sub-env's episode ends, it is reset in the same step: the returned
     observation is the new episode's, the last one is in ``infos["final_obs"]``
@@ -99,4 +100,4 @@ class TimeGapMonitorVectorEnv(VectorEnv):
         return infos
 
 
-__all__ = ["TimeGapMonitorVectorEnv", "TimeGapMonitorEnv"]
+__all__ = ["TimeGapMonitorVectorEnv"]

@@ -1,0 +1,129 @@
+"""What each env's episode is made of, drawn at reset from the env's own generator.
+
+An episode is a leader speed profile (a family drawn from ``EnvConfig.scenario_weights``, a
+named scenario, or the user's own speed series), a V2V outage (some followers fall back from
+CACC to ACC for a while), a sensor dropout rate and a sensor-noise key. The draws use the
+generator in a fixed order, so an env seeded alike draws alike whether it runs alone or in a
+batch.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+
+from timegap_env.config import EnvConfig
+from timegap_env.leaders.profile import LeaderProfile
+from timegap_env.leaders.scenarios import SCENARIOS, make_leader
+
+RESET_OPTIONS = ("leader_speed", "scenario")  # the keys reset(options=...) takes
+
+
+def check_reset_options(options: Mapping[str, Any] | None) -> dict[str, Any]:
+    """``options`` as a dict; ``ValueError`` naming any unknown key."""
+    options = dict(options or {})
+    unknown = sorted(set(options) - set(RESET_OPTIONS))
+    if unknown:
+        raise ValueError(f"reset options {unknown} unknown; known: {list(RESET_OPTIONS)}")
+    return options
+
+
+class Episodes:
+    """The current episode of each of ``n_envs`` envs.
+
+    Per env: ``leader_speed`` [m/s] and ``leader_accel`` [m/s^2] (n_envs, max_ticks + 1), the
+    leader at every tick, held at its last value beyond the profile; ``episode_ticks`` (n_envs,)
+    ticks in the episode; ``v2v_loss_start`` / ``v2v_loss_end`` (n_envs, n_followers), the first
+    tick without V2V and the first with it again (equal: no outage); ``dropout_probability``
+    (n_envs,) [-]; ``noise_keys`` (n_envs,) uint64; ``scenario`` (n_envs,), the leader's name.
+    """
+
+    def __init__(self, config: EnvConfig, n_envs: int) -> None:
+        unknown = sorted(set(config.scenario_weights) - set(SCENARIOS))
+        if unknown:
+            raise ValueError(f"EnvConfig.scenario_weights has unknown families {unknown}; known: {sorted(SCENARIOS)}")
+        self.config = config
+        self.ticks_per_decision = config.ticks_per_decision
+        n_followers = config.platoon.n_followers
+        max_ticks = config.max_episode_steps * self.ticks_per_decision
+        self.leader_speed = np.zeros((n_envs, max_ticks + 1))  # [m/s]
+        self.leader_accel = np.zeros((n_envs, max_ticks + 1))  # [m/s^2]
+        self.episode_ticks = np.full(n_envs, max_ticks)
+        self.v2v_loss_start = np.zeros((n_envs, n_followers), dtype=np.int64)
+        self.v2v_loss_end = np.zeros((n_envs, n_followers), dtype=np.int64)
+        self.dropout_probability = np.zeros(n_envs)
+        self.noise_keys = np.zeros(n_envs, dtype=np.uint64)
+        self.scenario = np.full(n_envs, "", dtype=object)
+        families = list(config.scenario_weights)
+        weights = np.array([config.scenario_weights[f] for f in families], dtype=float)
+        self._families, self._family_probabilities = families, weights / weights.sum()
+
+    def draw(self, env: int, rng: np.random.Generator, options: Mapping[str, Any]) -> None:
+        """A new episode for ``env`` from ``rng``; ``options`` as checked by :func:`check_reset_options`.
+
+        ``{"scenario": name}`` picks a scenario; ``{"leader_speed": array}`` runs the user's leader
+        speed series [m/s] at ``platoon.dt`` (truncated to the episode, padded to whole decisions by
+        holding its last speed).
+        """
+        cfg = self.config
+        if "leader_speed" in options:
+            profile = LeaderProfile.from_speed(np.asarray(options["leader_speed"], dtype=float), cfg.platoon.dt, "user")
+        else:
+            family = options.get("scenario") or self._families[rng.choice(len(self._families), p=self._family_probabilities)]
+            profile = make_leader(family, int(rng.integers(2**31)), cfg.leader)
+            if not math.isclose(profile.dt, cfg.platoon.dt, rel_tol=1e-9):
+                raise ValueError(f"scenario {family!r} has dt = {profile.dt} s; the env runs at {cfg.platoon.dt} s")
+        self._load_leader(env, profile)
+        self._draw_v2v_loss(env, rng)
+        self.dropout_probability[env] = rng.uniform(*cfg.dropout_probability_range)
+        self.noise_keys[env] = rng.integers(0, 2**63, dtype=np.uint64)
+
+    def _load_leader(self, env: int, profile: LeaderProfile) -> None:
+        """Put ``profile`` in env's leader buffer, cut to the episode and padded to whole decisions."""
+        tpd, capacity = self.ticks_per_decision, self.leader_speed.shape[1] - 1
+        ticks = min(profile.speed.size - 1, capacity)
+        ticks = -(-ticks // tpd) * tpd  # up to whole decisions
+        n = min(profile.speed.size, ticks + 1)
+        self.leader_speed[env, :n] = profile.speed[:n]
+        self.leader_speed[env, n:] = profile.speed[n - 1]
+        self.leader_accel[env, :n] = profile.accel[:n]
+        self.leader_accel[env, n:] = 0.0
+        self.episode_ticks[env] = ticks
+        self.scenario[env] = profile.name
+
+    def _draw_v2v_loss(self, env: int, rng: np.random.Generator) -> None:
+        """V2V loss for some followers, with ``v2v_loss_probability``."""
+        cfg = self.config
+        self.v2v_loss_start[env] = self.v2v_loss_end[env] = 0
+        if rng.random() < cfg.v2v_loss_probability:
+            n_followers = cfg.platoon.n_followers
+            losing = rng.random(n_followers) < cfg.v2v_loss_follower_probability
+            losing[rng.integers(n_followers)] = True  # at least one follower
+            duration = int(round(rng.uniform(*cfg.v2v_loss_duration_range) / cfg.platoon.dt))
+            start = int(rng.integers(0, max(self.episode_ticks[env] - duration, 0) + 1))
+            self.v2v_loss_start[env, losing] = start
+            self.v2v_loss_end[env, losing] = start + duration
+
+    def leader_at(self, ticks: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The leader's speed [m/s] and acceleration [m/s^2] at ``ticks`` (n_ticks, n_envs), held after the episode."""
+        ticks = np.minimum(ticks, self.episode_ticks)
+        envs = np.arange(ticks.shape[-1])
+        return self.leader_speed[envs, ticks], self.leader_accel[envs, ticks]
+
+    def v2v_at(self, ticks: np.ndarray) -> np.ndarray:
+        """CACC status of every follower at ``ticks``, (..., n_envs) -> (..., n_envs, n_followers)."""
+        ticks = ticks[..., None]
+        return ~((ticks >= self.v2v_loss_start) & (ticks < self.v2v_loss_end))
+
+    def fingerprint(self, env: int) -> str:
+        """A hash of everything ``env``'s episode drew: leader, outage, dropout rate and noise key."""
+        digest = hashlib.sha256()
+        ticks = int(self.episode_ticks[env])
+        for array in (self.leader_speed[env, : ticks + 1], self.episode_ticks[env], self.v2v_loss_start[env],
+                      self.v2v_loss_end[env], self.dropout_probability[env], self.noise_keys[env]):
+            digest.update(np.ascontiguousarray(array).tobytes())
+        return digest.hexdigest()

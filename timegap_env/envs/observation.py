@@ -1,0 +1,147 @@
+"""The agent's view: what each follower's monitor, chart and own car show, scaled to [-1, 1] or [0, 1].
+
+:func:`observe` encodes the features below for every follower of every env (a compiled kernel
+over the named :class:`FollowerState`); :func:`decode_observation` undoes the scaling for the
+hand-written policies, so the scaling is written once, here.
+
+The observation holds only what a car knows: its monitor's posterior and chart, its own
+setting and speed, and its V2V link flag; nothing of the true state.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numba
+import numpy as np
+from gymnasium import spaces
+
+from timegap_env.config import EnvConfig
+from timegap_env.monitoring.posterior import outside_probability
+
+FEATURES = (
+    "deviation",  # (posterior mean of tau - tau*) / DEVIATION_SCALE, clipped to [-1, 1]
+    "estimate_std",  # posterior std of tau / (L sigma_desired), clipped to [0, 1]
+    "prob_outside",  # posterior probability that tau lies outside [LCL, UCL]
+    "alarm",  # 1 while the chart is in alarm
+    "exceedances",  # exceedances within the chart's trailing window / (2 switch_exceedances), clipped to [0, 1]
+    "time_since_alarm",  # time since the last alarm / exceedance_window, clipped to [0, 1]
+    "setting",  # (tau* - smallest level) / (largest level - smallest level)
+    "speed",  # own speed / SPEED_SCALE, clipped to [0, 1]
+    "v2v",  # 1 in CACC (V2V on), 0 in ACC
+)
+DEVIATION_SCALE = 1.0  # [s]
+SPEED_SCALE = 40.0  # [m/s], above the 80 mph band
+OBSERVATION_LOW = np.array([-1, 0, 0, 0, 0, 0, 0, 0, 0], dtype=np.float32)
+OBSERVATION_HIGH = np.ones(len(FEATURES), dtype=np.float32)
+LADDER_TOLERANCE = 1e-3  # a decoded setting farther than this from every level means a config mismatch [s]
+
+
+def observation_space(config: EnvConfig) -> spaces.Box:
+    """Box (n_followers * len(FEATURES),) float32: follower 1's features, then follower 2's, ..."""
+    n = config.platoon.n_followers
+    return spaces.Box(np.tile(OBSERVATION_LOW, n), np.tile(OBSERVATION_HIGH, n), dtype=np.float32)
+
+
+class FollowerState(NamedTuple):
+    """What the observation reads, arrays (n_envs, n_followers)."""
+
+    tau_mean: np.ndarray  # posterior mean of tau [s]
+    tau_var: np.ndarray  # posterior variance of tau [s^2]
+    center: np.ndarray  # the chart's centre line, the applied setting [s]
+    side: np.ndarray  # the chart's side: -1, 0, +1 [-]
+    exceedances_in_window: np.ndarray  # the chart's count [-]
+    run_length: np.ndarray  # ticks since the last alarm [ticks]
+    setting: np.ndarray  # the setting asked for [s]
+    speed: np.ndarray  # own speed [m/s]
+    v2v: np.ndarray  # CACC on [bool]
+
+
+class ObservationScales(NamedTuple):
+    """The config's numbers that scale the features."""
+
+    half_width: float  # L sigma_desired, from the centre line to a limit [s]
+    exceedance_scale: float  # 2 switch_exceedances [-]
+    dt: float  # tick [s]
+    exceedance_window: float  # [s]
+    smallest_level: float  # [s]
+    level_span: float  # largest level - smallest level [s]
+
+    @classmethod
+    def from_config(cls, config: EnvConfig) -> ObservationScales:
+        levels = config.setting_levels
+        return cls(
+            half_width=config.chart.limit_width * config.chart.baseline_std,
+            exceedance_scale=2 * config.chart.switch_exceedances,
+            dt=config.platoon.dt,
+            exceedance_window=config.chart.exceedance_window,
+            smallest_level=levels[0],
+            level_span=levels[-1] - levels[0],
+        )
+
+
+def observe(state: FollowerState, scales: ObservationScales) -> np.ndarray:
+    """Observations (n_envs, n_followers, len(FEATURES)) float32, the features in FEATURES order."""
+    features = np.empty((*state.setting.shape, len(FEATURES)), dtype=np.float32)
+    _encode(state, scales, features)
+    return features
+
+
+@numba.njit(cache=True)
+def _encode(state, scales, out):  # noqa: ANN001, ANN202
+    """Fill ``out`` (n_envs, n_followers, len(FEATURES)) float32 with the features of ``state``
+    (:class:`FollowerState`), in FEATURES order, clipped to [OBSERVATION_LOW, OBSERVATION_HIGH]."""
+    n_envs, n_followers, n_features = out.shape
+    for e in range(n_envs):
+        for f in range(n_followers):
+            mean, variance, line = state.tau_mean[e, f], state.tau_var[e, f], state.center[e, f]
+            out[e, f, 0] = (mean - line) / DEVIATION_SCALE
+            out[e, f, 1] = math.sqrt(variance) / scales.half_width
+            out[e, f, 2] = outside_probability(mean, variance, line - scales.half_width, line + scales.half_width)
+            out[e, f, 3] = state.side[e, f] != 0
+            out[e, f, 4] = state.exceedances_in_window[e, f] / scales.exceedance_scale
+            out[e, f, 5] = state.run_length[e, f] * scales.dt / scales.exceedance_window
+            out[e, f, 6] = (state.setting[e, f] - scales.smallest_level) / scales.level_span
+            out[e, f, 7] = state.speed[e, f] / SPEED_SCALE
+            out[e, f, 8] = state.v2v[e, f]
+            for i in range(n_features):
+                out[e, f, i] = min(max(out[e, f, i], OBSERVATION_LOW[i]), OBSERVATION_HIGH[i])
+
+
+class FollowerView(NamedTuple):
+    """What :func:`decode_observation` reads back from a batch of observations, arrays (n_envs, n_followers)."""
+
+    exceedances: np.ndarray  # exceedances in the chart's trailing window, exact up to 2 switch_exceedances [-]
+    setting_index: np.ndarray  # index of the setting tau* in setting_levels [-]
+    setting: np.ndarray  # the setting tau* itself, a level [s]
+    v2v: np.ndarray  # follower in CACC (V2V on) [bool]
+
+
+def decode_observation(observation: np.ndarray, config: EnvConfig) -> FollowerView:
+    """Undo the scaling of :func:`observe` for (n_envs, n_followers * len(FEATURES)) observations.
+
+    - ``exceedances`` = count / (2 k), k = ``config.chart.switch_exceedances``, clipped to [0, 1]:
+      count = round(feature * 2 k), exact for counts up to 2 k (larger counts read as 2 k);
+    - ``setting`` = (tau* - smallest level) / (largest - smallest level): tau* is the setting last
+      asked for (not the ramped value the controller applies yet), mapped to its ladder index;
+    - ``v2v`` is 1 in CACC, 0 in ACC.
+    """
+    n_followers, n_features = config.platoon.n_followers, len(FEATURES)
+    features = observation.reshape(observation.shape[0], n_followers, n_features)
+    counts = np.rint(features[..., FEATURES.index("exceedances")] * 2 * config.chart.switch_exceedances)
+    levels = np.asarray(config.setting_levels)
+    setting = levels[0] + features[..., FEATURES.index("setting")] * (levels[-1] - levels[0])  # [s]
+    distance = np.abs(setting[..., None] - levels)
+    index = distance.argmin(axis=-1)
+    if np.any(np.take_along_axis(distance, index[..., None], axis=-1) > LADDER_TOLERANCE):
+        raise ValueError(
+            f"observation feature 'setting' decodes to {setting.ravel()[:5]} s, not on setting_levels "
+            f"{config.setting_levels}: was the policy built with the env's config?"
+        )
+    return FollowerView(
+        exceedances=counts.astype(np.int64),
+        setting_index=index.astype(np.int64),
+        setting=levels[index],
+        v2v=features[..., FEATURES.index("v2v")] > 0.5,
+    )

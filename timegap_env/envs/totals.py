@@ -1,0 +1,99 @@
+"""What an episode adds up, step by step, and the episode summary made of it (``info["episode_summary"]``)."""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numba
+import numpy as np
+
+from timegap_env.config import EnvConfig
+from timegap_env.envs.reward import FollowerReadouts, StepTicks
+
+
+class EpisodeTotals(NamedTuple):
+    """Sums (and extremes) over the steps of each env's episode so far, arrays (n_envs,)."""
+
+    steps: np.ndarray  # [-]
+    alarm_ticks: np.ndarray  # follower-ticks in alarm [-]
+    exceedances: np.ndarray  # excursion starts, all followers [-]
+    max_deviation: np.ndarray  # largest abs(estimate - tau*) [s]
+    jerk_squared: np.ndarray  # per step: sum over ticks of jerk^2, mean over followers [m^2/s^6]
+    switches: np.ndarray  # follower setting changes [-]
+    setting: np.ndarray  # per step: mean setting over followers [s]
+    capacity: np.ndarray  # per step: mean capacity implied by the settings at the speeds driven [veh/h]
+    collision: np.ndarray  # 1 once a collision happened [-]
+    min_ttc: np.ndarray  # smallest time-to-collision [s]
+
+    @classmethod
+    def zeros(cls, n_envs: int) -> EpisodeTotals:
+        """Totals of no step: zeros, and an infinite min TTC."""
+        totals = cls(*np.zeros((len(cls._fields), n_envs)))
+        totals.min_ttc[:] = np.inf
+        return totals
+
+    def restart(self, mask: np.ndarray) -> None:
+        """Back to no step for the envs in ``mask`` (n_envs,) bool."""
+        for name, total in zip(self._fields, self):
+            total[mask] = np.inf if name == "min_ttc" else 0.0
+
+    def add_step(
+        self,
+        step: StepTicks,
+        readouts: FollowerReadouts,
+        setting: np.ndarray,
+        changed: np.ndarray,
+        gap_per_vehicle: float,
+    ) -> None:
+        """Add a step; ``setting`` [s] and ``changed`` (n_envs, n_followers) are the settings at its end and which
+        changed at its start, ``gap_per_vehicle`` [m] the standstill spacing plus a vehicle length."""
+        _add_step(self, step, readouts, setting, changed, gap_per_vehicle)
+
+    def summary(self, config: EnvConfig) -> dict[str, np.ndarray]:
+        """Episode statistics so far under ``config``, each (n_envs,)."""
+        steps = np.maximum(self.steps, 1)
+        return {
+            "time_out_of_control": self.alarm_ticks * config.platoon.dt / config.platoon.n_followers,  # per follower [s]
+            "exceedances": self.exceedances.copy(),  # all followers [-]
+            "max_deviation": self.max_deviation.copy(),  # largest |estimate - tau*| [s]
+            "min_ttc": self.min_ttc.copy(),  # [s]
+            "rms_jerk": np.sqrt(self.jerk_squared / steps),  # [m/s^3]
+            "switches": self.switches.copy(),  # follower setting changes [-]
+            "mean_setting": self.setting / steps,  # [s]
+            "mean_capacity": self.capacity / steps,  # implied by the settings at the speeds driven [veh/h]
+            "collision": self.collision.astype(bool),
+            "duration": self.steps * config.decision_interval,  # [s]
+        }
+
+
+@numba.njit(cache=True)
+def _add_step(totals, step, readouts, setting, changed, gap_per_vehicle):  # noqa: ANN001, ANN202
+    n_ticks, n_envs, n_followers = step.tau_mean.shape
+    for e in range(n_envs):
+        max_deviation = alarm_ticks = exceedances = 0.0
+        collided = False
+        for k in range(n_ticks):
+            for f in range(n_followers):
+                max_deviation = max(max_deviation, abs(step.tau_mean[k, e, f] - step.center[k, e, f]))
+                alarm_ticks += step.alarm[k, e, f]
+                exceedances += step.exceedance[k, e, f]
+                collided = collided or step.collisions[k, e, f]
+        jerk_squared = switches = setting_sum = capacity = 0.0
+        min_ttc = np.inf
+        for f in range(n_followers):
+            v = step.speed[-1, e, f]  # the speed at the end of the step [m/s]
+            jerk_squared += readouts.jerk_squared[e, f]
+            switches += changed[e, f]
+            setting_sum += setting[e, f]
+            capacity += 3600.0 * v / (v * setting[e, f] + gap_per_vehicle)  # [veh/h] at the current speed
+            min_ttc = min(min_ttc, readouts.min_ttc[e, f])
+        totals.steps[e] += 1
+        totals.alarm_ticks[e] += alarm_ticks
+        totals.exceedances[e] += exceedances
+        totals.max_deviation[e] = max(totals.max_deviation[e], max_deviation)
+        totals.jerk_squared[e] += jerk_squared / n_followers
+        totals.switches[e] += switches
+        totals.setting[e] += setting_sum / n_followers
+        totals.capacity[e] += capacity / n_followers
+        totals.collision[e] = max(totals.collision[e], 1.0 if collided else 0.0)
+        totals.min_ttc[e] = min(totals.min_ttc[e], min_ttc)

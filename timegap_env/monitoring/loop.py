@@ -1,0 +1,128 @@
+"""The monitored platoon: simulator -> sensors -> Bayesian monitor -> control chart.
+
+This is the loop of the paper and of the environment, for ``n_envs`` platoons at
+once, a tick (:meth:`MonitoredPlatoon.tick`) or a block of ticks
+(:meth:`MonitoredPlatoon.run`, what an env step uses) at a time, with the same
+result. Changing a follower's time gap setting ramps it in the simulator and
+re-centres that follower's prior and chart on the new setting.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+from timegap_env.config import ChartConfig, MonitorConfig, PlatoonConfig, SensorConfig
+from timegap_env.monitoring.charts import ChartState, make_chart
+from timegap_env.monitoring.monitor import TimeGapMonitor
+from timegap_env.monitoring.sensors import Readings, Sensors
+from timegap_env.sim.platoon import Platoon, PlatoonTicks, per_env
+
+SAME_SETTING = 1e-6  # settings closer than this are the same setting [s]
+
+
+class MonitoredTicks(NamedTuple):
+    """A block of ticks of :meth:`MonitoredPlatoon.run`, arrays (n_ticks, n_envs, n_followers)."""
+
+    physics: PlatoonTicks  # the simulator's state after each tick
+    readings: Readings  # what the sensors measured, NaN = dropout
+    tau_mean: np.ndarray  # posterior mean of tau [s]
+    chart: ChartState  # the chart after each tick
+
+
+class MonitoredPlatoon:
+    """``n_envs`` platoons, each follower with its own sensors, monitor and chart.
+
+    Attributes: ``platoon`` (:class:`~timegap_env.sim.platoon.Platoon`), ``sensors``
+    (:class:`~timegap_env.monitoring.sensors.Sensors`), ``monitor``
+    (:class:`~timegap_env.monitoring.monitor.TimeGapMonitor`), ``chart`` (a chart from
+    :func:`~timegap_env.monitoring.charts.make_chart`); ``ticks`` (n_envs,) since each env's reset.
+    """
+
+    def __init__(
+        self,
+        platoon: PlatoonConfig = PlatoonConfig(),
+        monitor: MonitorConfig = MonitorConfig(),
+        chart: ChartConfig = ChartConfig(),
+        sensors: SensorConfig = SensorConfig(),
+        n_envs: int = 1,
+        seed: int | None = None,
+    ) -> None:
+        for name, config in (("monitor", monitor), ("chart", chart)):
+            if not np.isclose(config.dt, platoon.dt):
+                raise ValueError(f"{name}.dt = {config.dt}: must equal PlatoonConfig.dt = {platoon.dt}")
+        self.platoon = Platoon(platoon, n_envs)
+        self.sensors = Sensors(sensors, n_envs, seed)
+        self.monitor = TimeGapMonitor(n_envs, platoon.n_followers, platoon.initial_setting, monitor)
+        self.chart = make_chart(n_envs, platoon.n_followers, platoon.initial_setting, chart)
+        self.ticks = np.zeros(n_envs, dtype=np.int64)
+
+    def reset(
+        self,
+        leader_speed: np.ndarray | float,
+        leader_accel: np.ndarray | float = 0.0,
+        mask: np.ndarray | None = None,
+        setting: np.ndarray | float | None = None,
+        noise_key: np.ndarray | None = None,
+    ) -> None:
+        """Equilibrium platoons for the envs in ``mask`` (None = all) at ``setting`` [s] (default the
+        config's initial setting), monitors and charts centred on it.
+
+        ``noise_key`` (n_envs,) uint64, optional: new sensor-noise keys for the envs in ``mask``.
+        """
+        env_mask = np.ones(self.platoon.n_envs, dtype=bool) if mask is None else np.asarray(mask, dtype=bool)
+        self.platoon.reset(leader_speed, leader_accel, mask=env_mask, setting=setting)
+        self.ticks[env_mask] = 0
+        if noise_key is not None:
+            self.sensors.keys[env_mask] = np.asarray(noise_key, dtype=np.uint64)[env_mask]
+        self.monitor.reset(env_mask, self.platoon.setting)
+        self.chart.reset(env_mask, self.platoon.setting)
+
+    def change_setting(self, setting: np.ndarray | float, mask: np.ndarray | None = None) -> np.ndarray:
+        """Ask for a new setting [s] (broadcast to (n_envs, n_followers)) where ``mask``; return who changed.
+
+        Only a real change moves anything: the simulator ramps to it, and that
+        follower's prior and chart are re-centred on it (the chart's history is
+        cleared; its centre line then follows the ramp, see :meth:`run`). The
+        chart holds its alarms off until the ramp is done plus ``settle_time``.
+        """
+        platoon = self.platoon
+        setting = np.asarray(setting, dtype=float)
+        if setting.shape != platoon.setting.shape:
+            setting = np.broadcast_to(setting, platoon.setting.shape)
+        changed = ~(np.abs(setting - platoon.setting) <= SAME_SETTING)  # NaN counts as a change, refused below
+        if mask is not None:
+            changed &= mask
+        if changed.any():
+            platoon.request_setting(setting, mask=changed)  # checks the settings
+            self.monitor.recenter(setting, changed)
+            self.chart.recenter(platoon.applied_setting, changed)
+            settle_ticks = round(self.chart.config.settle_time / platoon.config.dt)
+            self.chart.hold(platoon.ramp_ticks(setting) + settle_ticks, changed)
+        return changed
+
+    def tick(self, leader_speed: np.ndarray | float, leader_accel: np.ndarray | float) -> tuple[np.ndarray, ChartState]:
+        """One tick to a leader at ``leader_speed`` [m/s] with ``leader_accel`` [m/s^2] (scalars or (n_envs,)).
+
+        Returns the followers that collided this tick (n_envs, n_followers) and the charts' state.
+        """
+        n_envs = self.platoon.n_envs
+        speed, accel = per_env("leader_speed", leader_speed, n_envs), per_env("leader_accel", leader_accel, n_envs)
+        block = self.run(speed[None], accel[None])
+        return block.physics.collisions[0], block.chart.tick(0)
+
+    def run(self, leader_speed: np.ndarray, leader_accel: np.ndarray, v2v: np.ndarray | None = None) -> MonitoredTicks:
+        """A block of ticks: move the platoons, measure, update monitors and charts.
+
+        ``leader_speed`` [m/s], ``leader_accel`` [m/s^2]: (n_ticks, n_envs), the leader at the end of each
+        tick; ``v2v`` (n_ticks, n_envs, n_followers), optional: CACC status during each tick (see
+        :meth:`~timegap_env.sim.platoon.Platoon.advance`). Each stage takes the whole block at once,
+        with the same result as tick by tick. The chart's limits follow the applied (ramping) setting.
+        """
+        physics = self.platoon.advance(leader_speed, leader_accel, v2v)
+        readings = self.sensors.measure(Readings(physics.spacing, physics.speed), self.ticks)
+        self.ticks += len(physics.spacing)
+        tau_mean = self.monitor.update_block(readings.speed, readings.spacing).tau_mean
+        chart = self.chart.update_block(tau_mean, physics.applied_setting)
+        return MonitoredTicks(physics, readings, tau_mean, chart)

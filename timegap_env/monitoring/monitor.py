@@ -1,0 +1,297 @@
+"""The Bayesian monitor of every follower's actual time gap: the paper's Proposition, streamed.
+
+:class:`TimeGapMonitor` keeps the sufficient statistics (:class:`~timegap_env.monitoring.posterior.WindowSums`)
+of a sliding window of measurements for every vehicle of every env and turns them into the
+posterior of [s0, tau] with :func:`~timegap_env.monitoring.posterior.posterior_moments`, the
+Proposition of :mod:`timegap_env.monitoring.posterior`. The prior mean of tau is each vehicle's
+time gap setting; :meth:`TimeGapMonitor.recenter` moves it when the setting changes.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numba
+import numpy as np
+from numpy.typing import ArrayLike
+
+from timegap_env.config import MonitorConfig
+from timegap_env.monitoring.batch import batch_array, batch_shape, env_mask, setting_array, vehicle_mask
+from timegap_env.monitoring.posterior import Moments, Prior, WindowSums, outside_probability, posterior_moments
+
+__all__ = ["MonitorTicks", "TimeGapMonitor"]
+
+N_SUMS = len(WindowSums._fields)  # channels of the window sums: n, sum V, sum V^2, sum S, sum V S
+
+
+class MonitorTicks(NamedTuple):
+    """What :meth:`TimeGapMonitor.update_block` returns, arrays (n_ticks, n_envs, n_vehicles)."""
+
+    used: np.ndarray  # the measurement was used (else skipped) [bool]
+    tau_mean: np.ndarray  # posterior mean of tau after the tick [s]
+
+
+class WindowMemory(NamedTuple):
+    """What the monitor carries from tick to tick; sums have a leading axis of N_SUMS channels."""
+
+    slots: np.ndarray  # (W + 1, N_SUMS, n_envs, n_vehicles) ring of per-tick sums, slot W stays zero (drift guard)
+    block_sum: np.ndarray  # (N_SUMS, n_envs, n_vehicles) forgetting-weighted sum of the current block
+    window_sums: np.ndarray  # (N_SUMS, n_envs, n_vehicles) forgetting-weighted sum of the window
+    skipped: np.ndarray  # (n_envs, n_vehicles) int64 measurements skipped since reset [-]
+    prior_tau: np.ndarray  # (n_envs, n_vehicles) prior mean of tau, the setting tau* [s]
+
+
+class WindowRule(NamedTuple):
+    """How measurements are screened, weighted and turned into the posterior; from :class:`MonitorConfig`."""
+
+    max_speed: float  # speeds above this are skipped [m/s]
+    max_spacing: float  # spacings above this are skipped [m]
+    forgetting: float  # exponential forgetting factor per tick [-]
+    suffix_weight: np.ndarray  # (W,) weight of suffix slot p + 1 seen from slot p [-]
+    age_weight: np.ndarray  # (W,) weight of slot m when its block is full [-]
+    prior: Prior  # the prior of [s0, tau] but tau's mean, and the noise variance
+
+
+class TimeGapMonitor:
+    """Streaming posterior of [s0, tau] for every vehicle of every env, O(1) work per measurement.
+
+    Arrays are shaped (n_envs, n_vehicles); one tick (``config.dt``) brings one measurement
+    per vehicle. :meth:`update` takes one tick, :meth:`update_block` several at once, every
+    vehicle and env in one compiled pass; the result does not depend on how the ticks are
+    grouped. Read-outs (after the last tick): ``mean`` (..., 2) and ``cov``
+    (..., 2, 2) of [s0, tau], ``tau_mean``, ``tau_std``, :meth:`prob_outside`, ``skipped``,
+    ``n_measurements``, ``ztz``, ``zts``.
+
+    Forgetting. With all data since t = 0 the estimate would freeze, so old data are
+    forgotten by a sliding window of the last ``config.window`` seconds (W ticks), by an
+    exponential factor ``config.forgetting`` per tick (a measurement a ticks old has
+    weight forgetting^a), or both; ``window=None, forgetting=1`` keeps everything.
+
+    Skipped measurements. A NaN, infinite, negative or implausibly large speed or spacing
+    (``config.max_speed``, ``config.max_spacing``) is skipped for that vehicle only and
+    counted in ``skipped``. No data are added, so nothing NaN ever comes out; but the tick
+    still passes: it occupies a window slot as an empty measurement and ages the data by one
+    tick, so the window always spans W seconds of time. With a window (or forgetting) the
+    posterior therefore drifts back towards the prior during a long dropout: no recent
+    evidence, no confident estimate. Without either, a skipped tick leaves it unchanged.
+
+    Drift guard. The window sums are never updated by subtracting the outgoing measurement
+    (which would accumulate round-off over a long run). The ring buffer is filled in blocks of
+    W ticks: slots 0..p hold this block's per-tick stats, and their running sum is kept;
+    slots p+1..W-1 hold the previous block as suffix sums (slot k = the total of that block's
+    slots k..W-1). The window total is then the running sum plus one suffix slot: only
+    additions of at most 2W terms, so the error is bounded and does not grow with time. When
+    a block is full it is turned into suffix sums in place: O(W) work every W ticks,
+    amortised O(1) per tick. A block of ticks makes the same additions in the same order as
+    tick by tick.
+    """
+
+    def __init__(
+        self, n_envs: int, n_vehicles: int, setting: ArrayLike, config: MonitorConfig = MonitorConfig()
+    ) -> None:
+        self.config = config
+        self.shape = batch_shape(n_envs, n_vehicles)
+        sums_shape = (N_SUMS,) + self.shape
+        W, decay = config.window_ticks or 0, config.forgetting  # W = 0: no window
+        self._memory = WindowMemory(
+            slots=np.zeros((W + 1,) + sums_shape),
+            block_sum=np.zeros(sums_shape),
+            window_sums=np.zeros(sums_shape),
+            skipped=np.zeros(self.shape, dtype=np.int64),
+            prior_tau=np.empty(self.shape),
+        )
+        self._rule = WindowRule(
+            max_speed=config.max_speed,
+            max_spacing=config.max_spacing,
+            forgetting=config.forgetting,
+            suffix_weight=decay ** np.arange(1, W + 1),
+            age_weight=decay ** np.arange(W - 1, -1, -1.0),
+            prior=Prior.from_cov(config.prior_standstill_spacing, config.prior_cov, config.noise_variance),
+        )
+        self._slot = 0 if W else -1  # slot of the next measurement, p; -1: no window
+        self._moments: Moments | None = None  # the posterior after the last tick; None: recompute when read
+        self.reset(None, setting)
+
+    # ---- streaming ------------------------------------------------------------------------
+
+    def update(self, speed: ArrayLike, spacing: ArrayLike) -> np.ndarray:
+        """Add one tick of measurements, speed [m/s] and spacing [m], each (n_envs, n_vehicles).
+
+        Returns the boolean mask (n_envs, n_vehicles) of the measurements used; the others
+        were skipped (see the class docstring).
+        """
+        speed = batch_array("speed", speed, self.shape)
+        spacing = batch_array("spacing", spacing, self.shape)
+        return self.update_block(speed[None], spacing[None]).used[0]
+
+    def update_block(self, speed: ArrayLike, spacing: ArrayLike) -> MonitorTicks:
+        """Add n_ticks ticks of measurements, speed [m/s] and spacing [m], each (n_ticks, n_envs, n_vehicles)."""
+        speed, spacing = np.ascontiguousarray(speed, dtype=float), np.ascontiguousarray(spacing, dtype=float)
+        if speed.ndim != 3 or speed.shape[1:] != self.shape or spacing.shape != speed.shape or not len(speed):
+            raise ValueError(
+                f"speed, spacing have shapes {speed.shape}, {spacing.shape}: expected (n_ticks >= 1, *{self.shape})"
+            )
+        ticks = MonitorTicks(used=np.empty(speed.shape, dtype=bool), tau_mean=np.empty(speed.shape))
+        moments = Moments(*np.empty((len(Moments._fields),) + self.shape))  # the posterior after the last tick
+        self._slot = _update_kernel(speed, spacing, self._memory, self._slot, self._rule, ticks, moments)
+        self._moments = moments
+        return ticks
+
+    # ---- changes of setting ------------------------------------------------------------------
+
+    def reset(self, mask: ArrayLike | None, setting: ArrayLike) -> None:
+        """Start the envs in ``mask`` ((n_envs,) bool, None = all) afresh.
+
+        Their prior mean of tau becomes ``setting`` [s] (broadcastable to (n_envs, n_vehicles)),
+        their window is emptied and their ``skipped`` counters are zeroed.
+        """
+        vehicles = np.broadcast_to(env_mask(mask, self.shape[0])[:, None], self.shape)
+        self._memory.skipped[vehicles] = 0
+        self.recenter(setting, vehicles)
+
+    def recenter(self, setting: ArrayLike, mask: ArrayLike | None = None) -> None:
+        """The setting tau* changed to ``setting`` [s] for the vehicles in ``mask``.
+
+        ``mask``: bool, broadcastable to (n_envs, n_vehicles), None = all. The prior mean of
+        tau moves to the new tau* (paper: 1.6 -> 1.0) and the window's data of those vehicles
+        are cleared, so their posterior restarts from the prior. Why clear: the model treats
+        [s0, tau] as the coefficients of one setting; measurements taken under the old
+        setting describe the old coefficients. Kept, they would pull the estimate towards the
+        old tau for a whole window, and the chart, re-centred on the new tau*, would read that
+        stale estimate as excursions (e.g. 1.6 s against limits 0.75-1.25 s) and count them
+        towards the next switch. ``skipped`` is sensor health and is kept.
+        """
+        setting, vehicles = setting_array(setting, self.shape), vehicle_mask(mask, self.shape)
+        memory = self._memory
+        np.copyto(memory.prior_tau, setting, where=vehicles)
+        for sums in (memory.block_sum, memory.window_sums, memory.slots):  # (..., n_envs, n_vehicles)
+            np.copyto(sums, 0.0, where=vehicles)
+        self._moments = None  # the prior, recomputed when first read
+
+    def _latest(self) -> Moments:
+        """The posterior after the last tick (or change of setting)."""
+        if self._moments is None:
+            memory = self._memory
+            self._moments = posterior_moments(WindowSums(*memory.window_sums), memory.prior_tau, self._rule.prior)
+        return self._moments
+
+    # ---- read-outs ----------------------------------------------------------------------------
+
+    @property
+    def mean(self) -> np.ndarray:
+        """Posterior mean of [s0 [m], tau [s]] (n_envs, n_vehicles, 2)."""
+        return self._latest().mean()
+
+    @property
+    def cov(self) -> np.ndarray:
+        """Posterior covariance of [s0, tau] (n_envs, n_vehicles, 2, 2), symmetric positive definite."""
+        return self._latest().cov()
+
+    @property
+    def prior_mean(self) -> np.ndarray:
+        """Prior mean of [s0 [m], tau [s]] (n_envs, n_vehicles, 2); tau's is the setting tau*."""
+        return np.stack([np.full(self.shape, self.config.prior_standstill_spacing), self._memory.prior_tau], axis=-1)
+
+    @property
+    def skipped(self) -> np.ndarray:
+        """Measurements skipped since reset (n_envs, n_vehicles) [-] (the monitor's own array: read, do not write)."""
+        return self._memory.skipped
+
+    @property
+    def tau_mean(self) -> np.ndarray:
+        """Posterior mean of tau (n_envs, n_vehicles) [s]."""
+        return self._latest().mean_tau.copy()
+
+    @property
+    def moments(self) -> Moments:
+        """The posterior after the last tick, channel by channel (the monitor's own arrays: read, do not write)."""
+        return self._latest()
+
+    @property
+    def tau_std(self) -> np.ndarray:
+        """Posterior standard deviation of tau (n_envs, n_vehicles) [s]."""
+        return np.sqrt(self._latest().var_tau)
+
+    @property
+    def n_measurements(self) -> np.ndarray:
+        """Forgetting-weighted number of measurements in the window (n_envs, n_vehicles) [-]."""
+        return self._memory.window_sums[0].copy()
+
+    @property
+    def ztz(self) -> np.ndarray:
+        """The window's forgetting-weighted Z^T Z (n_envs, n_vehicles, 2, 2)."""
+        n, sum_v, sum_vv = self._memory.window_sums[:3]
+        return np.stack([np.stack([n, sum_v], axis=-1), np.stack([sum_v, sum_vv], axis=-1)], axis=-2)
+
+    @property
+    def zts(self) -> np.ndarray:
+        """The window's forgetting-weighted Z^T S (n_envs, n_vehicles, 2)."""
+        return np.stack([self._memory.window_sums[3], self._memory.window_sums[4]], axis=-1)
+
+    def prob_outside(self, lcl: ArrayLike, ucl: ArrayLike) -> np.ndarray:
+        """Posterior P(tau < lcl or tau > ucl) (n_envs, n_vehicles) under tau's normal marginal.
+
+        lcl, ucl [s]: broadcastable to (n_envs, n_vehicles), lcl <= ucl (infinite limits allowed).
+        """
+        low, high = (np.asarray(limit, dtype=float) for limit in (lcl, ucl))
+        low, high = (limit if limit.shape == self.shape else np.broadcast_to(limit, self.shape) for limit in (low, high))
+        if not (low <= high).all():
+            raise ValueError(f"lcl = {lcl!r}, ucl = {ucl!r}: need lcl <= ucl everywhere")
+        moments = self._latest()
+        return outside_probability(moments.mean_tau, moments.var_tau, low, high)
+
+
+@numba.njit(cache=True)
+def _update_kernel(speed, spacing, memory, slot, rule, out, out_moments):  # noqa: ANN001, ANN202
+    """:meth:`TimeGapMonitor.update_block`, tick by tick and vehicle by vehicle, in place; returns the next slot.
+
+    ``memory`` (:class:`WindowMemory`) is updated under ``rule`` (:class:`WindowRule`); ``out``
+    (:class:`MonitorTicks`) gets each tick's verdict and posterior mean of tau, ``out_moments``
+    (:class:`Moments` of (n_envs, n_vehicles) arrays) the whole posterior after the last tick.
+
+    ``slot = -1`` means no window: the window sums are the block sums, which never close.
+    The additions are those of the class docstring's drift guard, in the same order.
+    """
+    slots, block_sum, window_sums = memory.slots, memory.block_sum, memory.window_sums
+    n_ticks, n_envs, n_vehicles = speed.shape
+    window_ticks = slots.shape[0] - 1
+    x = np.empty(N_SUMS)
+    for k in range(n_ticks):
+        for e in range(n_envs):
+            for i in range(n_vehicles):
+                v, s = speed[k, e, i], spacing[k, e, i]
+                used = 0.0 <= v <= rule.max_speed and 0.0 <= s <= rule.max_spacing  # NaN -> False
+                out.used[k, e, i] = used
+                if not used:
+                    memory.skipped[e, i] += 1
+                    v = s = 0.0
+                x[0], x[1], x[2], x[3], x[4] = (1.0 if used else 0.0), v, v * v, s, v * s
+                for c in range(N_SUMS):
+                    if rule.forgetting < 1.0:
+                        block_sum[c, e, i] *= rule.forgetting
+                    block_sum[c, e, i] += x[c]
+                    if slot < 0:
+                        window_sums[c, e, i] = block_sum[c, e, i]
+                    else:
+                        slots[slot, c, e, i] = x[c]
+                        window_sums[c, e, i] = slots[slot + 1, c, e, i] * rule.suffix_weight[slot] + block_sum[c, e, i]
+                sums = WindowSums(
+                    window_sums[0, e, i], window_sums[1, e, i], window_sums[2, e, i], window_sums[3, e, i],
+                    window_sums[4, e, i],
+                )
+                moments = posterior_moments(sums, memory.prior_tau[e, i], rule.prior)
+                out.tau_mean[k, e, i] = moments.mean_tau
+                if k == n_ticks - 1:
+                    for m in range(len(moments)):
+                        out_moments[m][e, i] = moments[m]
+        if slot < 0:  # no window
+            continue
+        if slot < window_ticks - 1:
+            slot += 1
+        else:  # the block is full: turn it into suffix sums
+            for m in range(window_ticks - 2, -1, -1):
+                slots[m] *= rule.age_weight[m]
+                slots[m] += slots[m + 1]
+            block_sum[:] = 0.0
+            slot = 0
+    return slot

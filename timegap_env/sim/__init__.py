@@ -1,0 +1,13 @@
+"""The simulator: the platoon's physics, its string stability, and whole runs without the env.
+
+- :mod:`~timegap_env.sim.platoon`: :class:`Platoon`, batched GLVD followers under the CTH controller;
+- :mod:`~timegap_env.sim.stability`: the analytic string-stability check;
+- :mod:`~timegap_env.sim.trajectory`: ``simulate(...) -> Trajectory``.
+"""
+
+from timegap_env.sim.platoon import Platoon
+from timegap_env.sim.stability import StabilityReport, platoon_string_stability, string_stability
+from timegap_env.sim.trajectory import Collision, Trajectory, simulate
+
+__all__ = ["Collision", "Platoon", "StabilityReport", "Trajectory", "platoon_string_stability", "simulate",
+           "string_stability"]

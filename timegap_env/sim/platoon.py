@@ -1,0 +1,380 @@
+"""Batched platoon physics: a human leader and automated followers at 10 Hz.
+
+State arrays are shaped (n_envs, n_vehicles) with column 0 the leader, so many
+platoons advance in the same call. Followers obey the generalised
+linear vehicle dynamics (GLVD) T da/dt = -a + K u under the constant time
+headway (CTH) controller
+
+    u = k_s dd + k_v dv + k_a a_i + k_f a_{i-1}(t - theta),
+    dd = s - s0 - tau* v_i,   dv = v_{i-1} - v_i,
+
+with u held over each tick (zero-order hold) and the GLVD integrated exactly
+over the tick, not with Euler. The feed-forward term comes over V2V with a
+delay of ``v2v_delay_ticks`` ticks; a follower without V2V (ACC mode) drops it.
+
+Three time gaps, three names: the **setting** is what was asked for; the
+**applied setting** is the tau* the controller uses, which follows a new setting
+at ``setting_ramp_rate`` (the ramp law, :func:`ramp_toward` and
+:meth:`Platoon.ramp_ticks`); the **actual time gap** (s - s0) / v is what the car
+really keeps (:attr:`Trajectory.actual_time_gap <timegap_env.sim.trajectory.Trajectory.actual_time_gap>`).
+
+The tick loop is a compiled kernel (numba): a tick is a recurrence through the
+feedback, so it cannot be vectorised over time, and as a few dozen NumPy calls
+per tick its cost for small batches was call overhead, not arithmetic.
+:meth:`Platoon.advance` runs a whole block of ticks in one call. The kernel takes
+the named structures below: the state, the block's inputs, the transition
+coefficients, the controller's constants and the arrays it fills.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numba
+import numpy as np
+
+from timegap_env.config import PlatoonConfig
+
+
+class ZOHCoefficients(NamedTuple):
+    """Exact one-tick transition of GLVD under a held command u; arrays broadcast per vehicle.
+
+    With e = exp(-dt/T), over one tick of length dt:
+        a' = e a + (1 - e) K u
+        v' = v + T (1 - e) a + (dt - T (1 - e)) K u
+        x' = x + dt v + T (dt - T (1 - e)) a + (dt^2/2 - T dt + T^2 (1 - e)) K u
+    """
+
+    a_from_a: np.ndarray  # [-]
+    a_from_u: np.ndarray  # [-]
+    v_from_a: np.ndarray  # [s]
+    v_from_u: np.ndarray  # [s]
+    x_from_a: np.ndarray  # [s^2]
+    x_from_u: np.ndarray  # [s^2]
+    dt: float  # [s]
+
+    @classmethod
+    def for_glvd(cls, lag: np.ndarray, gain: np.ndarray, dt: float) -> ZOHCoefficients:
+        """Coefficients for actuation lag ``lag`` [s] and gain ``gain`` [-] over a tick ``dt`` [s]."""
+        lag = np.asarray(lag, dtype=float)
+        gain = np.asarray(gain, dtype=float)
+        decayed = -np.expm1(-dt / lag)  # 1 - e, accurate for small dt/T
+        return cls(
+            a_from_a=1.0 - decayed,
+            a_from_u=decayed * gain,
+            v_from_a=lag * decayed,
+            v_from_u=(dt - lag * decayed) * gain,
+            x_from_a=lag * (dt - lag * decayed),
+            x_from_u=(0.5 * dt**2 - lag * dt + lag**2 * decayed) * gain,
+            dt=dt,
+        )
+
+    def step(
+        self, x: np.ndarray, v: np.ndarray, a: np.ndarray, u: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Position [m], speed [m/s] and acceleration [m/s^2] one tick later under held command u [m/s^2]."""
+        return glvd_tick(x, v, a, u, self)
+
+
+@numba.njit(cache=True)
+def glvd_tick(x, v, a, u, zoh):  # noqa: ANN001, ANN201
+    """The transition of :class:`ZOHCoefficients` ``zoh``, for scalars (inside the kernel) or arrays."""
+    x_next = x + zoh.dt * v + zoh.x_from_a * a + zoh.x_from_u * u
+    v_next = v + zoh.v_from_a * a + zoh.v_from_u * u
+    a_next = zoh.a_from_a * a + zoh.a_from_u * u
+    return x_next, v_next, a_next
+
+
+@numba.njit(cache=True)
+def ramp_toward(applied, setting, max_change):  # noqa: ANN001, ANN201
+    """The applied setting [s] one tick later: it moves towards ``setting`` [s] by at most ``max_change`` [s]."""
+    return applied + min(max(setting - applied, -max_change), max_change)
+
+
+class PlatoonState(NamedTuple):
+    """The state of ``n_envs`` platoons; vehicle arrays (n_envs, 1 + n_followers) with the leader first,
+    follower arrays (n_envs, n_followers)."""
+
+    x: np.ndarray  # front-bumper position [m]
+    v: np.ndarray  # speed [m/s]
+    a: np.ndarray  # acceleration [m/s^2]
+    u: np.ndarray  # last command [m/s^2]; the leader's is its acceleration
+    setting: np.ndarray  # per follower: the time gap setting asked for [s]
+    applied_setting: np.ndarray  # per follower: the tau* the controller uses, ramped towards the setting [s]
+    v2v: np.ndarray  # per follower: CACC on (V2V feed-forward) [bool]
+    collided: np.ndarray  # per follower: gap <= 0 was reached; sticky [bool]
+    predecessor_accel: np.ndarray  # (v2v_delay_ticks + 1, n_envs, n_followers) ring of recent predecessor accelerations [m/s^2]
+
+
+class Controller(NamedTuple):
+    """The CTH controller's constants, from :class:`PlatoonConfig`."""
+
+    dt: float  # tick [s]
+    k_s: float  # [1/s^2]
+    k_v: float  # [1/s]
+    k_a: float  # [-]
+    k_f: float  # [-]
+    accel_min: float  # [m/s^2]
+    accel_max: float  # [m/s^2]
+    standstill_spacing: float  # s0 [m]
+    vehicle_length: float  # [m]
+    max_setting_change: float  # largest change of the applied setting in one tick [s]
+
+    @classmethod
+    def from_config(cls, config: PlatoonConfig) -> Controller:
+        return cls(
+            dt=config.dt, k_s=config.k_s, k_v=config.k_v, k_a=config.k_a, k_f=config.k_f,
+            accel_min=config.accel_min, accel_max=config.accel_max, standstill_spacing=config.standstill_spacing,
+            vehicle_length=config.vehicle_length, max_setting_change=config.setting_ramp_rate * config.dt,
+        )
+
+
+class LeaderTicks(NamedTuple):
+    """What drives a block of ticks: row k is the end of tick k."""
+
+    speed: np.ndarray  # (n_ticks, n_envs) the leader's speed [m/s]
+    accel: np.ndarray  # (n_ticks, n_envs) the leader's acceleration [m/s^2]
+    v2v: np.ndarray  # (n_ticks, n_envs, n_followers) CACC status of each follower during the tick [bool]
+
+
+class PlatoonTicks(NamedTuple):
+    """What :meth:`Platoon.advance` records at the end of each tick, arrays (n_ticks, n_envs, n_followers)."""
+
+    spacing: np.ndarray  # bumper-to-bumper gap to the predecessor [m]
+    speed: np.ndarray  # follower speed [m/s]
+    accel: np.ndarray  # follower acceleration [m/s^2]
+    applied_setting: np.ndarray  # the setting the controller applied during the tick (ramped) [s]
+    collisions: np.ndarray  # gap <= 0 reached for the first time this tick [bool]
+
+    @classmethod
+    def empty(cls, shape: tuple[int, int, int]) -> PlatoonTicks:
+        """Uninitialised arrays of ``shape`` (n_ticks, n_envs, n_followers)."""
+        return cls(*np.empty((4, *shape)), np.empty(shape, dtype=bool))
+
+
+class Platoon:
+    """``n_envs`` platoons of one leader and ``config.n_followers`` followers, stepped together.
+
+    The state is :attr:`state`, a :class:`PlatoonState`; its arrays are also attributes of the
+    platoon (``x``, ``v``, ``a``, ``u``, ``setting``, ``applied_setting``, ``v2v``, ``collided``).
+    ``tick`` counts the ticks since the last reset of every env.
+    """
+
+    def __init__(self, config: PlatoonConfig = PlatoonConfig(), n_envs: int = 1) -> None:
+        if isinstance(n_envs, bool) or not isinstance(n_envs, (int, np.integer)) or n_envs < 1:
+            raise ValueError(f"n_envs = {n_envs!r}: must be an integer >= 1")
+        self.config = config
+        self.n_envs = int(n_envs)
+        self.n_followers = config.n_followers
+        vehicles, followers = (self.n_envs, self.n_followers + 1), (self.n_envs, self.n_followers)
+        self.state = PlatoonState(
+            x=np.zeros(vehicles),
+            v=np.zeros(vehicles),
+            a=np.zeros(vehicles),
+            u=np.zeros(vehicles),
+            setting=np.full(followers, config.initial_setting),
+            applied_setting=np.full(followers, config.initial_setting),
+            v2v=np.full(followers, bool(config.v2v)),
+            collided=np.zeros(followers, dtype=bool),
+            predecessor_accel=np.zeros((config.v2v_delay_ticks + 1, *followers)),
+        )
+        self.tick = 0
+        self.controller = Controller.from_config(config)
+        self.set_dynamics(config.per_follower("actuation_lag"), config.per_follower("actuation_gain"))
+
+    # ----------------------------------------------------------------- state
+    x = property(lambda self: self.state.x, doc="Front-bumper positions (n_envs, n_vehicles) [m].")
+    v = property(lambda self: self.state.v, doc="Speeds (n_envs, n_vehicles) [m/s].")
+    a = property(lambda self: self.state.a, doc="Accelerations (n_envs, n_vehicles) [m/s^2].")
+    u = property(lambda self: self.state.u, doc="Last commands (n_envs, n_vehicles) [m/s^2].")
+    setting = property(lambda self: self.state.setting, doc="Settings asked for (n_envs, n_followers) [s].")
+    applied_setting = property(
+        lambda self: self.state.applied_setting, doc="Settings the controller uses (n_envs, n_followers) [s]."
+    )
+    v2v = property(lambda self: self.state.v2v, doc="CACC on (n_envs, n_followers) [bool].")
+    collided = property(lambda self: self.state.collided, doc="Gap <= 0 was reached (n_envs, n_followers) [bool].")
+
+    @property
+    def spacing(self) -> np.ndarray:
+        """Bumper-to-bumper gap of each follower to its predecessor, (n_envs, n_followers) [m]."""
+        return self.x[:, :-1] - self.x[:, 1:] - self.config.vehicle_length
+
+    # ----------------------------------------------------------------- setup
+    def set_dynamics(self, lag: np.ndarray, gain: np.ndarray) -> None:
+        """Set GLVD lag T [s] and gain K [-], each broadcastable to (n_envs, n_followers)."""
+        follower_shape = (self.n_envs, self.n_followers)
+        for name, values in (("actuation_lag", lag), ("actuation_gain", gain)):
+            values = np.asarray(values, dtype=float)
+            try:
+                np.broadcast_to(values, follower_shape)
+            except ValueError:
+                raise ValueError(f"{name} has shape {values.shape}: must broadcast to {follower_shape}") from None
+            if not np.all(np.isfinite(values)) or np.any(values <= 0):
+                raise ValueError(f"{name} = {values}: every value must be finite and > 0")
+        self._zoh = ZOHCoefficients.for_glvd(
+            np.broadcast_to(lag, follower_shape), np.broadcast_to(gain, follower_shape), self.config.dt
+        )
+
+    def reset(
+        self,
+        leader_speed: np.ndarray | float,
+        leader_accel: np.ndarray | float = 0.0,
+        mask: np.ndarray | None = None,
+        setting: np.ndarray | float | None = None,
+    ) -> None:
+        """Put the platoons in ``mask`` (all if None) in equilibrium behind a leader at ``leader_speed`` [m/s].
+
+        Followers drive at the leader's speed with zero acceleration, each at its
+        desired spacing s0 + tau* v; the leader's front bumper is at x = 0. The
+        setting, applied at once, becomes ``setting`` [s] (default ``config.initial_setting``,
+        broadcast to (n_envs, n_followers)) and V2V returns to ``config.v2v``.
+        """
+        cfg, state = self.config, self.state
+        mask = np.ones(self.n_envs, dtype=bool) if mask is None else np.asarray(mask, dtype=bool)
+        speed = per_env("leader_speed", leader_speed, self.n_envs)[mask]
+        accel = per_env("leader_accel", leader_accel, self.n_envs)[mask]
+        if np.any(speed < 0):
+            raise ValueError(f"leader_speed = {speed}: must be >= 0")
+        n_reset = int(mask.sum())
+        self.request_setting(cfg.initial_setting if setting is None else setting, mask=mask[:, None])
+        state.applied_setting[mask] = state.setting[mask]
+        gaps = cfg.standstill_spacing + state.applied_setting[mask] * speed[:, None]  # (n_reset, n_followers)
+        offsets = np.cumsum(cfg.vehicle_length + gaps, axis=1)
+        state.x[mask, 0] = 0.0
+        state.x[mask, 1:] = -offsets
+        state.v[mask] = speed[:, None]
+        state.a[mask] = 0.0
+        state.a[mask, 0] = accel
+        state.u[mask] = 0.0
+        state.u[mask, 0] = accel
+        state.v2v[mask] = bool(cfg.v2v)
+        state.collided[mask] = False
+        state.predecessor_accel[:, mask] = state.a[mask, :-1]
+        if n_reset == self.n_envs:
+            self.tick = 0
+
+    def request_setting(self, setting: np.ndarray | float, mask: np.ndarray | None = None) -> None:
+        """Ask for a new time gap setting [s] (broadcast to (n_envs, n_followers)); the controller ramps to it."""
+        current = self.state.setting
+        setting = np.asarray(setting, dtype=float)
+        if setting.shape != current.shape:
+            setting = np.broadcast_to(setting, current.shape)
+        if not ((setting > 0) & (setting < np.inf)).all():  # NaN fails both
+            raise ValueError(f"setting = {setting}: every value must be finite and > 0 [s]")
+        np.copyto(current, setting, where=True if mask is None else np.asarray(mask, dtype=bool))
+
+    def ramp_ticks(self, setting: np.ndarray) -> np.ndarray:
+        """Ticks the applied setting needs to reach ``setting`` [s] (n_envs, n_followers) from where it is now."""
+        return np.ceil(np.abs(setting - self.state.applied_setting) / self.controller.max_setting_change)
+
+    def set_v2v(self, enabled: np.ndarray | bool) -> None:
+        """Switch CACC (True) or ACC (False) per follower, broadcast to (n_envs, n_followers)."""
+        self.state.v2v[:] = np.broadcast_to(np.asarray(enabled, dtype=bool), self.state.v2v.shape)
+
+    # ----------------------------------------------------------------- physics
+    def step(self, leader_speed: np.ndarray | float, leader_accel: np.ndarray | float) -> np.ndarray:
+        """Advance one tick to a leader at ``leader_speed`` [m/s] with ``leader_accel`` [m/s^2], each (n_envs,).
+
+        Returns the followers that reached a gap <= 0 during this tick, (n_envs, n_followers) bool.
+        """
+        speed = per_env("leader_speed", leader_speed, self.n_envs)
+        accel = per_env("leader_accel", leader_accel, self.n_envs)
+        return self.advance(speed[None], accel[None]).collisions[0]
+
+    def advance(
+        self, leader_speed: np.ndarray, leader_accel: np.ndarray, v2v: np.ndarray | None = None
+    ) -> PlatoonTicks:
+        """Advance n_ticks ticks; row k of ``leader_speed`` [m/s] and ``leader_accel`` [m/s^2], each (n_ticks, n_envs),
+        is where the leader is at the end of tick k.
+
+        ``v2v`` (n_ticks, n_envs, n_followers) bool, optional: CACC status during each tick
+        (default: keep the current ``v2v``); ``v2v`` is left at its last row.
+        """
+        leader_speed = self._per_tick("leader_speed", leader_speed)
+        n_ticks = leader_speed.shape[0]
+        leader_accel = self._per_tick("leader_accel", leader_accel, n_ticks)
+        follower_shape = (n_ticks, self.n_envs, self.n_followers)
+        if v2v is None:
+            v2v = np.broadcast_to(self.state.v2v, follower_shape)
+        elif np.shape(v2v) != follower_shape:
+            raise ValueError(f"v2v has shape {np.shape(v2v)}: expected {follower_shape} (n_ticks, n_envs, n_followers)")
+        ticks = PlatoonTicks.empty(follower_shape)
+        inputs = LeaderTicks(leader_speed, leader_accel, np.ascontiguousarray(v2v, dtype=bool))
+        _advance(self.state, self.tick, inputs, self._zoh, self.controller, ticks)
+        self.state.v2v[:] = v2v[-1]
+        self.tick += n_ticks
+        return ticks
+
+    def _per_tick(self, name: str, value: np.ndarray, n_ticks: int | None = None) -> np.ndarray:
+        """``value`` as a finite float array of shape (n_ticks, n_envs), n_ticks >= 1 (None: any)."""
+        array = np.ascontiguousarray(value, dtype=float)
+        if array.ndim != 2 or array.shape[1] != self.n_envs or array.shape[0] != (n_ticks or max(array.shape[0], 1)):
+            expected = f"({n_ticks or 'n_ticks >= 1'}, {self.n_envs})"
+            raise ValueError(f"{name} has shape {array.shape}: must be {expected} (n_ticks, n_envs)")
+        if not np.isfinite(array).all():
+            raise ValueError(f"{name} = {array}: must be finite")
+        return array
+
+
+def per_env(name: str, value: np.ndarray | float, n_envs: int) -> np.ndarray:
+    """``value`` as a finite float array of shape (n_envs,); a scalar is repeated."""
+    array = np.asarray(value, dtype=float)
+    if array.ndim == 0:
+        array = np.full(n_envs, float(array))
+    if array.shape != (n_envs,):
+        raise ValueError(f"{name} has shape {array.shape}: must be a scalar or ({n_envs},)")
+    if not np.all(np.isfinite(array)):
+        raise ValueError(f"{name} = {array}: must be finite")
+    return array
+
+
+@numba.njit(cache=True)
+def _advance(state, first_tick, leader, zoh, controller, out):  # noqa: ANN001, ANN202
+    """The physics of :meth:`Platoon.advance`, tick by tick, in place; see the module docstring for the model.
+
+    ``state`` (:class:`PlatoonState`) is updated, ``out`` (:class:`PlatoonTicks`) filled for the
+    ``leader`` (:class:`LeaderTicks`) of each tick. Followers are updated from the last to the
+    first, so each one still sees its predecessor's state from the start of the tick, as in the
+    continuous model.
+    """
+    x, v, a, u = state.x, state.v, state.a, state.u
+    n_ticks, n_envs, n_followers = leader.v2v.shape
+    buffer_length = state.predecessor_accel.shape[0]
+    delay = buffer_length - 1
+    for k in range(n_ticks):
+        tick = first_tick + k
+        slot, delayed_slot = tick % buffer_length, (tick - delay) % buffer_length
+        for e in range(n_envs):
+            for i in range(n_followers, 0, -1):  # vehicle i is follower f = i - 1
+                f = i - 1
+                applied = ramp_toward(state.applied_setting[e, f], state.setting[e, f], controller.max_setting_change)
+                state.applied_setting[e, f] = applied
+                state.predecessor_accel[slot, e, f] = a[e, i - 1]
+                spacing = x[e, i - 1] - x[e, i] - controller.vehicle_length
+                spacing_error = spacing - controller.standstill_spacing - applied * v[e, i]
+                command = (
+                    controller.k_s * spacing_error
+                    + controller.k_v * (v[e, i - 1] - v[e, i])
+                    + controller.k_a * a[e, i]
+                    + controller.k_f * (1.0 if leader.v2v[k, e, f] else 0.0) * state.predecessor_accel[delayed_slot, e, f]
+                )
+                command = min(max(command, controller.accel_min), controller.accel_max)
+                coefficients = ZOHCoefficients(
+                    zoh.a_from_a[e, f], zoh.a_from_u[e, f], zoh.v_from_a[e, f], zoh.v_from_u[e, f],
+                    zoh.x_from_a[e, f], zoh.x_from_u[e, f], zoh.dt,
+                )
+                x_next, v_next, a_next = glvd_tick(x[e, i], v[e, i], a[e, i], command, coefficients)
+                if v_next < 0.0:  # a vehicle does not reverse: it stays at standstill
+                    v_next, a_next = 0.0, max(a_next, 0.0)
+                x[e, i], v[e, i], a[e, i], u[e, i] = x_next, v_next, a_next, command
+            x[e, 0] += 0.5 * (v[e, 0] + leader.speed[k, e]) * zoh.dt
+            v[e, 0] = leader.speed[k, e]
+            a[e, 0] = u[e, 0] = leader.accel[k, e]
+            for f in range(n_followers):
+                spacing = x[e, f] - x[e, f + 1] - controller.vehicle_length
+                out.collisions[k, e, f] = spacing <= 0.0 and not state.collided[e, f]
+                state.collided[e, f] = state.collided[e, f] or spacing <= 0.0
+                out.spacing[k, e, f] = spacing
+                out.speed[k, e, f] = v[e, f + 1]
+                out.accel[k, e, f] = a[e, f + 1]
+                out.applied_setting[k, e, f] = state.applied_setting[e, f]
