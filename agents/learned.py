@@ -23,8 +23,7 @@ from stable_baselines3 import PPO
 from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.vec_env import VecNormalize
 
-MODEL_FILE = "model.zip"
-VECNORMALIZE_FILE = "vecnormalize.pkl"
+from agents.protocol import MODEL_FILE, VECNORMALIZE_FILE
 
 
 @dataclasses.dataclass(frozen=True)

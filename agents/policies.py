@@ -8,25 +8,25 @@ shaped like SB3's: ``()`` or ``(n_envs,)`` for ``action_mode="platoon"``,
 ``(N,)`` or ``(n_envs, N)`` for ``"per_vehicle"``, ladder indices (int64).
 
 The policies are stateless: they read all they need from the observation
-(:func:`decode_observation`), never from the env, and return ``state`` unchanged.
+(:func:`timegap_env.envs.observation.decode_observation`), never from the env, and return
+``state`` unchanged.
 Each is built for one :class:`EnvConfig` (the env's), which fixes the action
 mode, the ladder of settings and the scaling of the features.
 """
 
 from __future__ import annotations
 
-import dataclasses
 from collections.abc import Mapping
 from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
 from timegap_env.config import EnvConfig
-from timegap_env.task import FEATURES
+from timegap_env.envs.observation import FEATURES, FollowerView, decode_observation
+from timegap_env.monitoring.charts import switch_rule
 
-LADDER_TOLERANCE = 1e-3  # a decoded setting farther than this from every level means a config mismatch [s]
-V2V_TIME_GAP = 1.0  # string stable with V2V (CACC) from 1.0 s with the default gains [s]
-ACC_TIME_GAP = 1.6  # string stable without V2V (ACC) from about 1.6 s with the default gains [s]
+V2V_SETTING = 1.0  # string stable with V2V (CACC) from 1.0 s with the default gains [s]
+ACC_SETTING = 1.6  # string stable without V2V (ACC) from about 1.6 s with the default gains [s]
 
 
 @runtime_checkable
@@ -55,55 +55,18 @@ def as_config(config: EnvConfig | Mapping[str, Any] | None) -> EnvConfig:
     return config if isinstance(config, EnvConfig) else EnvConfig.from_dict(config)
 
 
-def seconds(time_gap: float) -> str:
+def seconds(setting: float) -> str:
     """A setting for names and labels: '1.0', '0.6', '1.25'."""
-    return str(round(float(time_gap), 3))
+    return str(round(float(setting), 3))
 
 
-def level_index(config: EnvConfig, time_gap: float, field: str = "time_gap") -> int:
-    """Index of ``time_gap`` [s] in ``config.time_gap_levels``; ``ValueError`` naming ``field`` if it is not a level."""
-    levels = np.asarray(config.time_gap_levels)
-    matches = np.flatnonzero(np.isclose(levels, time_gap))
+def level_index(config: EnvConfig, setting: float, field: str = "setting") -> int:
+    """Index of ``setting`` [s] in ``config.setting_levels``; ``ValueError`` naming ``field`` if it is not a level."""
+    levels = np.asarray(config.setting_levels)
+    matches = np.flatnonzero(np.isclose(levels, setting))
     if matches.size == 0:
-        raise ValueError(f"{field} = {time_gap!r} s: must be one of time_gap_levels {config.time_gap_levels}")
+        raise ValueError(f"{field} = {setting!r} s: must be one of setting_levels {config.setting_levels}")
     return int(matches[0])
-
-
-@dataclasses.dataclass(frozen=True)
-class FollowerView:
-    """What the hand-written policies read from a batch of observations, arrays (n_envs, n_followers)."""
-
-    exceedances: np.ndarray  # exceedances in the chart's trailing window, exact up to 2 switch_exceedances [-]
-    setting_index: np.ndarray  # index of the current setting tau* in time_gap_levels [-]
-    v2v: np.ndarray  # follower in CACC (V2V on) [bool]
-
-
-def decode_observation(observation: np.ndarray, config: EnvConfig) -> FollowerView:
-    """Undo the feature scaling of ``timegap_env.task.PlatoonTask.observation`` for (n_envs, obs_dim) observations.
-
-    - ``exceedances`` = count / (2 k), k = ``config.chart.switch_exceedances``, clipped to [0, 1]:
-      count = round(feature * 2 k), exact for counts up to 2 k (larger counts read as 2 k);
-    - ``setting`` = (tau* - smallest level) / (largest - smallest level): tau* is the setting last
-      asked for (not the ramped value the controller applies yet), mapped to its ladder index;
-    - ``v2v`` is 1 in CACC, 0 in ACC.
-    """
-    n_followers, n_features = config.platoon.n_followers, len(FEATURES)
-    features = observation.reshape(observation.shape[0], n_followers, n_features)
-    counts = np.rint(features[..., FEATURES.index("exceedances")] * 2 * config.chart.switch_exceedances)
-    levels = np.asarray(config.time_gap_levels)
-    setting = levels[0] + features[..., FEATURES.index("setting")] * (levels[-1] - levels[0])  # [s]
-    distance = np.abs(setting[..., None] - levels)
-    index = distance.argmin(axis=-1)
-    if np.any(np.take_along_axis(distance, index[..., None], axis=-1) > LADDER_TOLERANCE):
-        raise ValueError(
-            f"observation feature 'setting' decodes to {setting.ravel()[:5]} s, not on time_gap_levels "
-            f"{config.time_gap_levels}: was the policy built with the env's config?"
-        )
-    return FollowerView(
-        exceedances=counts.astype(np.int64),
-        setting_index=index.astype(np.int64),
-        v2v=features[..., FEATURES.index("v2v")] > 0.5,
-    )
 
 
 class ObservationPolicy:
@@ -153,9 +116,10 @@ class PaperRulePolicy(ObservationPolicy):
     """The paper's rule: ``switch_exceedances`` exceedances within ``exceedance_window`` -> ``switch_to``.
 
     Paper: 3 exceedances within 35 s -> 1.6 s becomes 1.0 s. Defaults come from
-    ``config.chart``. As :func:`timegap_env.charts.switch_rule`: a follower triggers when its
-    decoded count reaches k and its setting is not ``switch_to`` already; otherwise the current
-    setting is kept (the env's re-centring clears the count after a switch, so the rule fires once).
+    ``config.chart``. The rule is :func:`timegap_env.monitoring.charts.switch_rule` on the decoded
+    observation: a follower triggers when its count reaches k and its setting is not ``switch_to``
+    already; otherwise the current setting is kept (the env's re-centring clears the count after a
+    switch, so the rule fires once).
 
     - ``action_mode="platoon"``: everyone switches when any follower triggers;
     - ``action_mode="per_vehicle"``: each follower switches on its own chart.
@@ -194,12 +158,13 @@ class PaperRulePolicy(ObservationPolicy):
                 f"chart.exceedance_window = {chart.exceedance_window} s; set that in the env config instead"
             )
         self.switch_index = level_index(self.config, self.switch_to, "switch_to")
+        self.rule = chart.with_overrides({"switch_exceedances": self.switch_exceedances, "switch_to": self.switch_to})
         scope = "platoon" if self.action_mode == "platoon" else "per vehicle"
         self.name = f"paper rule ({scope})"
 
     def _triggered(self, view: FollowerView) -> np.ndarray:
         """Followers whose chart says switch (n_envs, n_followers)."""
-        return (view.exceedances >= self.switch_exceedances) & (view.setting_index != self.switch_index)
+        return switch_rule(view.exceedances, view.setting, self.rule)
 
     def _platoon_action(self, view: FollowerView) -> np.ndarray:
         return np.where(self._triggered(view).any(axis=1), self.switch_index, view.setting_index[:, 0])
@@ -209,13 +174,13 @@ class PaperRulePolicy(ObservationPolicy):
 
 
 class FixedPolicy(ObservationPolicy):
-    """Always the same setting ``time_gap`` [s], one of ``config.time_gap_levels``."""
+    """Always the same ``setting`` [s], one of ``config.setting_levels``."""
 
-    def __init__(self, time_gap: float, config: EnvConfig | Mapping[str, Any] | None = None) -> None:
+    def __init__(self, setting: float, config: EnvConfig | Mapping[str, Any] | None = None) -> None:
         super().__init__(config)
-        self.time_gap = time_gap
-        self.index = level_index(self.config, time_gap)
-        self.name = f"fixed {seconds(time_gap)} s"
+        self.setting = setting
+        self.index = level_index(self.config, setting)
+        self.name = f"fixed {seconds(setting)} s"
 
     def _platoon_action(self, view: FollowerView) -> np.ndarray:
         return np.full(view.setting_index.shape[0], self.index)
@@ -234,8 +199,8 @@ class V2VAwarePolicy(ObservationPolicy):
         self,
         config: EnvConfig | Mapping[str, Any] | None = None,
         *,
-        connected: float = V2V_TIME_GAP,
-        acc: float = ACC_TIME_GAP,
+        connected: float = V2V_SETTING,
+        acc: float = ACC_SETTING,
     ) -> None:
         super().__init__(config)
         self.connected_index = level_index(self.config, connected, "connected")
@@ -254,4 +219,4 @@ class V2VAwarePolicy(ObservationPolicy):
 def fixed_policies(config: EnvConfig | Mapping[str, Any] | None = None) -> list[FixedPolicy]:
     """One :class:`FixedPolicy` per level of the ladder, smallest first."""
     config = as_config(config)
-    return [FixedPolicy(level, config) for level in config.time_gap_levels]
+    return [FixedPolicy(level, config) for level in config.setting_levels]

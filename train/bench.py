@@ -35,7 +35,7 @@ import torch
 
 import timegap_env
 from timegap_env.config import MonitorConfig, PlatoonConfig
-from timegap_env.platoon import Platoon
+from timegap_env.sim import Platoon
 from train.bench_monitor import bench as bench_monitor
 
 TARGET_VS_HIGHWAY = 100.0  # single env steps/s over highway-fast-v0's [-]
@@ -182,7 +182,7 @@ def main() -> None:
 
     from stable_baselines3.common.env_util import make_vec_env
 
-    from timegap_env.sb3 import TimeGapVecEnv
+    from timegap_env.envs.sb3 import TimeGapVecEnv
 
     import highway_env  # noqa: F401  (registers highway-fast-v0)
 
@@ -252,7 +252,7 @@ def main() -> None:
         "single envs and PPO runs take turns over several rounds. Ratios are the figures to compare; absolute rates move "
         "with the machine's load. Numba kernels are loaded (or compiled) before timing.",
         "PPO: each setting runs on both envs alike, MlpPolicy, CPU, one torch thread; "
-        "TimeGapMonitor-v0 through the native vector env (`timegap_env.sb3.TimeGapVecEnv`), CartPole-v1 through DummyVecEnv.",
+        "TimeGapMonitor-v0 through the native vector env (`timegap_env.envs.sb3.TimeGapVecEnv`), CartPole-v1 through DummyVecEnv.",
         "",
         "| measure | value | target |",
         "|---|---|---|",

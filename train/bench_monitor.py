@@ -20,7 +20,8 @@ from collections.abc import Callable
 import numpy as np
 
 from timegap_env.config import MonitorConfig
-from timegap_env.monitor import N_STATS, TimeGapMonitor, _moments_from_stats, prior_precision
+from timegap_env.monitoring.monitor import N_SUMS, TimeGapMonitor
+from timegap_env.monitoring.posterior import Prior, WindowSums, posterior_moments
 
 
 def seconds_per_call(step: Callable[[int], None], n_calls: int) -> tuple[float, float]:
@@ -45,23 +46,23 @@ def measurements(n_envs: int, n_vehicles: int, n_distinct: int, seed: int = 0) -
 def bench(n_envs: int, n_vehicles: int, n_ticks: int, config: MonitorConfig) -> dict[str, float]:
     """Seconds per tick of the monitor and of the two references."""
     speed, spacing = measurements(n_envs, n_vehicles, n_distinct=64)
-    monitor = TimeGapMonitor(n_envs, n_vehicles, time_gap=1.6, config=config)
+    monitor = TimeGapMonitor(n_envs, n_vehicles, setting=1.6, config=config)
     monitor_mean, monitor_worst = seconds_per_call(lambda t: monitor.update(speed[t % 64], spacing[t % 64]), n_ticks)
 
     a, b, out = speed[0], speed[1], np.empty_like(speed[0])
     add_mean, _ = seconds_per_call(lambda t: np.add(a, b, out=out), n_ticks)
 
     window = config.window_ticks or 1
-    buffer = np.zeros((window, N_STATS, n_envs, n_vehicles))
-    precision = prior_precision(config.prior_cov)
-    prior_mean = (config.prior_standstill_spacing, np.full((n_envs, n_vehicles), 1.6))
+    buffer = np.zeros((window, N_SUMS, n_envs, n_vehicles))
+    prior = Prior.from_cov(config.prior_standstill_spacing, config.prior_cov, config.noise_variance)
+    prior_tau = np.full((n_envs, n_vehicles), 1.6)
 
     def recompute(t: int) -> None:
         v, s = speed[t % 64], spacing[t % 64]
         valid = np.isfinite(s)
         v, s = np.where(valid, v, 0.0), np.where(valid, s, 0.0)
         buffer[t % window] = np.stack([valid, v, v * v, s, v * s])
-        _moments_from_stats(buffer.sum(axis=0), prior_mean, precision, config.noise_variance)
+        posterior_moments(WindowSums(*buffer.sum(axis=0)), prior_tau, prior)
 
     recompute_mean, _ = seconds_per_call(recompute, n_ticks)
     return {"monitor": monitor_mean, "monitor_worst": monitor_worst, "add": add_mean, "recompute": recompute_mean}

@@ -28,8 +28,8 @@ from pathlib import Path
 import numpy as np
 
 from timegap_env.config import ChartConfig, MonitorConfig, PlatoonConfig, SensorConfig
-from timegap_env.monitored import MonitoredPlatoon
-from timegap_env.scenarios import make_leader
+from timegap_env.leaders import make_leader
+from timegap_env.monitoring import MonitoredPlatoon
 
 WINDOWS: list[float | None] = [0.5, 1.0, 2.0, 3.0, 5.0, 10.0, 20.0, None]  # [s]; None = all data since t = 0
 FAMILIES = ["aggressive_cycles", "sinusoid", "hard_braking", "stochastic_human"]
@@ -108,7 +108,7 @@ def main() -> None:
     chosen = min(quiet, key=worst_miscount)
     lines = [
         f"Monitor window experiment (`python -m train.choose_window`): {len(profiles)} platoons "
-        f"({', '.join(FAMILIES)} x seeds {SEEDS.start}-{SEEDS.stop - 1}), 250 s, tau* = {PlatoonConfig().time_gap} s, CACC, "
+        f"({', '.join(FAMILIES)} x seeds {SEEDS.start}-{SEEDS.stop - 1}), 250 s, tau* = {PlatoonConfig().initial_setting} s, CACC, "
         f"paper's Shewhart chart (L = {ChartConfig().limit_width}, sigma = {ChartConfig().baseline_std} s).",
         f"Default sensors: spacing noise {SensorConfig().spacing_noise_std} m, speed noise {SensorConfig().speed_noise_std} m/s; "
         f"noisy: {NOISY.spacing_noise_std} m, {NOISY.speed_noise_std} m/s.",

@@ -18,9 +18,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
-from timegap_env import simulate
-from timegap_env.simulation import Trajectory
-from timegap_env.stability import platoon_string_stability
+from timegap_env import Trajectory, platoon_string_stability, simulate
 
 
 def plot_scenario(trajectory: Trajectory, path: Path) -> None:
@@ -30,9 +28,9 @@ def plot_scenario(trajectory: Trajectory, path: Path) -> None:
     speed_ax.set_ylabel("leader speed [m/s]")
     speed_ax.set_title(f"Paper scenario ({trajectory.leader_name} leader), CACC followers")
     speed_ax.grid(alpha=0.3)
-    for i, gap in enumerate(trajectory.time_gap.T, start=1):
+    for i, gap in enumerate(trajectory.actual_time_gap.T, start=1):
         gap_ax.plot(trajectory.t, gap, lw=1, label=f"follower {i}")
-    gap_ax.plot(trajectory.t, trajectory.time_gap_setting[:, 0], "k--", lw=1, label="setting τ*")
+    gap_ax.plot(trajectory.t, trajectory.setting[:, 0], "k--", lw=1, label="setting τ*")
     gap_ax.set_xlabel("time [s]")
     gap_ax.set_ylabel("actual time gap (s − s0)/v [s]")
     gap_ax.legend(ncol=3, fontsize=8)
@@ -46,10 +44,10 @@ def plot_scenario(trajectory: Trajectory, path: Path) -> None:
 def summary_table(trajectory: Trajectory) -> str:
     """Markdown table per follower: time gap range, spacing error, acceleration, string-stability verdict."""
     report = platoon_string_stability(trajectory.config)
-    gap = trajectory.time_gap
+    gap = trajectory.actual_time_gap
     lines = [
         f"Paper scenario, seed-built {trajectory.leader_name} leader, {trajectory.t[-1]:.0f} s, "
-        f"tau* = {trajectory.config.time_gap} s, CACC. Collision: {trajectory.collision or 'none'}.",
+        f"tau* = {trajectory.config.initial_setting} s, CACC. Collision: {trajectory.collision or 'none'}.",
         "",
         "| follower | min time gap [s] | max time gap [s] | max abs spacing error [m] | max abs accel [m/s²] "
         "| peak abs G(jw) | string stable |",

@@ -6,7 +6,7 @@ Held out from training:
   (k = 0, 1, ..., ``--episodes`` - 1, numbered across groups) is reset with seed 10 000 + k.
 - **Leader families.** Groups of episodes, each a ``reset(options=...)``:
   ``ngsim_in_band`` (real NGSIM I-80 drivers, their acceleration integrated within
-  20-80 mph; only when ``timegap_env.ngsim.default_ngsim_path()`` exists), ``idm``
+  20-80 mph; only when ``timegap_env.default_ngsim_path()`` exists), ``idm``
   (highway-env's IDM driver behind scripted braking), and ``training_mix`` (the default
   family mix of training, on the held-out seeds). Episodes are split evenly across groups.
 
@@ -32,7 +32,6 @@ from __future__ import annotations
 import argparse
 import csv
 import dataclasses
-import hashlib
 import math
 import time
 from collections.abc import Sequence
@@ -48,18 +47,18 @@ import numpy as np
 
 import timegap_env
 from agents.policies import NamedPolicy, PaperRulePolicy, V2VAwarePolicy, fixed_policies, seconds
+from agents.protocol import EVAL_SEED_START, MODEL_FILE
 from timegap_env.config import EnvConfig
-from timegap_env.env import observation_space
-from timegap_env.ngsim import default_ngsim_path
+from timegap_env.envs.observation import observation_space
+from timegap_env.leaders import default_ngsim_path
 
-EVAL_SEED_START = 10_000  # evaluation seeds start here; training must use seeds below
 GROUP_OPTIONS: dict[str, dict[str, Any] | None] = {  # group -> reset options
     "ngsim_in_band": {"scenario": "ngsim_in_band"},
     "idm": {"scenario": "idm"},
     "training_mix": None,
 }
 DEFAULT_EPISODES = 30  # per policy, split across the groups
-DEFAULT_MODEL = Path("results/ppo/model.zip")
+DEFAULT_MODEL = Path("results/ppo", MODEL_FILE)
 DEFAULT_OUT = Path("results/eval")
 DEFAULT_REFERENCE = "rule_platoon"
 ALL_EPISODES = "all"  # the group name of the rows over every episode
@@ -130,7 +129,7 @@ def build_policies(names: Sequence[str] | None, model: Path) -> dict[str, NamedP
     policies: dict[str, Any] = {
         "rule_platoon": PaperRulePolicy(platoon),
         "rule_per_vehicle": PaperRulePolicy(platoon.with_overrides({"action_mode": "per_vehicle"})),
-        **{f"fixed_{seconds(policy.time_gap)}": policy for policy in fixed_policies(platoon)},
+        **{f"fixed_{seconds(policy.setting)}": policy for policy in fixed_policies(platoon)},
         "v2v_aware": V2VAwarePolicy(platoon),
     }
     wanted = list(policies) + ["ppo"] if names is None else list(names)
@@ -154,16 +153,6 @@ def build_policies(names: Sequence[str] | None, model: Path) -> dict[str, NamedP
     return {name: policies[name] for name in wanted}
 
 
-def fingerprint(task: Any, env: int) -> str:
-    """A hash of everything random that env ``env`` of a freshly reset ``PlatoonTask`` drew."""
-    digest = hashlib.sha256()
-    ticks = int(task.episode_ticks[env])
-    for array in (task.leader_speed[env, : ticks + 1], task.episode_ticks[env], task.v2v_loss_start[env],
-                  task.v2v_loss_end[env], task.loop.dropout_probability[env], task.loop.noise_keys[env]):
-        digest.update(np.ascontiguousarray(array).tobytes())
-    return digest.hexdigest()
-
-
 def run_batch(
     policy: NamedPolicy, group: str, seeds: list[int], record_profile: bool
 ) -> tuple[list[dict[str, Any]], list[str], Profile | None]:
@@ -176,10 +165,9 @@ def run_batch(
                         config={"action_mode": policy.action_mode})
     obs, infos = venv.reset(seed=seeds, options=GROUP_OPTIONS[group])
     task, config = venv.unwrapped.task, venv.unwrapped.config
-    prints = [fingerprint(task, env) for env in range(n)]
+    prints = [task.fingerprint(env) for env in range(n)]
     scenarios = list(infos["scenario"])
-    if record_profile:
-        task.trace = []  # env 0 at every tick: (t [s], estimates [s], chart centres [s])
+    trace = task.start_trace() if record_profile else None  # env 0 at every tick
     returns, steps = np.zeros(n), np.zeros(n, dtype=np.int64)
     active = np.ones(n, dtype=bool)
     summaries: list[dict[str, float]] = [{} for _ in range(n)]
@@ -199,12 +187,13 @@ def run_batch(
         for env, seed in enumerate(seeds)
     ]
     profile = None
-    if record_profile:
-        trace = task.trace[: int(steps[0]) * config.ticks_per_decision]  # env 0's episode, not its autoreset successor
+    if trace is not None:
+        episode = slice(int(steps[0]) * config.ticks_per_decision)  # env 0's episode, not its autoreset successor
+        arrays = trace.arrays()
         profile = Profile(
-            t=np.array([entry[0] for entry in trace]),
-            estimate=np.array([entry[1] for entry in trace]),
-            center=np.array([entry[2] for entry in trace]),
+            t=arrays.t[episode],
+            estimate=arrays.estimate[episode],
+            center=arrays.center[episode],
             half_width=config.chart.limit_width * config.chart.baseline_std,
             scenario=f"{group} seed {seeds[0]} ({scenarios[0]})",
         )

@@ -18,7 +18,6 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 
 import timegap_env
-from timegap_env.config import EnvConfig
 
 SWITCH_STEP, FRAME_STEP = 10, 40  # [steps of 1 s]
 
@@ -28,7 +27,7 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--out", type=Path, default=Path("results/env_frame.png"))
     args = parser.parse_args()
-    levels = list(EnvConfig().time_gap_levels)
+    levels = list(timegap_env.EnvConfig().setting_levels)
     env = gym.make(timegap_env.ENV_ID, render_mode="rgb_array", config={"v2v_loss_probability": 0.0})
     env.reset(seed=args.seed, options={"scenario": "aggressive_cycles"})
     for step in range(FRAME_STEP):

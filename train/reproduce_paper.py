@@ -29,11 +29,13 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
-from timegap_env.charts import switch_rule
-from timegap_env import leaders
-from timegap_env.config import MONITOR_PRESETS, AggressiveCyclesConfig, ChartConfig, MonitorConfig, SensorConfig
-from timegap_env.monitored import MonitoredPlatoon
-from timegap_env.scenarios import SCENARIOS, make_leader
+from timegap_env.config import (
+    MONITOR_PRESETS, AggressiveCyclesConfig, ChartConfig, MonitorConfig, PlatoonConfig, SensorConfig,
+)
+from timegap_env.leaders import aggressive_cycles, make_leader
+from timegap_env.monitoring import MonitoredPlatoon, switch_rule
+
+PLATOON = PlatoonConfig()  # the paper's Table 1: five followers, T = 0.45 s, K = 1, tau* = 1.6 s, s0 = 5 m
 
 PAPER = {  # the paper's reported numbers (Sec. 3.3)
     "limits_1_6": (1.35, 1.6, 1.85),
@@ -67,12 +69,11 @@ def run_loop(
 ) -> LoopRecord:
     """Drive platoons with leaders ``speeds``/``accels`` (n_envs, n_ticks); vehicle 1 follows the rule if asked."""
     chart_config = ChartConfig()
-    scenario = SCENARIOS["paper"]
-    loop = MonitoredPlatoon(scenario.platoon, monitor, chart_config, SensorConfig(), n_envs=speeds.shape[0],
+    loop = MonitoredPlatoon(PLATOON, monitor, chart_config, SensorConfig(), n_envs=speeds.shape[0],
                             seed=SENSOR_SEED)
     loop.reset(speeds[:, 0], accels[:, 0])
-    s0 = scenario.platoon.standstill_spacing
-    vehicle_1 = np.zeros(scenario.platoon.n_followers, dtype=bool)
+    s0 = PLATOON.standstill_spacing
+    vehicle_1 = np.zeros(PLATOON.n_followers, dtype=bool)
     vehicle_1[0] = True
     switch_tick = np.full(speeds.shape[0], -1)
     names = ("estimate", "true_gap", "setting", "lcl", "ucl", "exceedance")
@@ -81,17 +82,17 @@ def run_loop(
         if k > 0:
             _, state = loop.tick(speeds[:, k], accels[:, k])
             if apply_rule:
-                fire = switch_rule(state, chart_config) & vehicle_1
+                fire = switch_rule(state.exceedances_in_window, state.center, chart_config) & vehicle_1
                 switch_tick[fire.any(axis=1)] = k
-                loop.change_time_gap(chart_config.switch_to, fire)
+                loop.change_setting(chart_config.switch_to, fire)
         rows["estimate"].append(loop.monitor.tau_mean)
         rows["true_gap"].append((loop.platoon.spacing - s0) / loop.platoon.v[:, 1:])
-        rows["setting"].append(loop.platoon.time_gap_setting.copy())
+        rows["setting"].append(loop.platoon.setting.copy())
         rows["lcl"].append(loop.chart.lcl)
         rows["ucl"].append(loop.chart.ucl)
         rows["exceedance"].append(loop.chart.exceedance.copy())
     arrays = {name: np.stack(values, axis=1) for name, values in rows.items()}
-    return LoopRecord(t=np.arange(speeds.shape[1]) * scenario.platoon.dt, switch_tick=switch_tick, **arrays)
+    return LoopRecord(t=np.arange(speeds.shape[1]) * PLATOON.dt, switch_tick=switch_tick, **arrays)
 
 
 def max_exits_within(exceedance: np.ndarray, window_ticks: int) -> int:
@@ -161,7 +162,7 @@ def main() -> None:
 
     chart = ChartConfig()
     dt = fixed.t[1] - fixed.t[0]
-    ramp_time = abs(SCENARIOS["paper"].platoon.time_gap - chart.switch_to) / SCENARIOS["paper"].platoon.time_gap_ramp_rate
+    ramp_time = abs(PLATOON.initial_setting - chart.switch_to) / PLATOON.setting_ramp_rate
     settle = switched.switch_tick[env] + int(round((ramp_time + 5.0) / dt))  # ramp, then 5 s to settle
     deviation_before = np.abs(fixed.estimate[env, settle:, 0] - fixed.setting[env, settle:, 0]).max()
     deviation_after = np.abs(switched.estimate[env, settle:, 0] - switched.setting[env, settle:, 0]).max()
@@ -173,7 +174,7 @@ def main() -> None:
     lcl_after, ucl_after = switched.lcl[env, -1, 0], switched.ucl[env, -1, 0]
     leave = [bool(ranges[i][0] < lcl or ranges[i][1] > ucl) for i in (0, 1)]
 
-    gentle = [leaders.aggressive_cycles(seed, AggressiveCyclesConfig(max_jerk=GENTLE_JERK)) for seed in range(args.seeds)]
+    gentle = [aggressive_cycles(seed, AggressiveCyclesConfig(max_jerk=GENTLE_JERK)) for seed in range(args.seeds)]
     gentle_run = run_loop(np.stack([p.speed for p in gentle]), np.stack([p.accel for p in gentle]), apply_rule=True)
     gentle_fired = int((gentle_run.switch_tick >= 0).sum())
 

@@ -17,7 +17,7 @@ normalisation statistics. The run directory ``--out`` holds exactly:
 - ``training.md``: command, timesteps, wall time, throughput and returns, written at the end.
 
 Sub-env i of phase k's env is seeded ``--seed + k * n_envs + i``; all training seeds stay below
-``MAX_TRAINING_SEED`` (evaluation uses seeds from 10 000 on). The final check runs the
+``agents.protocol.EVAL_SEED_START`` (10 000), where the evaluation's seeds begin. The final check runs the
 deterministic policy and the best constant setting on ``EVAL_EPISODES`` episodes seeded
 ``EVAL_SEED + i``, also below 10 000. TensorBoard logs go to ``--tensorboard-log``.
 """
@@ -41,16 +41,14 @@ from stable_baselines3 import PPO
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.vec_env import VecEnv, VecNormalize
 
+from agents.protocol import EVAL_SEED_START, MODEL_FILE, VECNORMALIZE_FILE
 from timegap_env import ENV_ID
-from timegap_env.sb3 import TimeGapVecEnv
+from timegap_env.envs.sb3 import TimeGapVecEnv
 
-MODEL_FILE = "model.zip"
-VECNORMALIZE_FILE = "vecnormalize.pkl"
 REPORT_FILE = "training.md"
-MAX_TRAINING_SEED = 10_000  # training seeds are < this; the evaluation's start here [-]
-EVAL_SEED = 9_000  # first seed of the end-of-training check, below MAX_TRAINING_SEED [-]
+EVAL_SEED = 9_000  # first seed of the end-of-training check, below EVAL_SEED_START [-]
 EVAL_EPISODES = 32  # episodes of the end-of-training check [-]
-REFERENCE_TIME_GAP = 1.0  # the best constant setting on the default mix, the check's reference [s]
+REFERENCE_SETTING = 1.0  # the best constant setting on the default mix, the check's reference [s]
 RUN_KEYS = {"n_envs", "n_timesteps", "policy", "normalize", "env_kwargs", "warmup"}  # the rest of the yml is PPO's
 SUMMARY_KEYS = {"collision", "mean_setting", "switches", "time_out_of_control"}  # logged per episode
 STRING_KWARGS = ("policy_kwargs", "normalize")  # may be Python expressions as in rl-zoo3: "dict(net_arch=[64])"
@@ -176,9 +174,9 @@ def main(argv: list[str] | None = None) -> None:
         raise ValueError(f"timesteps = {total_timesteps}: must be >= 1")
     if args.checkpoint_freq < 1:
         raise ValueError(f"checkpoint_freq = {args.checkpoint_freq}: must be >= 1")
-    if not 0 <= args.seed <= MAX_TRAINING_SEED - len(phases) * n_envs:
+    if not 0 <= args.seed <= EVAL_SEED_START - len(phases) * n_envs:
         raise ValueError(f"seed = {args.seed}: sub-env seeds seed .. seed + {len(phases) * n_envs - 1} "
-                         f"must lie in [0, {MAX_TRAINING_SEED})")
+                         f"must lie in [0, {EVAL_SEED_START})")
     if not isinstance(normalize, (bool, dict)):
         raise ValueError(f"hyperparams {ENV_ID}.normalize = {normalize!r}: "
                          "must be true, false or a dict of VecNormalize arguments")
@@ -245,7 +243,7 @@ def main(argv: list[str] | None = None) -> None:
     # ---------------------------------------------------------------- check and report
     normalize_obs = env.normalize_obs if isinstance(env, VecNormalize) else (lambda obs: obs)
     learned = mean_return(lambda obs: model.predict(normalize_obs(obs), deterministic=True)[0], env_kwargs)
-    reference_level = int(np.argmin(np.abs(np.asarray(env.unwrapped.config.time_gap_levels) - REFERENCE_TIME_GAP)))
+    reference_level = int(np.argmin(np.abs(np.asarray(env.unwrapped.config.setting_levels) - REFERENCE_SETTING)))
     reference = mean_return(lambda obs: np.full((len(obs), *env.action_space.shape), reference_level), env_kwargs)
     episodes = [info["r"] for info in model.ep_info_buffer]
     final_return = f"{np.mean(episodes):.1f}" if episodes else "n/a (no episode ended)"
@@ -266,7 +264,7 @@ Command: `{command}` ({f"resumed from a checkpoint at {steps_before:,} steps" if
 {phase_rows}
 | final mean episode return, last {len(episodes)} training episodes (stochastic policy) | {final_return} |
 | mean return, deterministic policy, {EVAL_EPISODES} episodes seeded {EVAL_SEED}+ | {learned:.1f} |
-| mean return, constant {REFERENCE_TIME_GAP} s, same episodes | {reference:.1f} |
+| mean return, constant {REFERENCE_SETTING} s, same episodes | {reference:.1f} |
 
 Files: {files}, this report; TensorBoard logs in `{args.tensorboard_log}/`.
 """

@@ -10,7 +10,7 @@ import pytest
 
 import timegap_env
 from timegap_env.config import MPH, LeaderConfig
-from timegap_env.ngsim import (
+from timegap_env.leaders.ngsim import (
     FOOT,
     PATH_VARIABLE,
     default_ngsim_path,

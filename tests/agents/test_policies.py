@@ -12,7 +12,7 @@ from agents.policies import (
     NamedPolicy, PaperRulePolicy, V2VAwarePolicy, decode_observation, fixed_policies, level_index,
 )
 from timegap_env.config import EnvConfig
-from timegap_env.task import FEATURES
+from timegap_env.envs.observation import FEATURES
 
 # Limits at tau* -/+ 1 sigma instead of 2: the default chart rarely sees 3 exceedances within 35 s,
 # this one does within a minute on aggressive_cycles seed 0 (follower 1 first).
@@ -46,7 +46,7 @@ def drive_rule(config: dict) -> list[tuple[int, np.ndarray]]:
     triggers = []
     for step in range(cfg.max_episode_steps):
         count = loop.chart.exceedances_in_window[0].copy()
-        current = np.array([level_index(cfg, s) for s in loop.platoon.time_gap_setting[0]])
+        current = np.array([level_index(cfg, s) for s in loop.platoon.setting[0]])
         triggered = (count >= k) & (current != switch_index)
         action, state = policy.predict(obs)
         assert state is None
@@ -57,10 +57,10 @@ def drive_rule(config: dict) -> list[tuple[int, np.ndarray]]:
         np.testing.assert_array_equal(action, expected, err_msg=f"step {step}, counts {count}, settings {current}")
         if triggered.any():
             triggers.append((step, triggered))
-            before = loop.platoon.time_gap_setting[0].copy()
+            before = loop.platoon.setting[0].copy()
         obs, _, terminated, truncated, _ = env.step(action)
         if triggered.any() and cfg.action_mode == "per_vehicle":
-            changed = ~np.isclose(loop.platoon.time_gap_setting[0], before)
+            changed = ~np.isclose(loop.platoon.setting[0], before)
             np.testing.assert_array_equal(changed, triggered, err_msg="only the triggering followers switch")
         if terminated or truncated:
             break
@@ -82,7 +82,7 @@ def test_per_vehicle_rule_switches_only_the_triggering_follower():
 def test_rule_reads_counts_exactly_and_holds_below_k():
     config = EnvConfig()
     obs = real_observation()
-    k, levels = config.chart.switch_exceedances, np.asarray(config.time_gap_levels)
+    k, levels = config.chart.switch_exceedances, np.asarray(config.setting_levels)
     for count in range(2 * k + 1):
         crafted = with_features(obs, exceedances=np.float32(count / (2 * k)))
         assert np.all(decode_observation(crafted[None], config).exceedances == count)
@@ -111,7 +111,7 @@ def test_rule_parameters_and_their_limits():
 
 def test_rule_is_not_re_triggered_at_switch_to():
     config = EnvConfig()
-    levels = np.asarray(config.time_gap_levels)
+    levels = np.asarray(config.setting_levels)
     at_switch_to = np.float32((1.0 - levels[0]) / (levels[-1] - levels[0]))
     obs = with_features(real_observation(), exceedances=1.0, setting=at_switch_to)
     assert PaperRulePolicy(config).predict(obs)[0] == level_index(config, 1.0)
@@ -122,7 +122,7 @@ def test_fixed_baselines_return_their_level_single_and_batched():
     batch = np.stack([obs, with_features(obs, v2v=0.0, exceedances=1.0)])
     config = EnvConfig()
     policies = fixed_policies(config)
-    assert [p.time_gap for p in policies] == list(config.time_gap_levels)
+    assert [p.setting for p in policies] == list(config.setting_levels)
     for index, policy in enumerate(policies):
         action, _ = policy.predict(obs)
         assert action.shape == () and action == index
@@ -161,8 +161,8 @@ def test_observation_shape_and_config_mismatches_are_errors():
     obs = real_observation()
     with pytest.raises(ValueError, match=r"observation shape \(44,\)"):
         PaperRulePolicy().predict(obs[:-1])
-    with pytest.raises(ValueError, match="not on time_gap_levels"):
-        PaperRulePolicy({"time_gap_levels": (0.6, 1.0, 1.6, 3.0)}).predict(with_features(obs, setting=0.3))
+    with pytest.raises(ValueError, match="not on setting_levels"):
+        PaperRulePolicy({"setting_levels": (0.6, 1.0, 1.6, 3.0)}).predict(with_features(obs, setting=0.3))
 
 
 # ---------------------------------------------------------------- learned policies

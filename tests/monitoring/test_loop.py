@@ -4,33 +4,13 @@ import numpy as np
 import pytest
 
 from timegap_env.config import MonitorConfig, PlatoonConfig, SensorConfig
-from timegap_env.monitored import MonitoredPlatoon, counter_uniforms, measure
-
-
-def test_counter_noise_is_gaussian_with_dropouts():
-    keys = np.arange(1, 201, dtype=np.uint64)
-    uniforms = counter_uniforms(keys, np.full(200, 7), 5)
-    assert uniforms.shape == (3, 200, 5) and 0 < uniforms.min() and uniforms.max() < 1
-    spacing, speed = np.full((200, 5), 40.0), np.full((200, 5), 20.0)
-    measured_spacing, measured_speed = measure(spacing, speed, SensorConfig(), uniforms, np.full(200, 0.1))
-    dropped = np.isnan(measured_spacing)
-    assert 0.05 < dropped.mean() < 0.15
-    np.testing.assert_array_equal(dropped, np.isnan(measured_speed))
-    assert np.std(measured_spacing[~dropped] - 40.0) == pytest.approx(0.1, rel=0.1)
-    assert abs(np.corrcoef(measured_spacing[~dropped], measured_speed[~dropped])[0, 1]) < 0.1
-
-
-def test_counter_noise_depends_only_on_key_tick_and_follower():
-    alone = counter_uniforms(np.array([42], dtype=np.uint64), np.array([9]), 5)
-    batched = counter_uniforms(np.array([7, 42, 3], dtype=np.uint64), np.array([1, 9, 9]), 5)
-    np.testing.assert_array_equal(alone[:, 0], batched[:, 1])
-    assert not np.array_equal(batched[:, 1], batched[:, 2])
-    assert not np.array_equal(alone, counter_uniforms(np.array([42], dtype=np.uint64), np.array([10]), 5))
+from timegap_env.monitoring.loop import MonitoredPlatoon
+from timegap_env.monitoring.sensors import Readings
 
 
 def test_estimate_tracks_the_actual_time_gap_through_dropouts():
     loop = MonitoredPlatoon(sensors=SensorConfig(dropout_probability=0.2), n_envs=2, seed=3)
-    assert loop.dropout_probability.tolist() == [0.2, 0.2]
+    assert loop.sensors.dropout_probability.tolist() == [0.2, 0.2]
     loop.reset([25.0, 15.0])
     for _ in range(100):
         _, state = loop.tick([25.0, 15.0], 0.0)
@@ -45,16 +25,16 @@ def test_change_of_setting_ramps_and_recentres_only_who_changed():
     loop.reset(25.0)
     mask = np.zeros((2, 5), dtype=bool)
     mask[0, 0] = True
-    changed = loop.change_time_gap(1.0, mask)
+    changed = loop.change_setting(1.0, mask)
     np.testing.assert_array_equal(changed, mask)
     assert loop.monitor.prior_mean[0, 0, 1] == 1.0
     loop.tick([25.0, 25.0], 0.0)
     assert loop.chart.center[0, 0] == pytest.approx(1.6 - 0.02)  # the limits follow the 0.2 s/s ramp
     assert loop.chart.center[1, 0] == 1.6
-    assert not loop.change_time_gap(1.0, mask).any()  # asking again changes nothing
+    assert not loop.change_setting(1.0, mask).any()  # asking again changes nothing
     for _ in range(300):
         loop.tick([25.0, 25.0], 0.0)
-    assert loop.platoon.time_gap[0, 0] == pytest.approx(1.0) and loop.chart.center[0, 0] == pytest.approx(1.0)
+    assert loop.platoon.applied_setting[0, 0] == pytest.approx(1.0) and loop.chart.center[0, 0] == pytest.approx(1.0)
     assert loop.monitor.tau_mean[0, 0] == pytest.approx(1.0, abs=0.02)
     assert loop.monitor.tau_mean[1, 0] == pytest.approx(1.6, abs=0.02)
 
@@ -66,20 +46,11 @@ def test_configs_must_share_the_tick():
 
 def test_a_commanded_change_raises_no_alarm_but_a_real_excursion_after_it_does():
     loop = MonitoredPlatoon(n_envs=1, seed=0)
-    loop.reset(25.0, time_gap=0.6)
-    loop.change_time_gap(2.2)  # the slowest transition of the ladder
+    loop.reset(25.0, setting=0.6)
+    loop.change_setting(2.2)  # the slowest transition of the ladder
     assert not any(loop.tick(25.0, 0.0)[1].alarm.any() for _ in range(300))
     loop.platoon.x[0, 0] += 15.0  # the leader jumps 15 m ahead: a real gap excursion
     assert any(loop.tick(25.0, 0.0)[1].alarm.any() for _ in range(20))
-
-
-def test_counter_noise_of_a_block_is_its_ticks_stacked():
-    keys = np.array([5, 11], dtype=np.uint64)
-    ticks = np.array([[3, 8], [4, 9], [5, 10]])
-    block = counter_uniforms(keys, ticks, 5)
-    assert block.shape == (3, 3, 2, 5)
-    for k, row in enumerate(ticks):
-        np.testing.assert_array_equal(block[:, k], counter_uniforms(keys, row, 5))
 
 
 @pytest.mark.parametrize("kind", ["shewhart", "ewma", "cusum"])
@@ -92,7 +63,7 @@ def test_a_block_of_ticks_equals_the_same_ticks_one_by_one(kind):
         loop = MonitoredPlatoon(chart=ChartConfig(kind=kind), sensors=SensorConfig(dropout_probability=0.05),
                                 n_envs=3, seed=4)
         loop.reset([25.0, 15.0, 30.0])
-        loop.change_time_gap(np.array([[1.0] * 5, [1.6] * 5, [2.2] * 5]))
+        loop.change_setting(np.array([[1.0] * 5, [1.6] * 5, [2.2] * 5]))
         return loop
 
     rng = np.random.default_rng(0)
@@ -116,7 +87,7 @@ def test_a_block_of_ticks_equals_the_same_ticks_one_by_one(kind):
     np.testing.assert_array_equal(alarm, [state.alarm for state in states])
     np.testing.assert_array_equal(np.concatenate([block.chart.exceedances_in_window for block in blocks]),
                                   [state.exceedances_in_window for state in states])
-    for name in ("x", "v", "a", "u", "time_gap"):
+    for name in ("x", "v", "a", "u", "applied_setting"):
         np.testing.assert_array_equal(getattr(by_block.platoon, name), getattr(by_tick.platoon, name))
     np.testing.assert_array_equal(by_block.monitor.mean, by_tick.monitor.mean)
     np.testing.assert_array_equal(by_block.monitor.cov, by_tick.monitor.cov)
@@ -124,15 +95,14 @@ def test_a_block_of_ticks_equals_the_same_ticks_one_by_one(kind):
     assert by_block.monitor.skipped.sum() > 0
 
 
-def test_the_loop_measures_what_measure_gives_for_counter_uniforms():
-    """The fused sensor kernel of run() draws the same noise as the public counter_uniforms + measure."""
+def test_the_loop_measures_with_its_sensors_from_the_ticks_since_reset():
+    """run() hands the block's true spacings and speeds to its Sensors, counting ticks from each env's reset."""
     loop = MonitoredPlatoon(sensors=SensorConfig(dropout_probability=0.2), n_envs=4, seed=9)
     loop.reset(np.array([10.0, 20.0, 25.0, 30.0]))
     loop.run(np.full((7, 4), 20.0), np.zeros((7, 4)))  # the ticks no longer start at 0
+    assert loop.ticks.tolist() == [7] * 4
     block = loop.run(np.full((10, 4), 20.0), np.zeros((10, 4)))
-    ticks = 7 + np.arange(1, 11)[:, None] + np.zeros(4, dtype=np.int64)
-    uniforms = counter_uniforms(loop.noise_keys, ticks, 5)
-    spacing, speed = measure(block.physics.spacing, block.physics.speed, loop.sensors, uniforms, loop.dropout_probability)
-    np.testing.assert_array_equal(block.measured_spacing, spacing)
-    np.testing.assert_array_equal(block.measured_speed, speed)
-    assert np.isnan(spacing).any()
+    expected = loop.sensors.measure(Readings(block.physics.spacing, block.physics.speed), np.full(4, 7))
+    np.testing.assert_array_equal(block.readings.spacing, expected.spacing)
+    np.testing.assert_array_equal(block.readings.speed, expected.speed)
+    assert np.isnan(expected.spacing).any()

@@ -12,9 +12,9 @@ def test_paper_scenario_trajectory():
     assert trajectory.t.shape == (2501,) and trajectory.t[-1] == pytest.approx(250.0)
     for name in ("x", "v", "a", "u"):
         assert getattr(trajectory, name).shape == (2501, 6)
-    assert trajectory.time_gap_setting.shape == (2501, 5)
+    assert trajectory.setting.shape == (2501, 5)
     assert trajectory.collision is None
-    gap = trajectory.time_gap
+    gap = trajectory.actual_time_gap
     # The paper's shape: the first followers swing most, the swing shrinks down the platoon (string stable).
     swing = np.nanmax(gap, axis=0) - np.nanmin(gap, axis=0)
     assert np.all(np.diff(swing) < 0)
@@ -23,7 +23,7 @@ def test_paper_scenario_trajectory():
 
 def test_same_seed_gives_identical_arrays():
     first, again = timegap_env.simulate("stochastic_human", seed=5), timegap_env.simulate("stochastic_human", seed=5)
-    for name in ("x", "v", "a", "u", "time_gap_applied"):
+    for name in ("x", "v", "a", "u", "applied_setting"):
         np.testing.assert_array_equal(getattr(first, name), getattr(again, name))
     other = timegap_env.simulate("stochastic_human", seed=6)
     assert not np.array_equal(first.v, other.v)
@@ -38,9 +38,9 @@ def test_user_speed_array_runs():
     "kwargs, message",
     [
         ({"scenario": "rush_hour"}, "scenario = 'rush_hour'"),
-        ({"time_gap_setting": np.ones((3, 5))}, r"time_gap_setting has shape \(3, 5\)"),
-        ({"time_gap_setting": np.ones(4)}, r"time_gap_setting has shape \(4,\)"),
-        ({"time_gap_setting": -1.0}, "time_gap_setting = -1.0"),
+        ({"setting": np.ones((3, 5))}, r"setting has shape \(3, 5\)"),
+        ({"setting": np.ones(4)}, r"setting has shape \(4,\)"),
+        ({"setting": -1.0}, "setting = -1.0"),
         ({"v2v": np.ones((2, 2), dtype=bool)}, r"v2v has shape \(2, 2\)"),
         ({"scenario": np.ones((10, 2))}, r"speed has shape \(10, 2\)"),
         ({"scenario": np.r_[20.0, np.nan, 20.0]}, r"speed\[1\] = nan"),

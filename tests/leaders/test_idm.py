@@ -5,7 +5,7 @@ import pytest
 from highway_env.vehicle.behavior import IDMVehicle
 
 from timegap_env.config import LeaderConfig
-from timegap_env.human_leader import build_scene, idm_leader
+from timegap_env.leaders.idm import build_scene, idm_leader
 from timegap_env.leaders import LeaderProfile
 
 DT = 0.1  # [s]

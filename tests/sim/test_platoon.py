@@ -5,8 +5,8 @@ import pytest
 
 from timegap_env.config import PlatoonConfig
 from timegap_env.leaders import LeaderProfile
-from timegap_env.platoon import Platoon, ZOHCoefficients
-from timegap_env.simulation import simulate
+from timegap_env.sim.platoon import Platoon, ZOHCoefficients
+from timegap_env.sim import simulate
 
 
 @pytest.mark.parametrize("lag, gain", [(0.45, 1.0), (0.2, 0.8), (1.3, 1.2)])
@@ -35,21 +35,21 @@ def test_zoh_is_not_euler():
 def test_equilibrium_is_kept_behind_a_constant_speed_leader():
     trajectory = simulate(np.full(300, 25.0))
     assert np.allclose(trajectory.v, 25.0, atol=1e-9)
-    assert np.allclose(trajectory.time_gap, 1.6, atol=1e-9)
+    assert np.allclose(trajectory.actual_time_gap, 1.6, atol=1e-9)
     assert np.allclose(trajectory.spacing, 5.0 + 1.6 * 25.0, atol=1e-9)
 
 
-def test_time_gap_change_is_ramped_and_the_platoon_settles_on_it():
-    config = PlatoonConfig(time_gap_ramp_rate=0.2)
+def test_setting_change_is_ramped_and_the_platoon_settles_on_it():
+    config = PlatoonConfig(setting_ramp_rate=0.2)
     n_ticks = 600
     setting = np.full((n_ticks, config.n_followers), 1.6)
     setting[100:] = 1.0
-    trajectory = simulate(np.full(n_ticks, 25.0), config, time_gap_setting=setting)
-    applied = trajectory.time_gap_applied[:, 0]
+    trajectory = simulate(np.full(n_ticks, 25.0), config, setting=setting)
+    applied = trajectory.applied_setting[:, 0]
     assert np.max(np.abs(np.diff(applied))) <= 0.2 * config.dt + 1e-12
     ramp_ticks = int(round(0.6 / (0.2 * config.dt)))
     assert applied[100 + ramp_ticks // 2] == pytest.approx(1.3, abs=0.011)
-    assert np.allclose(trajectory.time_gap[-1], 1.0, atol=1e-3)
+    assert np.allclose(trajectory.actual_time_gap[-1], 1.0, atol=1e-3)
 
 
 def test_v2v_loss_switches_to_acc_during_a_run():
@@ -69,7 +69,7 @@ def test_v2v_loss_switches_to_acc_during_a_run():
 def test_collision_is_detected_and_stops_the_run():
     """A leader that stops dead at 12 m/s^2 from 30 m/s with a tiny time gap gets hit."""
     speed = np.r_[np.full(20, 30.0), np.maximum(30.0 - 1.2 * np.arange(1, 40), 0.0), np.zeros(100)]
-    trajectory = simulate(speed, PlatoonConfig(time_gap=0.3, standstill_spacing=1.0), v2v=False)
+    trajectory = simulate(speed, PlatoonConfig(initial_setting=0.3, standstill_spacing=1.0), v2v=False)
     assert trajectory.collision is not None
     assert trajectory.collision.gap <= 0
     assert trajectory.t[-1] == pytest.approx(trajectory.collision.time)
@@ -123,7 +123,7 @@ def test_followers_do_not_reverse():
         (lambda p: p.set_dynamics(np.zeros(5), 1.0), "actuation_lag"),
         (lambda p: p.set_dynamics(0.45, -1.0), "actuation_gain"),
         (lambda p: p.set_dynamics(np.ones(4), 1.0), "actuation_lag"),
-        (lambda p: p.set_time_gap(0.0), "time_gap_setting"),
+        (lambda p: p.request_setting(0.0), "setting"),
         (lambda p: p.step([20.0, 20.0], 0.0), "leader_speed"),
         (lambda p: p.step(np.nan, 0.0), "leader_speed"),
         (lambda p: p.reset(-1.0), "leader_speed"),

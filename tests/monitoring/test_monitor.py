@@ -1,4 +1,4 @@
-"""Tests of the Bayesian time-gap monitor: the Proposition, the streaming window, invalid data."""
+"""The streaming monitor: the Proposition over a sliding window, forgetting, invalid data, changes of setting."""
 
 from __future__ import annotations
 
@@ -10,24 +10,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from timegap_env.config import MONITOR_PRESETS, MonitorConfig, PlatoonConfig
-from timegap_env.monitor import TimeGapMonitor, outside_probability, posterior
+from timegap_env.monitoring.monitor import TimeGapMonitor
+from timegap_env.monitoring.posterior import posterior
 
 PAPER_PRIOR_COV = np.array([[1e-4, -1e-5], [-1e-5, 0.125]])
-
-
-def dense_posterior(V, S, mu_b, Sigma_b, sigma2, weights=None):
-    """The Proposition written out with explicit inverses, as printed in the paper."""
-    Z = np.column_stack([np.ones(len(V)), V])
-    W = np.diag(np.ones(len(V)) if weights is None else weights)
-    prior_inv = np.linalg.inv(Sigma_b)
-    cov = np.linalg.inv(prior_inv + Z.T @ W @ Z / sigma2)
-    return cov @ (Z.T @ W @ S / sigma2 + prior_inv @ mu_b), cov
-
-
-def random_spd(rng: np.random.Generator) -> np.ndarray:
-    std = rng.uniform(0.01, 1.0, 2)
-    rho = rng.uniform(-0.9, 0.9)
-    return np.array([[std[0] ** 2, rho * std[0] * std[1]], [rho * std[0] * std[1], std[1] ** 2]])
 
 
 def synthetic(rng: np.random.Generator, shape: tuple[int, ...], tau: float = 1.6, s0: float = 5.0):
@@ -78,70 +64,6 @@ def assert_spd(cov: np.ndarray) -> None:
     np.linalg.cholesky(cov)  # raises unless positive definite
 
 
-# ---- posterior(): the Proposition ------------------------------------------------------------
-
-
-@pytest.mark.parametrize("seed", range(5))
-def test_posterior_matches_dense_formula(seed):
-    rng = np.random.default_rng(seed)
-    n = int(rng.integers(1, 200))
-    V = rng.uniform(0, 40, n)
-    S = rng.uniform(0, 100, n)
-    mu_b, Sigma_b, sigma2 = rng.normal(size=2), random_spd(rng), rng.uniform(0.01, 2.0)
-    weights = rng.uniform(0, 1, n)
-    for w in (None, weights):
-        mean, cov = posterior(V, S, mu_b, Sigma_b, sigma2, weights=w)
-        dense_mean, dense_cov = dense_posterior(V, S, mu_b, Sigma_b, sigma2, w)
-        np.testing.assert_allclose(mean, dense_mean, rtol=1e-9, atol=1e-12)
-        np.testing.assert_allclose(cov, dense_cov, rtol=1e-9, atol=1e-15)
-
-
-def test_posterior_paper_prior_and_data():
-    rng = np.random.default_rng(0)
-    V, S = synthetic(rng, (100,), tau=1.6, s0=1.0)
-    mean, cov = posterior(V, S, [1.0, 1.6], PAPER_PRIOR_COV, 0.01)
-    dense_mean, dense_cov = dense_posterior(V, S, np.array([1.0, 1.6]), PAPER_PRIOR_COV, 0.01)
-    np.testing.assert_allclose(mean, dense_mean, rtol=1e-10)
-    np.testing.assert_allclose(cov, dense_cov, rtol=1e-8)
-    assert mean[1] == pytest.approx(1.6, abs=0.01)
-
-
-def test_posterior_without_data_is_the_prior():
-    mean, cov = posterior([], [], [5.0, 1.6], PAPER_PRIOR_COV, 0.01)
-    np.testing.assert_allclose(mean, [5.0, 1.6], rtol=1e-14)
-    np.testing.assert_allclose(cov, PAPER_PRIOR_COV, rtol=1e-12)
-
-
-def test_posterior_integer_weights_repeat_measurements():
-    V, S = np.array([10.0, 20.0, 30.0]), np.array([21.0, 37.5, 53.0])
-    weighted = posterior(V, S, [5.0, 1.6], PAPER_PRIOR_COV, 0.01, weights=[2, 0, 3])
-    repeated = posterior([10, 10, 30, 30, 30], [21, 21, 53, 53, 53], [5.0, 1.6], PAPER_PRIOR_COV, 0.01)
-    np.testing.assert_allclose(weighted[0], repeated[0], rtol=1e-12)
-    np.testing.assert_allclose(weighted[1], repeated[1], rtol=1e-12)
-
-
-@pytest.mark.parametrize(
-    ("kwargs", "message"),
-    [
-        ({"V": [1.0, np.nan]}, r"V\[1\] = nan"),
-        ({"S": [1.0]}, "S has shape"),
-        ({"V": [[1.0, 2.0]]}, "V has shape"),
-        ({"mu_b": [1.0, 2.0, 3.0]}, "mu_b"),
-        ({"Sigma_b": [[1.0, 0.0], [0.0, -1.0]]}, "Sigma_b .* positive definite"),
-        ({"Sigma_b": [[1.0, 0.5], [0.4, 1.0]]}, "Sigma_b .* symmetric"),
-        ({"sigma2": 0.0}, "sigma2 = 0.0"),
-        ({"sigma2": float("inf")}, "sigma2 = inf"),
-        ({"weights": [1.0, -1.0]}, "weights"),
-        ({"V": [1e200, 1e200]}, "overflows"),
-    ],
-)
-def test_posterior_rejects_bad_input(kwargs, message):
-    args = {"V": [10.0, 20.0], "S": [21.0, 37.0], "mu_b": [5.0, 1.6], "Sigma_b": PAPER_PRIOR_COV, "sigma2": 0.01}
-    args.update(kwargs)
-    with pytest.raises(ValueError, match=message):
-        posterior(**args)
-
-
 # ---- the streaming monitor against posterior() -------------------------------------------------
 
 
@@ -152,7 +74,7 @@ def test_monitor_matches_posterior_of_the_window(window, forgetting):
     rng = np.random.default_rng(1)
     n_ticks, shape = 83, (3, 2)  # the 5-tick window wraps 16 times
     speeds, spacings = corrupt(rng, *synthetic(rng, (n_ticks,) + shape))
-    monitor = TimeGapMonitor(*shape, time_gap=1.6, config=config)
+    monitor = TimeGapMonitor(*shape, setting=1.6, config=config)
     for t in range(n_ticks):
         used = monitor.update(speeds[t], spacings[t])
         np.testing.assert_array_equal(used, is_valid(speeds[t], spacings[t], config))
@@ -166,7 +88,7 @@ def long_run(n_ticks: int, config: MonitorConfig, check_every: int) -> None:
     """Stream n_ticks of (2 x 3) data, check SPD along the way and the final posterior exactly."""
     rng = np.random.default_rng(2)
     shape, chunk = (2, 3), 1000
-    monitor = TimeGapMonitor(*shape, time_gap=1.6, config=config)
+    monitor = TimeGapMonitor(*shape, setting=1.6, config=config)
     for start in range(0, n_ticks, chunk):
         speeds, spacings = corrupt(rng, *synthetic(rng, (chunk,) + shape), rate=0.05)
         for t in range(min(chunk, n_ticks - start)):
@@ -192,9 +114,9 @@ def test_million_updates_stay_exact_and_positive_definite(window):
     long_run(1_000_000, MonitorConfig(window=window), check_every=10_007)
 
 
-def test_estimate_follows_a_change_of_time_gap():
+def test_estimate_follows_a_change_of_the_actual_time_gap():
     rng = np.random.default_rng(3)
-    monitor = TimeGapMonitor(1, 1, time_gap=1.6, config=MonitorConfig(window=5.0))
+    monitor = TimeGapMonitor(1, 1, setting=1.6, config=MonitorConfig(window=5.0))
     for tau in (1.6, 1.9):
         for _ in range(50):
             monitor.update(*synthetic(rng, (1, 1), tau=tau))
@@ -207,7 +129,7 @@ def test_estimate_follows_a_change_of_time_gap():
 def test_invalid_measurements_are_skipped_per_vehicle():
     config = MonitorConfig(window=None)
     rng = np.random.default_rng(4)
-    monitor = TimeGapMonitor(1, 6, time_gap=1.6, config=config)
+    monitor = TimeGapMonitor(1, 6, setting=1.6, config=config)
     for _ in range(20):
         monitor.update(*synthetic(rng, (1, 6)))
     mean, cov = monitor.mean.copy(), monitor.cov.copy()
@@ -226,7 +148,7 @@ def test_invalid_measurements_are_skipped_per_vehicle():
 def test_a_long_dropout_empties_the_window_back_to_the_prior():
     config = MonitorConfig(window=1.0)
     rng = np.random.default_rng(5)
-    monitor = TimeGapMonitor(1, 1, time_gap=1.6, config=config)
+    monitor = TimeGapMonitor(1, 1, setting=1.6, config=config)
     for _ in range(15):
         monitor.update(*synthetic(rng, (1, 1), tau=1.9))
     for tick in range(config.window_ticks):
@@ -238,7 +160,7 @@ def test_a_long_dropout_empties_the_window_back_to_the_prior():
 
 
 def test_update_rejects_wrong_shapes():
-    monitor = TimeGapMonitor(2, 3, time_gap=1.6)
+    monitor = TimeGapMonitor(2, 3, setting=1.6)
     with pytest.raises(ValueError, match=r"speed has shape \(3, 2\)"):
         monitor.update(np.zeros((3, 2)), np.zeros((2, 3)))
     with pytest.raises(ValueError, match="spacing"):
@@ -247,7 +169,7 @@ def test_update_rejects_wrong_shapes():
 
 @pytest.mark.parametrize(
     ("args", "message"),
-    [((0, 3, 1.6), "n_envs = 0"), ((2, 2.5, 1.6), "n_vehicles = 2.5"), ((2, 3, -1.0), r"time_gap\[0, 0\] = -1.0")],
+    [((0, 3, 1.6), "n_envs = 0"), ((2, 2.5, 1.6), "n_vehicles = 2.5"), ((2, 3, -1.0), r"setting\[0, 0\] = -1.0")],
 )
 def test_monitor_constructor_rejects_bad_arguments(args, message):
     with pytest.raises(ValueError, match=message):
@@ -260,7 +182,7 @@ def test_monitor_constructor_rejects_bad_arguments(args, message):
 def test_recenter_moves_the_prior_and_clears_the_window():
     config = MonitorConfig(window=2.0)
     rng = np.random.default_rng(6)
-    monitor = TimeGapMonitor(2, 2, time_gap=1.6, config=config)
+    monitor = TimeGapMonitor(2, 2, setting=1.6, config=config)
     for _ in range(30):
         monitor.update(*synthetic(rng, (2, 2), tau=1.8))
     before = monitor.mean.copy()
@@ -280,12 +202,12 @@ def test_recenter_moves_the_prior_and_clears_the_window():
 
 
 def test_reset_restarts_envs_and_their_skip_counters():
-    monitor = TimeGapMonitor(2, 2, time_gap=1.6)
+    monitor = TimeGapMonitor(2, 2, setting=1.6)
     rng = np.random.default_rng(7)
     for _ in range(10):
         monitor.update(*corrupt(rng, *synthetic(rng, (2, 2)), rate=0.5))
     skipped = monitor.skipped.copy()
-    monitor.reset(np.array([False, True]), time_gap=[[1.2, 1.4]])
+    monitor.reset(np.array([False, True]), setting=[[1.2, 1.4]])
     np.testing.assert_array_equal(monitor.skipped[0], skipped[0])
     np.testing.assert_array_equal(monitor.skipped[1], 0)
     np.testing.assert_allclose(monitor.tau_mean[1], [1.2, 1.4])
@@ -298,14 +220,14 @@ def test_reset_restarts_envs_and_their_skip_counters():
         (lambda m: m.reset(np.array([True]), 1.6), r"mask has dtype bool and shape \(1,\)"),
         (lambda m: m.reset(np.array([1, 0]), 1.6), "mask has dtype int"),
         (lambda m: m.recenter(1.0, np.ones((3, 3), dtype=bool)), r"mask has shape \(3, 3\)"),
-        (lambda m: m.recenter(np.nan), r"time_gap\[0, 0\] = nan"),
-        (lambda m: m.recenter([1.0, 1.0, 1.0]), r"time_gap has shape \(3,\)"),
+        (lambda m: m.recenter(np.nan), r"setting\[0, 0\] = nan"),
+        (lambda m: m.recenter([1.0, 1.0, 1.0]), r"setting has shape \(3,\)"),
         (lambda m: m.prob_outside(1.85, 1.35), "need lcl <= ucl"),
     ],
 )
 def test_changes_of_setting_reject_bad_arguments(call, message):
     with pytest.raises(ValueError, match=message):
-        call(TimeGapMonitor(2, 2, time_gap=1.6))
+        call(TimeGapMonitor(2, 2, setting=1.6))
 
 
 # ---- read-outs ------------------------------------------------------------------------------
@@ -313,7 +235,7 @@ def test_changes_of_setting_reject_bad_arguments(call, message):
 
 def test_prob_outside_matches_the_normal_marginal():
     rng = np.random.default_rng(8)
-    monitor = TimeGapMonitor(3, 4, time_gap=1.6, config=MonitorConfig(window=0.3))
+    monitor = TimeGapMonitor(3, 4, setting=1.6, config=MonitorConfig(window=0.3))
     monitor.update(*synthetic(rng, (3, 4), tau=1.7))
     lcl, ucl = 1.35, rng.uniform(1.6, 1.9, (3, 4))
     p = monitor.prob_outside(lcl, ucl)
@@ -326,15 +248,8 @@ def test_prob_outside_matches_the_normal_marginal():
     np.testing.assert_allclose(monitor.prob_outside(monitor.tau_mean, monitor.tau_mean), 1.0, rtol=1e-6)
 
 
-def test_outside_probability_of_a_normal():
-    assert outside_probability(0.0, 1.0, -1.0, 1.0) == pytest.approx(0.31731050786291415, rel=1e-14)  # 2 (1 - Phi(1))
-    assert outside_probability(0.0, 4.0, -2.0, np.inf) == pytest.approx(0.15865525393145707, rel=1e-14)  # sd 2
-    assert outside_probability(0.0, 1.0, -40.0, 40.0) == 0.0  # both tails underflow cleanly
-    assert outside_probability(0.0, 1.0, 40.0, 50.0) == 1.0  # mean far below the band
-
-
 def test_sufficient_statistics_are_exposed():
-    monitor = TimeGapMonitor(1, 1, time_gap=1.6, config=MonitorConfig(window=None))
+    monitor = TimeGapMonitor(1, 1, setting=1.6, config=MonitorConfig(window=None))
     monitor.update([[10.0]], [[21.0]])
     monitor.update([[20.0]], [[37.0]])
     np.testing.assert_allclose(monitor.ztz[0, 0], [[2, 30], [30, 500]])
@@ -350,7 +265,7 @@ def test_presets():
     assert paper.prior_standstill_spacing == 1.0
     np.testing.assert_array_equal(paper.prior_cov, PAPER_PRIOR_COV)
     assert default.prior_standstill_spacing == PlatoonConfig().standstill_spacing == 5.0
-    monitor = TimeGapMonitor(1, 2, time_gap=1.6, config=paper)
+    monitor = TimeGapMonitor(1, 2, setting=1.6, config=paper)
     np.testing.assert_allclose(monitor.mean[0], [[1.0, 1.6], [1.0, 1.6]], rtol=1e-12)
 
 
@@ -380,33 +295,9 @@ any_float = st.floats(allow_nan=True, allow_infinity=True)
     forgetting=st.floats(0.5, 1.0),
 )
 def test_any_input_keeps_the_posterior_finite_and_positive_definite(ticks, window, forgetting):
-    monitor = TimeGapMonitor(2, 2, time_gap=1.6, config=MonitorConfig(window=window, forgetting=forgetting))
+    monitor = TimeGapMonitor(2, 2, setting=1.6, config=MonitorConfig(window=window, forgetting=forgetting))
     for values in ticks:
         monitor.update(np.reshape(values[:4], (2, 2)), np.reshape(values[4:], (2, 2)))
         assert_spd(monitor.cov)
         assert np.all(np.isfinite(monitor.mean))
         assert np.all(np.isfinite(monitor.prob_outside(1.35, 1.85)))
-
-
-@settings(max_examples=100, deadline=None)
-@given(
-    data=st.lists(st.tuples(st.floats(0, 100), st.floats(0, 1000)), max_size=50),
-    mu_b=st.tuples(st.floats(-10, 10), st.floats(0, 5)),
-    std=st.tuples(st.floats(1e-3, 10), st.floats(1e-3, 10)),
-    rho=st.floats(-0.99, 0.99),
-    sigma2=st.floats(1e-3, 10),
-)
-def test_posterior_is_finite_and_positive_definite(data, mu_b, std, rho, sigma2):
-    V, S = np.array(data, dtype=float).reshape(-1, 2).T
-    Sigma_b = np.array([[std[0] ** 2, rho * std[0] * std[1]], [rho * std[0] * std[1], std[1] ** 2]])
-    mean, cov = posterior(V, S, mu_b, Sigma_b, sigma2)
-    assert_spd(cov)
-    assert np.all(np.isfinite(mean))
-
-
-def test_benchmark_quick_runs(capsys):
-    from train import bench_monitor
-
-    bench_monitor.main(["--quick"])
-    out = capsys.readouterr().out
-    assert "vehicle-updates/s" in out and "ratio" in out

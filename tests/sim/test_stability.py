@@ -5,24 +5,24 @@ import pytest
 
 from timegap_env.config import PlatoonConfig
 from timegap_env.leaders import LeaderProfile
-from timegap_env.simulation import simulate
-from timegap_env.stability import platoon_string_stability, string_stability, transfer_gain
+from timegap_env.sim import simulate
+from timegap_env.sim.stability import platoon_string_stability, string_stability, transfer_gain
 
 DEFAULT = PlatoonConfig()
 GAINS = dict(k_s=DEFAULT.k_s, k_v=DEFAULT.k_v, k_a=DEFAULT.k_a, lag=0.45, gain=1.0)
 
 
-@pytest.mark.parametrize("time_gap", [1.0, 1.6])
+@pytest.mark.parametrize("setting", [1.0, 1.6])
 @pytest.mark.parametrize("delay", [0.1, 0.2])
-def test_default_gains_are_string_stable_with_v2v(time_gap, delay):
-    report = string_stability(**GAINS, k_f=DEFAULT.k_f, time_gap=time_gap, delay=delay)
+def test_default_gains_are_string_stable_with_v2v(setting, delay):
+    report = string_stability(**GAINS, k_f=DEFAULT.k_f, setting=setting, delay=delay)
     assert report.string_stable and report.locally_stable
     assert report.peak_gain <= 1 + 1e-9
 
 
 def test_default_gains_without_v2v_are_unstable_at_1_0_and_stable_at_1_6():
-    unstable = string_stability(**GAINS, k_f=0.0, time_gap=1.0, delay=0.1)
-    stable = string_stability(**GAINS, k_f=0.0, time_gap=1.6, delay=0.1)
+    unstable = string_stability(**GAINS, k_f=0.0, setting=1.0, delay=0.1)
+    stable = string_stability(**GAINS, k_f=0.0, setting=1.6, delay=0.1)
     assert not unstable.string_stable and unstable.peak_gain > 1.05
     assert 0.1 < unstable.peak_frequency < 1.0
     assert stable.string_stable
@@ -30,23 +30,23 @@ def test_default_gains_without_v2v_are_unstable_at_1_0_and_stable_at_1_6():
 
 
 def test_gain_is_one_at_zero_frequency():
-    assert transfer_gain(np.array([0.0]), **GAINS, k_f=0.6, time_gap=1.6, delay=0.1)[0] == pytest.approx(1.0)
+    assert transfer_gain(np.array([0.0]), **GAINS, k_f=0.6, setting=1.6, delay=0.1)[0] == pytest.approx(1.0)
 
 
 def test_hurwitz_check_flags_an_unstable_loop():
-    report = string_stability(k_s=0.2, k_v=0.01, k_a=0.9, k_f=0.0, time_gap=0.1, lag=2.0, gain=1.0, delay=0.0)
+    report = string_stability(k_s=0.2, k_v=0.01, k_a=0.9, k_f=0.0, setting=0.1, lag=2.0, gain=1.0, delay=0.0)
     assert not report.locally_stable
 
 
-@pytest.mark.parametrize("field, value", [("time_gap", 0.0), ("lag", -0.45), ("gain", 0.0), ("delay", -0.1)])
+@pytest.mark.parametrize("field, value", [("setting", 0.0), ("lag", -0.45), ("gain", 0.0), ("delay", -0.1)])
 def test_bad_arguments_are_named(field, value):
-    arguments = dict(**GAINS, k_f=0.6, time_gap=1.6, delay=0.1)
+    arguments = dict(**GAINS, k_f=0.6, setting=1.6, delay=0.1)
     arguments[field] = value
     with pytest.raises(ValueError, match=field):
         string_stability(**arguments)
 
 
-def _peak_spacing_errors(time_gap: float, v2v: bool) -> np.ndarray:
+def _peak_spacing_errors(setting: float, v2v: bool) -> np.ndarray:
     """Peak |spacing error| of each of 8 followers after one slow braking-and-recovery pulse of the leader.
 
     10 s each way puts the pulse's energy near the unstable band (peak near 0.3 rad/s);
@@ -54,17 +54,17 @@ def _peak_spacing_errors(time_gap: float, v2v: bool) -> np.ndarray:
     """
     pulse = np.r_[np.zeros(50), np.full(100, -1.0), np.full(100, 1.0), np.zeros(700)]
     leader = LeaderProfile.from_acceleration(pulse)
-    config = PlatoonConfig(n_followers=8, time_gap=time_gap, v2v=v2v)
+    config = PlatoonConfig(n_followers=8, initial_setting=setting, v2v=v2v)
     trajectory = simulate(leader, config)
     assert trajectory.collision is None
     return np.abs(trajectory.spacing_error).max(axis=0)
 
 
-@pytest.mark.parametrize("time_gap, v2v", [(1.0, True), (1.6, True), (1.0, False), (1.6, False), (0.6, True)])
-def test_simulator_agrees_with_the_analytic_check(time_gap, v2v):
+@pytest.mark.parametrize("setting, v2v", [(1.0, True), (1.6, True), (1.0, False), (1.6, False), (0.6, True)])
+def test_simulator_agrees_with_the_analytic_check(setting, v2v):
     """Where the check says unstable the peak spacing error grows down the platoon; where stable it shrinks."""
-    report = platoon_string_stability(PlatoonConfig(n_followers=8, time_gap=time_gap, v2v=v2v))[0]
-    peaks = _peak_spacing_errors(time_gap, v2v)
+    report = platoon_string_stability(PlatoonConfig(n_followers=8, initial_setting=setting, v2v=v2v))[0]
+    peaks = _peak_spacing_errors(setting, v2v)
     if report.string_stable:
         assert np.all(np.diff(peaks) < 0), peaks
     else:

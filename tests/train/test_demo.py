@@ -5,7 +5,7 @@ from pathlib import Path
 
 from train import demo
 
-RESULTS = Path(__file__).resolve().parents[1] / "results"
+RESULTS = Path(__file__).resolve().parents[2] / "results"
 
 
 def test_demo_writes_figure_and_table(tmp_path, monkeypatch, capsys):

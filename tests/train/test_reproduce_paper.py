@@ -5,7 +5,7 @@ from pathlib import Path
 
 from train import reproduce_paper
 
-RESULTS = Path(__file__).resolve().parents[1] / "results" / "paper"
+RESULTS = Path(__file__).resolve().parents[2] / "results" / "paper"
 
 
 def test_reproduction_matches_the_committed_summary(tmp_path, monkeypatch):

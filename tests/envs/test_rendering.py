@@ -10,8 +10,8 @@ import time
 import numpy as np
 import pytest
 
-from timegap_env import rendering
-from timegap_env.rendering import (
+from timegap_env.envs import rendering
+from timegap_env.envs.rendering import (
     ALARM_COLOR,
     COLLIDED_COLOR,
     FOLLOWER_COLOR,

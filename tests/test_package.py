@@ -1,0 +1,51 @@
+"""The package as users meet it: registration, the episode length, what the top level exports."""
+
+import subprocess
+import sys
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import timegap_env
+
+
+def test_makeable_by_module_prefix_without_importing_first():
+    code = "import gymnasium as gym; env = gym.make('timegap_env:TimeGapMonitor-v0'); env.reset(seed=0); print('ok')"
+    assert subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.strip() == "ok"
+
+
+@pytest.mark.parametrize("duration, decision_interval", [(None, None), (500.0, None), (60.0, 2.0)])
+def test_episodes_last_episode_duration_without_max_episode_steps(duration, decision_interval):
+    config = {key: value for key, value in (("episode_duration", duration), ("decision_interval", decision_interval))
+              if value is not None}
+    env = gym.make(timegap_env.ENV_ID, config=config)
+    expected = env.unwrapped.config.max_episode_steps
+    assert expected == round((duration or 250.0) / (decision_interval or 1.0))
+    env.reset(seed=0, options={"leader_speed": np.full(10_000, 25.0)})  # a leader longer than any of the episodes
+    for step in range(1, expected + 1):
+        _, _, terminated, truncated, _ = env.step(5)
+        assert not terminated and truncated == (step == expected)
+    vector = gym.make_vec(timegap_env.ENV_ID, num_envs=2, vectorization_mode="vector_entry_point", config=config)
+    vector.reset(seed=0, options={"leader_speed": np.full(10_000, 25.0)})
+    for step in range(1, expected + 1):
+        _, _, _, truncated, _ = vector.step(np.full(2, 5))
+        assert truncated.tolist() == [step == expected] * 2
+
+
+def test_what_users_call_is_importable_from_the_top_level():
+    for name in ("simulate", "Trajectory", "posterior", "TimeGapMonitor", "LeaderProfile", "make_leader", "SCENARIOS",
+                 "aggressive_cycles", "sinusoid", "hard_braking", "stochastic_human", "read_ngsim", "vehicle_profile",
+                 "idm_leader", "string_stability", "EnvConfig", "PlatoonConfig", "MonitorConfig", "ChartConfig",
+                 "SensorConfig", "LeaderConfig", "RewardWeights", "MONITOR_PRESETS", "ENV_ID"):
+        assert name in timegap_env.__all__ and hasattr(timegap_env, name), name
+    assert all(hasattr(timegap_env, name) for name in timegap_env.__all__)
+    mean, cov = timegap_env.posterior([20.0, 25.0], [37.0, 45.0], [5.0, 1.6], [[1e-4, -1e-5], [-1e-5, 0.125]], 0.01)
+    assert mean.shape == (2,) and cov.shape == (2, 2)
+
+
+def test_agents_are_installed_with_the_package():
+    """pyproject.toml installs ``agents`` beside ``timegap_env``: importable outside the repository."""
+    code = "import agents.policies, agents.protocol; print(agents.policies.__file__)"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd="/").stdout
+    assert "agents" in out
