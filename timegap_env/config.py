@@ -207,7 +207,7 @@ class StochasticHumanConfig(ConfigMixin):
 
 @dataclasses.dataclass(frozen=True)
 class HumanLeaderConfig(ConfigMixin):
-    """highway-env's IDM driver as a human leader behind a scripted disturbance (``timegap_env.human_leader``)."""
+    """highway-env's IDM driver as a human leader behind a scripted disturbance (``timegap_env.leaders.idm``)."""
 
     desired_speed_factor: float = 1.2  # driver's desired speed over the disturbance's top speed [-]
     time_wanted_range: tuple[float, float] = (1.0, 2.0)  # desired time gap of a seeded driver (highway-env: 1.5) [s]

@@ -1,14 +1,11 @@
-"""TimeGapMonitor-v0: registration, config, spaces, scenarios, rewards, info, vector env, checkers."""
+"""TimeGapMonitor-v0 as a single env: config, spaces, scenarios, rewards, info, checkers, rendering."""
 
-import subprocess
-import sys
 import warnings
 
 import gymnasium as gym
 import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env
-from gymnasium.vector import AutoresetMode, SyncVectorEnv
 from stable_baselines3.common.env_checker import check_env as sb3_check_env
 
 import timegap_env
@@ -170,26 +167,6 @@ def test_same_seed_same_episode():
     np.testing.assert_array_equal(first[1][-1]["estimate"], again[1][-1]["estimate"])
 
 
-def test_vector_env_equals_single_envs_step_by_step():
-    config = {"episode_duration": 6.0, "v2v_loss_probability": 1.0, "v2v_loss_duration_range": (1.0, 3.0),
-              "dropout_probability_range": (0.0, 0.1)}
-    n = 3
-    native = gym.make_vec("TimeGapMonitor-v0", num_envs=n, vectorization_mode="vector_entry_point", config=config)
-    reference = SyncVectorEnv([lambda: gym.make("TimeGapMonitor-v0", config=config) for _ in range(n)],
-                              autoreset_mode=AutoresetMode.SAME_STEP)
-    obs_native, _ = native.reset(seed=7)
-    obs_reference, _ = reference.reset(seed=7)
-    np.testing.assert_array_equal(obs_native, obs_reference)
-    rng = np.random.default_rng(0)
-    for step in range(20):  # three episodes of 6 steps each and more: crosses autoresets
-        actions = rng.integers(0, len(LEVELS), size=n)
-        step_native = native.step(actions)
-        step_reference = reference.step(actions)
-        for got, want in zip(step_native[:4], step_reference[:4]):
-            np.testing.assert_array_equal(got, want, err_msg=f"step {step}")
-        np.testing.assert_array_equal(step_native[4]["estimate"][~step_native[3]], step_reference[4]["estimate"][~step_native[3]])
-
-
 def test_constant_extremes_lose_to_a_v2v_aware_policy():
     """The reward is not won by a constant: always 0.6 s and always 2.2 s both score below
     '1.0 s while every follower has V2V, 1.6 s (string stable in ACC) otherwise', over 30 episodes."""
@@ -241,19 +218,3 @@ def test_rgb_array_frames_are_drawn_and_change():
     assert len(np.unique(first.reshape(-1, 3), axis=0)) > 50 and first.mean() > 40  # not a blank or black frame
     assert np.abs(first.astype(int) - second.astype(int)).sum() > 0
     env.close()
-
-
-def test_vector_env_without_step_diagnostics_steps_the_same():
-    config = {"episode_duration": 4.0}
-    full = gym.make_vec("TimeGapMonitor-v0", num_envs=2, vectorization_mode="vector_entry_point", config=config)
-    lean = gym.make_vec("TimeGapMonitor-v0", num_envs=2, vectorization_mode="vector_entry_point", config=config,
-                        step_diagnostics=False)
-    full.reset(seed=3)
-    lean.reset(seed=3)
-    for step in range(6):  # past the end of the 4-step episodes
-        actions = np.array([step % len(LEVELS), 2])
-        got, want = lean.step(actions), full.step(actions)
-        for a, b in zip(got[:4], want[:4]):
-            np.testing.assert_array_equal(a, b)
-        assert "estimate" in want[4] and "estimate" not in got[4]
-        assert ("episode_summary" in got[4]) == ("episode_summary" in want[4])

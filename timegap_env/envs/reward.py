@@ -8,25 +8,26 @@ A step is scored in three steps, each a compiled kernel over named structures:
 3. :func:`weighted_sum`: the reward, the terms weighted by :class:`~timegap_env.config.RewardWeights`
    and added in the order of its fields.
 
-The terms (default weight in brackets), means over followers:
+The terms, means over followers (their weights are :class:`~timegap_env.config.RewardWeights`'s):
 
 | term | value | why |
 |---|---|---|
-| ``tracking`` (1) | -mean over ticks of abs(estimate - tau*) / (L sigma_desired) | keep the actual gap at its setting |
-| ``alarms`` (1) | -share of follower-ticks in alarm | the monitor's view matters |
-| ``safety`` (2) | -max(0, 1 - TTC / ttc_threshold), TTC the step's smallest | keep a margin to the predecessor |
-| ``collision`` (1000) | -1 on the step a collision ends the episode | outweighs any whole episode of the rest |
-| ``comfort`` (0.05) | -mean over ticks of (jerk / jerk_reference)^2 | no chattering |
-| ``efficiency`` (1) | -(1 - capacity(tau*) / capacity(smallest level)) at the current speed | a smaller setting moves more vehicles per hour |
-| ``preference`` (0.5) | -abs(tau* - preferred_setting) / span of the levels | the driver chose 1.6 s |
-| ``switching`` (0.2) | -share of followers whose setting changed | no chattering |
+| ``tracking`` | -mean over ticks of abs(estimate - tau*) / (L sigma_desired) | keep the actual gap at its setting |
+| ``alarms`` | -share of follower-ticks in alarm | the monitor's view matters |
+| ``safety`` | -max(0, 1 - TTC / ttc_threshold), TTC the step's smallest | keep a margin to the predecessor |
+| ``collision`` | -1 on the step a collision ends the episode | outweighs any whole episode of the rest |
+| ``comfort`` | -mean over ticks of (jerk / jerk_reference)^2 | no chattering |
+| ``efficiency`` | -(1 - capacity(tau*) / capacity(smallest level)) at the current speed | a smaller setting moves more vehicles per hour |
+| ``preference`` | -abs(tau* - preferred_setting) / span of the levels | the driver chose 1.6 s |
+| ``switching`` | -share of followers whose setting changed | no chattering |
 
-Each term is at most about -1 per step over 250 steps, so a collision costs more than four
-whole episodes of everything else: no efficiency gain pays for one, and ending an episode early
-never pays. Efficiency and preference pull in opposite directions, so neither the smallest nor the
-largest setting wins; switching and comfort keep the policy from chattering. Measured on 30
-episodes of the default mix (``tests/envs/test_env.py``): always 0.6 s and always 2.2 s both
-score below a policy that keeps 1.0 s while V2V is up and 1.6 s (string stable in ACC) without it.
+Each term is at most about -1 per step over 250 steps, so with the default weights a collision
+(1000) costs more than four whole episodes of everything else: no efficiency gain pays for one,
+and ending an episode early never pays. Efficiency and preference pull in opposite directions, so
+neither the smallest nor the largest setting wins; switching and comfort keep the policy from
+chattering. Measured on 30 episodes of the default mix (``tests/envs/test_env.py``): always 0.6 s
+and always 2.2 s both score below a policy that keeps 1.0 s while V2V is up and 1.6 s (string
+stable in ACC) without it.
 """
 
 from __future__ import annotations

@@ -11,6 +11,8 @@ Each takes a seed, its own parameters (a config of :mod:`timegap_env.config`) an
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numba
 import numpy as np
 
@@ -95,6 +97,25 @@ def hard_braking(
     return LeaderProfile.from_acceleration(accel, leader, name="hard_braking")
 
 
+class _HumanDraws(NamedTuple):
+    """The stochastic human's random draws, one per tick."""
+
+    innovations: np.ndarray  # (n,) innovations of the AR(1) acceleration noise [m/s^2]
+    target_changes: np.ndarray  # (n,) the target speed changes at this tick [bool]
+    new_targets: np.ndarray  # (n,) the target speed if it changes [m/s]
+
+
+class _HumanMotion(NamedTuple):
+    """The stochastic human's constants."""
+
+    initial_speed: float  # [m/s]
+    noise_decay: float  # AR(1) factor of the acceleration noise per tick [-]
+    speed_gain: float  # pull of the speed towards the target [1/s]
+    dt: float  # [s]
+    low: float  # speed band [m/s]
+    high: float  # [m/s]
+
+
 def stochastic_human(
     seed: int | None,
     params: StochasticHumanConfig = StochasticHumanConfig(),
@@ -108,12 +129,13 @@ def stochastic_human(
     low, high = leader.speed_band
     n, dt = leader.n_samples, leader.dt
     decay = np.exp(-dt / params.accel_correlation_time)
-    innovations = params.accel_std * np.sqrt(1.0 - decay**2) * rng.standard_normal(n)
-    target_changes = rng.random(n) < dt / params.target_change_interval
-    new_targets = rng.uniform(low, high, size=n)
-    accel = _pursue_targets(target_changes, new_targets, innovations, leader.initial_speed, decay,
-                            params.speed_gain, dt, low, high)
-    return LeaderProfile.from_acceleration(accel, leader, name="stochastic_human")
+    draws = _HumanDraws(
+        innovations=params.accel_std * np.sqrt(1.0 - decay**2) * rng.standard_normal(n),
+        target_changes=rng.random(n) < dt / params.target_change_interval,
+        new_targets=rng.uniform(low, high, size=n),
+    )
+    motion = _HumanMotion(leader.initial_speed, decay, params.speed_gain, dt, low, high)
+    return LeaderProfile.from_acceleration(_pursue_targets(draws, motion), leader, name="stochastic_human")
 
 
 # Compiled loops; each runs in order because every step depends on the speed reached so far.
@@ -129,14 +151,14 @@ def _jerk_limited_phase(accel, current, target, jerk_step, speed, dt):  # noqa: 
 
 
 @numba.njit(cache=True)
-def _pursue_targets(target_changes, new_targets, innovations, initial_speed, decay, speed_gain, dt, low, high):  # noqa: ANN001, ANN202, PLR0913
+def _pursue_targets(draws, motion):  # noqa: ANN001, ANN202
     """The stochastic human's acceleration [m/s^2]: speed_gain (target - v) plus an AR(1) noise."""
-    accel = np.empty(innovations.size)
-    speed, target, noise = initial_speed, initial_speed, 0.0
-    for k in range(innovations.size):
-        if target_changes[k]:
-            target = new_targets[k]
-        noise = decay * noise + innovations[k]
-        accel[k] = speed_gain * (target - speed) + noise
-        speed = min(max(speed + accel[k] * dt, low), high)
+    accel = np.empty(draws.innovations.size)
+    speed, target, noise = motion.initial_speed, motion.initial_speed, 0.0
+    for k in range(draws.innovations.size):
+        if draws.target_changes[k]:
+            target = draws.new_targets[k]
+        noise = motion.noise_decay * noise + draws.innovations[k]
+        accel[k] = motion.speed_gain * (target - speed) + noise
+        speed = min(max(speed + accel[k] * motion.dt, motion.low), motion.high)
     return accel

@@ -1,0 +1,71 @@
+"""A trained SB3 model as a policy: loaded with or without its VecNormalize statistics, errors that name the file."""
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from stable_baselines3 import PPO
+from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
+
+import timegap_env
+from agents.learned import LearnedPolicy
+from timegap_env.envs.observation import FEATURES
+
+
+def real_observation() -> np.ndarray:
+    """A reset observation of the default env (5 * 9,)."""
+    obs, _ = gym.make(timegap_env.ENV_ID).reset(seed=0)
+    return obs
+
+
+def with_feature(obs: np.ndarray, feature: str, value: float) -> np.ndarray:
+    """``obs`` with one feature of every follower set to ``value``."""
+    rows = obs.reshape(-1, len(FEATURES)).copy()
+    rows[:, FEATURES.index(feature)] = value
+    return rows.reshape(obs.shape)
+
+
+def tiny_ppo(env) -> PPO:
+    model = PPO("MlpPolicy", env, n_steps=64, batch_size=32, n_epochs=1, seed=0, device="cpu")
+    return model.learn(64)
+
+
+def test_learned_policy_without_vecnormalize(tmp_path):
+    env = gym.make(timegap_env.ENV_ID)
+    model = tiny_ppo(env)
+    model.save(tmp_path / "model.zip")
+    policy = LearnedPolicy.load(tmp_path)
+    assert policy.normalizer is None and policy.action_mode == "platoon"
+    obs = real_observation()
+    batch = np.stack([obs, with_feature(obs, "v2v", 0.0)])
+    action, _ = policy.predict(obs)
+    assert action.shape == () and env.action_space.contains(action)
+    assert action == model.predict(obs, deterministic=True)[0]
+    np.testing.assert_array_equal(policy.predict(batch)[0], model.predict(batch, deterministic=True)[0])
+
+
+def test_learned_policy_applies_saved_vecnormalize_statistics(tmp_path):
+    venv = VecNormalize(DummyVecEnv([lambda: gym.make(timegap_env.ENV_ID, config={"action_mode": "per_vehicle"})]))
+    model = tiny_ppo(venv)
+    model.save(tmp_path / "model.zip")
+    venv.save(tmp_path / "vecnormalize.pkl")
+    policy = LearnedPolicy.load(tmp_path / "model.zip")
+    assert policy.normalizer is not None and policy.action_mode == "per_vehicle"
+    obs = real_observation()
+    batch = np.stack([obs, with_feature(obs, "exceedances", 1.0)])
+    venv.training = False
+    np.testing.assert_allclose(policy.normalizer(batch), venv.normalize_obs(batch), rtol=1e-6)
+    expected, _ = model.predict(venv.normalize_obs(batch), deterministic=True)
+    np.testing.assert_array_equal(policy.predict(batch)[0], expected)
+    assert policy.predict(obs)[0].shape == (5,)
+    # the same model loaded without the statistics sees other inputs
+    (tmp_path / "vecnormalize.pkl").rename(tmp_path / "stats.pkl")
+    assert LearnedPolicy.load(tmp_path).normalizer is None
+    assert LearnedPolicy.load(tmp_path, vecnormalize=tmp_path / "stats.pkl").normalizer is not None
+
+
+def test_learned_policy_load_errors(tmp_path):
+    with pytest.raises(FileNotFoundError, match="no model zip"):
+        LearnedPolicy.load(tmp_path)
+    tiny_ppo(gym.make(timegap_env.ENV_ID)).save(tmp_path / "model.zip")
+    with pytest.raises(FileNotFoundError, match="vecnormalize = "):
+        LearnedPolicy.load(tmp_path, vecnormalize=tmp_path / "missing.pkl")

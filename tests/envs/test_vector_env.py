@@ -1,0 +1,60 @@
+"""The native vector env: equal to SyncVectorEnv over single envs, step by step, autoresets included."""
+
+import gymnasium as gym
+import numpy as np
+from gymnasium.vector import AutoresetMode, SyncVectorEnv
+
+from timegap_env.config import EnvConfig
+
+LEVELS = EnvConfig().setting_levels
+
+
+def test_vector_env_equals_single_envs_step_by_step():
+    config = {"episode_duration": 6.0, "v2v_loss_probability": 1.0, "v2v_loss_duration_range": (1.0, 3.0),
+              "dropout_probability_range": (0.0, 0.1)}
+    n = 3
+    native = gym.make_vec("TimeGapMonitor-v0", num_envs=n, vectorization_mode="vector_entry_point", config=config)
+    reference = SyncVectorEnv([lambda: gym.make("TimeGapMonitor-v0", config=config) for _ in range(n)],
+                              autoreset_mode=AutoresetMode.SAME_STEP)
+    obs_native, _ = native.reset(seed=7)
+    obs_reference, _ = reference.reset(seed=7)
+    np.testing.assert_array_equal(obs_native, obs_reference)
+    rng = np.random.default_rng(0)
+    for step in range(20):  # three episodes of 6 steps each and more: crosses autoresets
+        actions = rng.integers(0, len(LEVELS), size=n)
+        step_native = native.step(actions)
+        step_reference = reference.step(actions)
+        for got, want in zip(step_native[:4], step_reference[:4]):
+            np.testing.assert_array_equal(got, want, err_msg=f"step {step}")
+        np.testing.assert_array_equal(step_native[4]["estimate"][~step_native[3]], step_reference[4]["estimate"][~step_native[3]])
+
+
+def test_vector_env_without_step_diagnostics_steps_the_same():
+    config = {"episode_duration": 4.0}
+    full = gym.make_vec("TimeGapMonitor-v0", num_envs=2, vectorization_mode="vector_entry_point", config=config)
+    lean = gym.make_vec("TimeGapMonitor-v0", num_envs=2, vectorization_mode="vector_entry_point", config=config,
+                        step_diagnostics=False)
+    full.reset(seed=3)
+    lean.reset(seed=3)
+    for step in range(6):  # past the end of the 4-step episodes
+        actions = np.array([step % len(LEVELS), 2])
+        got, want = lean.step(actions), full.step(actions)
+        for a, b in zip(got[:4], want[:4]):
+            np.testing.assert_array_equal(a, b)
+        assert "estimate" in want[4] and "estimate" not in got[4]
+        assert ("episode_summary" in got[4]) == ("episode_summary" in want[4])
+
+
+def test_a_finished_episode_reports_its_last_observation_and_summary_then_restarts():
+    config = {"episode_duration": 3.0}
+    envs = gym.make_vec("TimeGapMonitor-v0", num_envs=2, vectorization_mode="vector_entry_point", config=config)
+    envs.reset(seed=0)
+    for _ in range(2):
+        _, _, terminated, truncated, infos = envs.step(np.array([5, 5]))
+        assert not (terminated | truncated).any() and "final_obs" not in infos
+    obs, _, _, truncated, infos = envs.step(np.array([5, 5]))
+    assert truncated.all() and infos["_final_obs"].all() and infos["_episode_summary"].all()
+    np.testing.assert_array_equal(infos["episode_summary"]["duration"], [3.0, 3.0])
+    assert not np.array_equal(np.stack(infos["final_obs"]), obs)  # obs is the new episode's first
+    _, _, _, truncated, _ = envs.step(np.array([5, 5]))
+    assert not truncated.any()
