@@ -45,7 +45,7 @@ class TimeGapMonitorEnv(gym.Env):
 
     | Num | Feature          | Meaning                                                    | Min | Max |
     |-----|------------------|------------------------------------------------------------|-----|-----|
-    | 0   | deviation        | (posterior mean of tau - tau*) / 1 s                       | -1  | 1   |
+    | 0   | deviation        | (posterior mean of tau - centre line tau*) / 1 s           | -1  | 1   |
     | 1   | estimate_std     | posterior std of tau / (L sigma)                           | 0   | 1   |
     | 2   | prob_outside     | posterior P(tau outside [LCL, UCL])                        | 0   | 1   |
     | 3   | alarm            | 1 while the chart is in alarm                              | 0   | 1   |

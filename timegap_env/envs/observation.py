@@ -21,7 +21,7 @@ from timegap_env.config import EnvConfig
 from timegap_env.monitoring.posterior import outside_probability
 
 FEATURES = (
-    "deviation",  # (posterior mean of tau - tau*) / DEVIATION_SCALE, clipped to [-1, 1]
+    "deviation",  # (posterior mean of tau - the chart's centre line) / DEVIATION_SCALE, clipped to [-1, 1]
     "estimate_std",  # posterior std of tau / (L sigma_desired), clipped to [0, 1]
     "prob_outside",  # posterior probability that tau lies outside [LCL, UCL]
     "alarm",  # 1 while the chart is in alarm
@@ -70,12 +70,12 @@ class ObservationScales(NamedTuple):
 
     @classmethod
     def from_config(cls, config: EnvConfig) -> ObservationScales:
-        levels = config.setting_levels
+        levels = [float(level) for level in config.setting_levels]
         return cls(
-            half_width=config.chart.limit_width * config.chart.baseline_std,
-            exceedance_scale=2 * config.chart.switch_exceedances,
-            dt=config.platoon.dt,
-            exceedance_window=config.chart.exceedance_window,
+            half_width=float(config.chart.limit_width * config.chart.baseline_std),
+            exceedance_scale=float(2 * config.chart.switch_exceedances),
+            dt=float(config.platoon.dt),
+            exceedance_window=float(config.chart.exceedance_window),
             smallest_level=levels[0],
             level_span=levels[-1] - levels[0],
         )

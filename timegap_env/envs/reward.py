@@ -8,13 +8,14 @@ A step is scored in three steps, each a compiled kernel over named structures:
 3. :func:`weighted_sum`: the reward, the terms weighted by :class:`~timegap_env.config.RewardWeights`
    and added in the order of its fields.
 
-The terms, means over followers (their weights are :class:`~timegap_env.config.RewardWeights`'s):
+The terms, means over followers (their weights are :class:`~timegap_env.config.RewardWeights`'s); the
+centre line is the chart's, the applied setting, which ramps after a change of setting:
 
 | term | value | why |
 |---|---|---|
-| ``tracking`` | -mean over ticks of abs(estimate - tau*) / (L sigma_desired) | keep the actual gap at its setting |
+| ``tracking`` | -mean over ticks of abs(estimate - centre line) / (L sigma_desired) | keep the actual gap at its setting |
 | ``alarms`` | -share of follower-ticks in alarm | the monitor's view matters |
-| ``safety`` | -max(0, 1 - TTC / ttc_threshold), TTC the step's smallest | keep a margin to the predecessor |
+| ``safety`` | -max(0, 1 - TTC / ttc_threshold), TTC the step's smallest (below -1 once a gap is gone) | keep a margin to the predecessor |
 | ``collision`` | -1 on the step a collision ends the episode | outweighs any whole episode of the rest |
 | ``comfort`` | -mean over ticks of (jerk / jerk_reference)^2 | no chattering |
 | ``efficiency`` | -(1 - capacity(tau*) / capacity(smallest level)) at the current speed | a smaller setting moves more vehicles per hour |
@@ -80,21 +81,21 @@ class RewardConstants(NamedTuple):
 
     @classmethod
     def from_config(cls, config: EnvConfig) -> RewardConstants:
-        levels = config.setting_levels
+        levels = [float(level) for level in config.setting_levels]
         return cls(
-            half_width=config.chart.limit_width * config.chart.baseline_std,
-            ttc_threshold=config.ttc_threshold,
-            jerk_reference=config.jerk_reference,
+            half_width=float(config.chart.limit_width * config.chart.baseline_std),
+            ttc_threshold=float(config.ttc_threshold),
+            jerk_reference=float(config.jerk_reference),
             smallest_level=levels[0],
             level_span=levels[-1] - levels[0],
-            preferred_setting=config.preferred_setting,
-            gap_per_vehicle=config.platoon.standstill_spacing + config.platoon.vehicle_length,
+            preferred_setting=float(config.preferred_setting),
+            gap_per_vehicle=float(config.platoon.standstill_spacing + config.platoon.vehicle_length),
         )
 
 
 def weights_of(config: EnvConfig) -> RewardTerms:
-    """The reward weights as :class:`RewardTerms` of floats."""
-    return RewardTerms(*dataclasses.astuple(config.reward_weights))
+    """The reward weights as :class:`RewardTerms` of floats (the kernel indexes them, so all must be floats)."""
+    return RewardTerms(*(float(weight) for weight in dataclasses.astuple(config.reward_weights)))
 
 
 def follower_readouts(step: StepTicks, previous_accel: np.ndarray, dt: float) -> FollowerReadouts:

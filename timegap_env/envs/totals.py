@@ -17,7 +17,7 @@ class EpisodeTotals(NamedTuple):
     steps: np.ndarray  # [-]
     alarm_ticks: np.ndarray  # follower-ticks in alarm [-]
     exceedances: np.ndarray  # excursion starts, all followers [-]
-    max_deviation: np.ndarray  # largest abs(estimate - tau*) [s]
+    max_deviation: np.ndarray  # largest abs(estimate - the chart's centre line) [s]
     jerk_squared: np.ndarray  # per step: sum over ticks of jerk^2, mean over followers [m^2/s^6]
     switches: np.ndarray  # follower setting changes [-]
     setting: np.ndarray  # per step: mean setting over followers [s]
@@ -55,9 +55,11 @@ class EpisodeTotals(NamedTuple):
         return {
             "time_out_of_control": self.alarm_ticks * config.platoon.dt / config.platoon.n_followers,  # per follower [s]
             "exceedances": self.exceedances.copy(),  # all followers [-]
-            "max_deviation": self.max_deviation.copy(),  # largest |estimate - tau*| [s]
+            "max_deviation": self.max_deviation.copy(),  # largest |estimate - centre line| [s]
             "min_ttc": self.min_ttc.copy(),  # [s]
-            "rms_jerk": np.sqrt(self.jerk_squared / steps),  # [m/s^3]
+            # sqrt of the mean over steps of a step's summed squared jerk: sqrt(ticks per step) times
+            # the RMS of the per-tick jerk (info["jerk"] divides by the ticks) [m/s^3]
+            "rms_jerk": np.sqrt(self.jerk_squared / steps),
             "switches": self.switches.copy(),  # follower setting changes [-]
             "mean_setting": self.setting / steps,  # [s]
             "mean_capacity": self.capacity / steps,  # implied by the settings at the speeds driven [veh/h]

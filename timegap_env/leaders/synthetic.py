@@ -134,7 +134,7 @@ def stochastic_human(
         target_changes=rng.random(n) < dt / params.target_change_interval,
         new_targets=rng.uniform(low, high, size=n),
     )
-    motion = _HumanMotion(leader.initial_speed, decay, params.speed_gain, dt, low, high)
+    motion = _HumanMotion(*(float(value) for value in (leader.initial_speed, decay, params.speed_gain, dt, low, high)))
     return LeaderProfile.from_acceleration(_pursue_targets(draws, motion), leader, name="stochastic_human")
 
 

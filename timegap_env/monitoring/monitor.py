@@ -92,7 +92,7 @@ class TimeGapMonitor:
         self.config = config
         self.shape = batch_shape(n_envs, n_vehicles)
         sums_shape = (N_SUMS,) + self.shape
-        W, decay = config.window_ticks or 0, config.forgetting  # W = 0: no window
+        W, decay = config.window_ticks or 0, float(config.forgetting)  # W = 0: no window
         self._memory = WindowMemory(
             slots=np.zeros((W + 1,) + sums_shape),
             block_sum=np.zeros(sums_shape),
@@ -101,9 +101,9 @@ class TimeGapMonitor:
             prior_tau=np.empty(self.shape),
         )
         self._rule = WindowRule(
-            max_speed=config.max_speed,
-            max_spacing=config.max_spacing,
-            forgetting=config.forgetting,
+            max_speed=float(config.max_speed),
+            max_spacing=float(config.max_spacing),
+            forgetting=decay,
             suffix_weight=decay ** np.arange(1, W + 1),
             age_weight=decay ** np.arange(W - 1, -1, -1.0),
             prior=Prior.from_cov(config.prior_standstill_spacing, config.prior_cov, config.noise_variance),

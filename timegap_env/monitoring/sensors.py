@@ -57,8 +57,8 @@ class Sensors:
     def measure(self, true: Readings, ticks_before: np.ndarray) -> Readings:
         """Readings of the ``true`` spacings and speeds of a block of ticks; env e's block starts after
         ``ticks_before[e]`` ticks since its reset (its first reading is tick ``ticks_before[e] + 1``)."""
-        noise = NoiseModel(self.keys, self.dropout_probability, self.config.spacing_noise_std,
-                           self.config.speed_noise_std)
+        noise = NoiseModel(self.keys, self.dropout_probability, float(self.config.spacing_noise_std),
+                           float(self.config.speed_noise_std))
         measured = Readings(np.empty_like(true.spacing), np.empty_like(true.speed))
         _measure(true, ticks_before, noise, measured)
         return measured

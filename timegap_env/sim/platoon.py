@@ -66,7 +66,7 @@ class ZOHCoefficients(NamedTuple):
             v_from_u=(dt - lag * decayed) * gain,
             x_from_a=lag * (dt - lag * decayed),
             x_from_u=(0.5 * dt**2 - lag * dt + lag**2 * decayed) * gain,
-            dt=dt,
+            dt=float(dt),
         )
 
     def step(
@@ -122,11 +122,10 @@ class Controller(NamedTuple):
 
     @classmethod
     def from_config(cls, config: PlatoonConfig) -> Controller:
-        return cls(
-            dt=config.dt, k_s=config.k_s, k_v=config.k_v, k_a=config.k_a, k_f=config.k_f,
-            accel_min=config.accel_min, accel_max=config.accel_max, standstill_spacing=config.standstill_spacing,
-            vehicle_length=config.vehicle_length, max_setting_change=config.setting_ramp_rate * config.dt,
-        )
+        return cls(*(float(value) for value in (
+            config.dt, config.k_s, config.k_v, config.k_a, config.k_f, config.accel_min, config.accel_max,
+            config.standstill_spacing, config.vehicle_length, config.setting_ramp_rate * config.dt,
+        )))
 
 
 class LeaderTicks(NamedTuple):

@@ -1,0 +1,174 @@
+"""Reward kernels: follower_readouts, reward_terms and weighted_sum against NumPy references of their documented formulas."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from timegap_env.config import EnvConfig, RewardWeights
+from timegap_env.envs.reward import (
+    REWARD_TERMS,
+    FollowerReadouts,
+    RewardConstants,
+    RewardTerms,
+    StepTicks,
+    follower_readouts,
+    reward_terms,
+    weighted_sum,
+    weights_of,
+)
+
+CONFIG = EnvConfig()
+CONSTANTS = RewardConstants.from_config(CONFIG)
+LEVELS = np.array(CONFIG.setting_levels)
+DT = CONFIG.platoon.dt
+N_TICKS, N_ENVS = 10, 4
+COLLIDING_ENV = 2  # the only env with a collision
+NEVER_CLOSING = (0, 1)  # (env, follower) always slower than its predecessor
+
+
+def random_step(seed: int, n_followers: int = 5):
+    """A step's ticks, the acceleration before them, the settings at its end and which changed."""
+    rng = np.random.default_rng(seed)
+    shape = (N_TICKS, N_ENVS, n_followers)
+    leader_speed = rng.uniform(10.0, 35.0, (N_TICKS, N_ENVS))
+    speed = leader_speed[..., None] + rng.normal(0.0, 2.0, shape)
+    env, follower = NEVER_CLOSING
+    speed[:, env, follower] = speed[:, env, follower - 1] - rng.uniform(0.1, 1.0, N_TICKS)
+    collisions = np.zeros(shape, dtype=bool)
+    collisions[rng.integers(N_TICKS), COLLIDING_ENV, rng.integers(n_followers)] = True
+    step = StepTicks(
+        tau_mean=rng.normal(1.6, 0.3, shape),
+        center=rng.uniform(LEVELS[0], LEVELS[-1], shape),
+        alarm=rng.random(shape) < 0.3,
+        exceedance=rng.random(shape) < 0.1,
+        collisions=collisions,
+        leader_speed=leader_speed,
+        speed=speed,
+        spacing=rng.uniform(1.0, 40.0, shape),
+        accel=rng.normal(0.0, 1.5, shape),
+    )
+    previous_accel = rng.normal(0.0, 1.5, (N_ENVS, n_followers))
+    setting = rng.choice(LEVELS, (N_ENVS, n_followers))
+    changed = rng.random((N_ENVS, n_followers)) < 0.4
+    return step, previous_accel, setting, changed
+
+
+def reference_readouts(step: StepTicks, previous_accel: np.ndarray, dt: float) -> FollowerReadouts:
+    predecessor_speed = np.concatenate([step.leader_speed[..., None], step.speed[..., :-1]], axis=-1)
+    closing = step.speed - predecessor_speed
+    with np.errstate(divide="ignore"):
+        ttc = np.where(closing > 0, step.spacing / closing, np.inf)
+    jerk = np.diff(np.concatenate([previous_accel[None], step.accel]), axis=0) / dt
+    return FollowerReadouts(min_ttc=ttc.min(axis=0), jerk_squared=(jerk**2).sum(axis=0))
+
+
+def reference_terms(step, readouts, setting, changed, c: RewardConstants) -> dict[str, np.ndarray]:
+    n_ticks = step.tau_mean.shape[0]
+    v = step.speed[-1]  # at the step's last tick
+    capacity_ratio = (v * c.smallest_level + c.gap_per_vehicle) / (v * setting + c.gap_per_vehicle)
+    return {
+        "tracking": -np.mean(np.abs(step.tau_mean - step.center), axis=(0, 2)) / c.half_width,
+        "alarms": -np.mean(step.alarm, axis=(0, 2)),
+        "safety": -np.mean(np.maximum(0.0, 1.0 - readouts.min_ttc / c.ttc_threshold), axis=1),
+        "collision": -np.any(step.collisions, axis=(0, 2)).astype(float),
+        "comfort": -np.mean(readouts.jerk_squared / n_ticks, axis=1) / c.jerk_reference**2,
+        "efficiency": -np.mean(1.0 - capacity_ratio, axis=1),
+        "preference": -np.mean(np.abs(setting - c.preferred_setting), axis=1) / c.level_span,
+        "switching": -np.mean(changed, axis=1),
+    }
+
+
+@pytest.mark.parametrize(("seed", "n_followers"), [(0, 5), (1, 3), (2, 5)])
+def test_follower_readouts_match_the_numpy_reference(seed, n_followers):
+    step, previous_accel, _, _ = random_step(seed, n_followers)
+    readouts = follower_readouts(step, previous_accel, DT)
+    expected = reference_readouts(step, previous_accel, DT)
+    np.testing.assert_allclose(readouts.min_ttc, expected.min_ttc, rtol=1e-12)
+    np.testing.assert_allclose(readouts.jerk_squared, expected.jerk_squared, rtol=1e-12)
+    assert readouts.min_ttc[NEVER_CLOSING] == np.inf
+    assert np.any(readouts.min_ttc < CONSTANTS.ttc_threshold)  # the safety term has something to score
+
+
+def test_the_first_tick_jerk_is_taken_against_the_previous_acceleration():
+    step, previous_accel, _, _ = random_step(3)
+    accel = np.ones_like(step.accel)
+    readouts = follower_readouts(step._replace(accel=accel), np.zeros_like(previous_accel), DT)
+    np.testing.assert_allclose(readouts.jerk_squared, (1.0 / DT) ** 2, rtol=1e-12)  # only the first tick jerks
+
+
+@pytest.mark.parametrize(("seed", "n_followers"), [(0, 5), (1, 3), (2, 5)])
+def test_reward_terms_match_the_numpy_reference(seed, n_followers):
+    step, previous_accel, setting, changed = random_step(seed, n_followers)
+    readouts = reference_readouts(step, previous_accel, DT)
+    terms = reward_terms(step, readouts, setting, changed, CONSTANTS)
+    expected = reference_terms(step, readouts, setting, changed, CONSTANTS)
+    assert terms._fields == REWARD_TERMS
+    for name in REWARD_TERMS:
+        np.testing.assert_allclose(getattr(terms, name), expected[name], rtol=1e-12, err_msg=name)
+    np.testing.assert_array_equal(terms.collision, np.where(np.arange(N_ENVS) == COLLIDING_ENV, -1.0, 0.0))
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_reward_terms_are_never_positive(seed):
+    step, previous_accel, setting, changed = random_step(seed)
+    terms = reward_terms(step, follower_readouts(step, previous_accel, DT), setting, changed, CONSTANTS)
+    for name in REWARD_TERMS:
+        assert np.all(getattr(terms, name) <= 0.0), name
+
+
+def test_weights_of_the_default_config_are_the_reward_weights_in_field_order():
+    names = tuple(field.name for field in dataclasses.fields(RewardWeights))
+    assert REWARD_TERMS == names
+    weights = weights_of(EnvConfig())
+    assert isinstance(weights, RewardTerms)
+    for name in names:
+        assert getattr(weights, name) == getattr(RewardWeights(), name)
+    custom = weights_of(EnvConfig.from_dict({"reward_weights": {"comfort": 0.3, "switching": 0.0}}))
+    assert (custom.comfort, custom.switching, custom.collision) == (0.3, 0.0, 1000.0)
+
+
+def test_reward_constants_come_from_the_config():
+    config = EnvConfig.from_dict({"chart": {"limit_width": 3.0}, "setting_levels": [0.8, 1.2, 2.0], "ttc_threshold": 5.0,
+                                  "platoon": {"standstill_spacing": 2.0, "initial_setting": 1.2}})
+    constants = RewardConstants.from_config(config)
+    assert constants.half_width == pytest.approx(3.0 * config.chart.baseline_std, rel=1e-15)
+    assert (constants.smallest_level, constants.level_span) == (0.8, pytest.approx(1.2, rel=1e-15))
+    assert (constants.ttc_threshold, constants.gap_per_vehicle) == (5.0, 2.0 + config.platoon.vehicle_length)
+    assert (constants.jerk_reference, constants.preferred_setting) == (config.jerk_reference, config.preferred_setting)
+
+
+@pytest.mark.parametrize("name", REWARD_TERMS)
+def test_weighted_sum_with_a_one_hot_weight_picks_that_term(name):
+    step, previous_accel, setting, changed = random_step(4)
+    terms = reward_terms(step, follower_readouts(step, previous_accel, DT), setting, changed, CONSTANTS)
+    one_hot = RewardTerms(*(float(term == name) for term in REWARD_TERMS))
+    np.testing.assert_array_equal(weighted_sum(terms, one_hot), getattr(terms, name))
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_weighted_sum_is_the_terms_times_their_weights(seed):
+    step, previous_accel, setting, changed = random_step(seed)
+    terms = reward_terms(step, follower_readouts(step, previous_accel, DT), setting, changed, CONSTANTS)
+    weights = weights_of(CONFIG)
+    expected = np.sum(np.array(weights)[:, None] * np.array(terms), axis=0)
+    np.testing.assert_allclose(weighted_sum(terms, weights), expected, rtol=1e-12)
+    assert weighted_sum(terms, weights)[COLLIDING_ENV] < -CONFIG.reward_weights.collision + 1e-9
+
+
+@pytest.mark.parametrize("env", range(N_ENVS))
+def test_an_env_scores_the_same_alone_as_in_a_batch(env):
+    step, previous_accel, setting, changed = random_step(5)
+    alone = StepTicks(*(ticks[:, [env]] for ticks in step))
+    weights = weights_of(CONFIG)
+    batch_readouts = follower_readouts(step, previous_accel, DT)
+    alone_readouts = follower_readouts(alone, previous_accel[[env]], DT)
+    for batch_field, alone_field in zip(batch_readouts, alone_readouts):
+        np.testing.assert_array_equal(alone_field, batch_field[[env]])
+    batch_terms = reward_terms(step, batch_readouts, setting, changed, CONSTANTS)
+    alone_terms = reward_terms(alone, alone_readouts, setting[[env]], changed[[env]], CONSTANTS)
+    for batch_term, alone_term in zip(batch_terms, alone_terms):
+        np.testing.assert_array_equal(alone_term, batch_term[[env]])
+    np.testing.assert_array_equal(weighted_sum(alone_terms, weights), weighted_sum(batch_terms, weights)[[env]])
