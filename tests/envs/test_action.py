@@ -5,7 +5,7 @@ import pytest
 from gymnasium import spaces
 
 from timegap_env.config import EnvConfig
-from timegap_env.envs.action import action_space, settings_for
+from timegap_env.envs.action import SettingLadder, action_space
 
 PLATOON = EnvConfig()
 PER_VEHICLE = EnvConfig.from_dict({"action_mode": "per_vehicle", "platoon": {"n_followers": 3}})
@@ -18,8 +18,8 @@ def test_spaces_follow_the_action_mode_and_the_ladder():
 
 def test_indices_become_settings():
     levels = np.array(PLATOON.setting_levels)
-    np.testing.assert_array_equal(settings_for(np.array([0, 8]), PLATOON, 2), np.repeat(levels[[0, 8], None], 5, axis=1))
-    np.testing.assert_array_equal(settings_for(np.array([[0, 4, 8]]), PER_VEHICLE, 1), [levels[[0, 4, 8]]])
+    np.testing.assert_array_equal(SettingLadder(PLATOON, 2).settings(np.array([0, 8])), np.repeat(levels[[0, 8], None], 5, axis=1))
+    np.testing.assert_array_equal(SettingLadder(PER_VEHICLE, 1).settings(np.array([[0, 4, 8]])), [levels[[0, 4, 8]]])
 
 
 @pytest.mark.parametrize(
@@ -33,4 +33,4 @@ def test_indices_become_settings():
 )
 def test_bad_actions_are_refused_naming_the_action(action, message):
     with pytest.raises(ValueError, match=message):
-        settings_for(action, PLATOON, 2)
+        SettingLadder(PLATOON, 2).settings(action)

@@ -1,4 +1,4 @@
-"""Reward kernels: follower_readouts, reward_terms and weighted_sum against NumPy references of their documented formulas."""
+"""Reward kernels: step_readouts, reward_terms, weighted_sum and score_step against NumPy references of their documented formulas."""
 
 from __future__ import annotations
 
@@ -10,12 +10,13 @@ import pytest
 from timegap_env.config import EnvConfig, RewardWeights
 from timegap_env.envs.reward import (
     REWARD_TERMS,
-    FollowerReadouts,
     RewardConstants,
     RewardTerms,
+    StepReadouts,
     StepTicks,
-    follower_readouts,
     reward_terms,
+    score_step,
+    step_readouts,
     weighted_sum,
     weights_of,
 )
@@ -56,25 +57,35 @@ def random_step(seed: int, n_followers: int = 5):
     return step, previous_accel, setting, changed
 
 
-def reference_readouts(step: StepTicks, previous_accel: np.ndarray, dt: float) -> FollowerReadouts:
+def reference_readouts(step: StepTicks, previous_accel: np.ndarray, dt: float) -> StepReadouts:
     predecessor_speed = np.concatenate([step.leader_speed[..., None], step.speed[..., :-1]], axis=-1)
     closing = step.speed - predecessor_speed
     with np.errstate(divide="ignore"):
         ttc = np.where(closing > 0, step.spacing / closing, np.inf)
     jerk = np.diff(np.concatenate([previous_accel[None], step.accel]), axis=0) / dt
-    return FollowerReadouts(min_ttc=ttc.min(axis=0), jerk_squared=(jerk**2).sum(axis=0))
+    deviation = np.abs(step.tau_mean - step.center)
+    return StepReadouts(
+        min_ttc=ttc.min(axis=0),
+        jerk_squared=(jerk**2).sum(axis=0),
+        final_speed=step.speed[-1],
+        deviation_sum=deviation.sum(axis=(0, 2)),
+        max_deviation=deviation.max(axis=(0, 2)),
+        alarm_ticks=step.alarm.sum(axis=(0, 2)).astype(float),
+        exceedances=step.exceedance.sum(axis=(0, 2)).astype(float),
+        collided=step.collisions.any(axis=(0, 2)),
+    )
 
 
-def reference_terms(step, readouts, setting, changed, c: RewardConstants) -> dict[str, np.ndarray]:
-    n_ticks = step.tau_mean.shape[0]
-    v = step.speed[-1]  # at the step's last tick
+def reference_terms(readouts: StepReadouts, setting, changed, c: RewardConstants) -> dict[str, np.ndarray]:
+    n_followers = setting.shape[1]
+    v = readouts.final_speed
     capacity_ratio = (v * c.smallest_level + c.gap_per_vehicle) / (v * setting + c.gap_per_vehicle)
     return {
-        "tracking": -np.mean(np.abs(step.tau_mean - step.center), axis=(0, 2)) / c.half_width,
-        "alarms": -np.mean(step.alarm, axis=(0, 2)),
+        "tracking": -readouts.deviation_sum / (c.ticks_per_step * n_followers) / c.half_width,
+        "alarms": -readouts.alarm_ticks / (c.ticks_per_step * n_followers),
         "safety": -np.mean(np.maximum(0.0, 1.0 - readouts.min_ttc / c.ttc_threshold), axis=1),
-        "collision": -np.any(step.collisions, axis=(0, 2)).astype(float),
-        "comfort": -np.mean(readouts.jerk_squared / n_ticks, axis=1) / c.jerk_reference**2,
+        "collision": -readouts.collided.astype(float),
+        "comfort": -np.mean(readouts.jerk_squared / c.ticks_per_step, axis=1) / c.jerk_reference**2,
         "efficiency": -np.mean(1.0 - capacity_ratio, axis=1),
         "preference": -np.mean(np.abs(setting - c.preferred_setting), axis=1) / c.level_span,
         "switching": -np.mean(changed, axis=1),
@@ -82,12 +93,13 @@ def reference_terms(step, readouts, setting, changed, c: RewardConstants) -> dic
 
 
 @pytest.mark.parametrize(("seed", "n_followers"), [(0, 5), (1, 3), (2, 5)])
-def test_follower_readouts_match_the_numpy_reference(seed, n_followers):
+def test_step_readouts_match_the_numpy_reference(seed, n_followers):
     step, previous_accel, _, _ = random_step(seed, n_followers)
-    readouts = follower_readouts(step, previous_accel, DT)
+    readouts = step_readouts(step, previous_accel, CONSTANTS)
     expected = reference_readouts(step, previous_accel, DT)
-    np.testing.assert_allclose(readouts.min_ttc, expected.min_ttc, rtol=1e-12)
-    np.testing.assert_allclose(readouts.jerk_squared, expected.jerk_squared, rtol=1e-12)
+    for name, got, want in zip(StepReadouts._fields, readouts, expected):
+        np.testing.assert_allclose(got, want, rtol=1e-12, err_msg=name)
+    np.testing.assert_array_equal(readouts.collided, np.arange(N_ENVS) == COLLIDING_ENV)
     assert readouts.min_ttc[NEVER_CLOSING] == np.inf
     assert np.any(readouts.min_ttc < CONSTANTS.ttc_threshold)  # the safety term has something to score
 
@@ -95,7 +107,7 @@ def test_follower_readouts_match_the_numpy_reference(seed, n_followers):
 def test_the_first_tick_jerk_is_taken_against_the_previous_acceleration():
     step, previous_accel, _, _ = random_step(3)
     accel = np.ones_like(step.accel)
-    readouts = follower_readouts(step._replace(accel=accel), np.zeros_like(previous_accel), DT)
+    readouts = step_readouts(step._replace(accel=accel), np.zeros_like(previous_accel), CONSTANTS)
     np.testing.assert_allclose(readouts.jerk_squared, (1.0 / DT) ** 2, rtol=1e-12)  # only the first tick jerks
 
 
@@ -103,8 +115,8 @@ def test_the_first_tick_jerk_is_taken_against_the_previous_acceleration():
 def test_reward_terms_match_the_numpy_reference(seed, n_followers):
     step, previous_accel, setting, changed = random_step(seed, n_followers)
     readouts = reference_readouts(step, previous_accel, DT)
-    terms = reward_terms(step, readouts, setting, changed, CONSTANTS)
-    expected = reference_terms(step, readouts, setting, changed, CONSTANTS)
+    terms = reward_terms(readouts, setting, changed, CONSTANTS)
+    expected = reference_terms(readouts, setting, changed, CONSTANTS)
     assert terms._fields == REWARD_TERMS
     for name in REWARD_TERMS:
         np.testing.assert_allclose(getattr(terms, name), expected[name], rtol=1e-12, err_msg=name)
@@ -114,7 +126,7 @@ def test_reward_terms_match_the_numpy_reference(seed, n_followers):
 @pytest.mark.parametrize("seed", range(5))
 def test_reward_terms_are_never_positive(seed):
     step, previous_accel, setting, changed = random_step(seed)
-    terms = reward_terms(step, follower_readouts(step, previous_accel, DT), setting, changed, CONSTANTS)
+    terms = reward_terms(step_readouts(step, previous_accel, CONSTANTS), setting, changed, CONSTANTS)
     for name in REWARD_TERMS:
         assert np.all(getattr(terms, name) <= 0.0), name
 
@@ -143,7 +155,7 @@ def test_reward_constants_come_from_the_config():
 @pytest.mark.parametrize("name", REWARD_TERMS)
 def test_weighted_sum_with_a_one_hot_weight_picks_that_term(name):
     step, previous_accel, setting, changed = random_step(4)
-    terms = reward_terms(step, follower_readouts(step, previous_accel, DT), setting, changed, CONSTANTS)
+    terms = reward_terms(step_readouts(step, previous_accel, CONSTANTS), setting, changed, CONSTANTS)
     one_hot = RewardTerms(*(float(term == name) for term in REWARD_TERMS))
     np.testing.assert_array_equal(weighted_sum(terms, one_hot), getattr(terms, name))
 
@@ -151,7 +163,7 @@ def test_weighted_sum_with_a_one_hot_weight_picks_that_term(name):
 @pytest.mark.parametrize("seed", range(3))
 def test_weighted_sum_is_the_terms_times_their_weights(seed):
     step, previous_accel, setting, changed = random_step(seed)
-    terms = reward_terms(step, follower_readouts(step, previous_accel, DT), setting, changed, CONSTANTS)
+    terms = reward_terms(step_readouts(step, previous_accel, CONSTANTS), setting, changed, CONSTANTS)
     weights = weights_of(CONFIG)
     expected = np.sum(np.array(weights)[:, None] * np.array(terms), axis=0)
     np.testing.assert_allclose(weighted_sum(terms, weights), expected, rtol=1e-12)
@@ -163,12 +175,27 @@ def test_an_env_scores_the_same_alone_as_in_a_batch(env):
     step, previous_accel, setting, changed = random_step(5)
     alone = StepTicks(*(ticks[:, [env]] for ticks in step))
     weights = weights_of(CONFIG)
-    batch_readouts = follower_readouts(step, previous_accel, DT)
-    alone_readouts = follower_readouts(alone, previous_accel[[env]], DT)
+    batch_readouts = step_readouts(step, previous_accel, CONSTANTS)
+    alone_readouts = step_readouts(alone, previous_accel[[env]], CONSTANTS)
     for batch_field, alone_field in zip(batch_readouts, alone_readouts):
         np.testing.assert_array_equal(alone_field, batch_field[[env]])
-    batch_terms = reward_terms(step, batch_readouts, setting, changed, CONSTANTS)
-    alone_terms = reward_terms(alone, alone_readouts, setting[[env]], changed[[env]], CONSTANTS)
+    batch_terms = reward_terms(batch_readouts, setting, changed, CONSTANTS)
+    alone_terms = reward_terms(alone_readouts, setting[[env]], changed[[env]], CONSTANTS)
     for batch_term, alone_term in zip(batch_terms, alone_terms):
         np.testing.assert_array_equal(alone_term, batch_term[[env]])
     np.testing.assert_array_equal(weighted_sum(alone_terms, weights), weighted_sum(batch_terms, weights)[[env]])
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_score_step_is_the_three_steps_in_one_call(seed):
+    step, previous_accel, setting, changed = random_step(seed)
+    weights = weights_of(CONFIG)
+    readouts = StepReadouts.empty(N_ENVS, 5)
+    score = score_step(step, previous_accel, setting, changed, CONSTANTS, weights, readouts)
+    expected_readouts = step_readouts(step, previous_accel, CONSTANTS)
+    expected_terms = reward_terms(expected_readouts, setting, changed, CONSTANTS)
+    for got, want in zip(readouts, expected_readouts):
+        np.testing.assert_array_equal(got, want)
+    for got, want in zip(score.terms, expected_terms):
+        np.testing.assert_array_equal(got, want)
+    np.testing.assert_array_equal(score.reward, weighted_sum(expected_terms, weights))

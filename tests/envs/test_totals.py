@@ -1,4 +1,4 @@
-"""EpisodeTotals: add_step against NumPy references over two steps, restart of some envs, and the episode summary."""
+"""EpisodeTotals: add_step of a step's read-outs against NumPy references, restart of some envs, the episode summary."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from timegap_env.config import EnvConfig
-from timegap_env.envs.reward import FollowerReadouts, RewardConstants, StepTicks
+from timegap_env.envs.reward import RewardConstants, StepReadouts
 from timegap_env.envs.totals import EpisodeTotals
 
 CONFIG = EnvConfig()
@@ -19,44 +19,39 @@ ADDITIVE = ("steps", "alarm_ticks", "exceedances", "jerk_squared", "switches", "
 
 
 def random_step(rng: np.random.Generator, collide: bool):
-    """A step's ticks and readouts, the settings at its end and which changed."""
-    shape = (N_TICKS, N_ENVS, N_FOLLOWERS)
-    collisions = np.zeros(shape, dtype=bool)
-    if collide:
-        collisions[rng.integers(N_TICKS), COLLIDING_ENV, rng.integers(N_FOLLOWERS)] = True
-    step = StepTicks(
-        tau_mean=rng.normal(1.6, 0.3, shape),
-        center=rng.uniform(LEVELS[0], LEVELS[-1], shape),
-        alarm=rng.random(shape) < 0.3,
-        exceedance=rng.random(shape) < 0.1,
-        collisions=collisions,
-        leader_speed=rng.uniform(10.0, 35.0, (N_TICKS, N_ENVS)),
-        speed=rng.uniform(0.0, 35.0, shape),
-        spacing=rng.uniform(1.0, 40.0, shape),
-        accel=rng.normal(0.0, 1.5, shape),
-    )
-    min_ttc = rng.uniform(0.5, 30.0, (N_ENVS, N_FOLLOWERS))
-    min_ttc[rng.random(min_ttc.shape) < 0.3] = np.inf
+    """A step's read-outs, the settings at its end and which changed."""
+    per_follower = (N_ENVS, N_FOLLOWERS)
+    min_ttc = rng.uniform(0.5, 30.0, per_follower)
+    min_ttc[rng.random(per_follower) < 0.3] = np.inf
     min_ttc[NEVER_CLOSING_ENV] = np.inf
-    readouts = FollowerReadouts(min_ttc=min_ttc, jerk_squared=rng.uniform(0.0, 500.0, (N_ENVS, N_FOLLOWERS)))
-    setting = rng.choice(LEVELS, (N_ENVS, N_FOLLOWERS))
-    changed = rng.random((N_ENVS, N_FOLLOWERS)) < 0.4
-    return step, readouts, setting, changed
+    readouts = StepReadouts(
+        min_ttc=min_ttc,
+        jerk_squared=rng.uniform(0.0, 500.0, per_follower),
+        final_speed=rng.uniform(0.0, 35.0, per_follower),
+        deviation_sum=rng.uniform(0.0, 20.0, N_ENVS),
+        max_deviation=rng.uniform(0.0, 1.0, N_ENVS),
+        alarm_ticks=rng.integers(0, N_TICKS * N_FOLLOWERS, N_ENVS).astype(float),
+        exceedances=rng.integers(0, 5, N_ENVS).astype(float),
+        collided=(np.arange(N_ENVS) == COLLIDING_ENV) & collide,
+    )
+    setting = rng.choice(LEVELS, per_follower)
+    changed = rng.random(per_follower) < 0.4
+    return readouts, setting, changed
 
 
-def reference_step(step: StepTicks, readouts: FollowerReadouts, setting, changed, gap: float) -> dict[str, np.ndarray]:
+def reference_step(readouts: StepReadouts, setting, changed, gap: float) -> dict[str, np.ndarray]:
     """One step's contribution to each total, the field comments of EpisodeTotals as NumPy."""
-    v = step.speed[-1]  # at the step's last tick
+    v = readouts.final_speed
     return {
         "steps": np.ones(N_ENVS),
-        "alarm_ticks": step.alarm.sum(axis=(0, 2)).astype(float),
-        "exceedances": step.exceedance.sum(axis=(0, 2)).astype(float),
-        "max_deviation": np.abs(step.tau_mean - step.center).max(axis=(0, 2)),
+        "alarm_ticks": readouts.alarm_ticks,
+        "exceedances": readouts.exceedances,
+        "max_deviation": readouts.max_deviation,
         "jerk_squared": readouts.jerk_squared.mean(axis=1),
         "switches": changed.sum(axis=1).astype(float),
         "setting": setting.mean(axis=1),
         "capacity": (3600.0 * v / (v * setting + gap)).mean(axis=1),
-        "collision": step.collisions.any(axis=(0, 2)).astype(float),
+        "collision": readouts.collided.astype(float),
         "min_ttc": readouts.min_ttc.min(axis=1),
     }
 
@@ -139,11 +134,10 @@ def test_summary_of_no_step_divides_by_one_step_not_zero():
 
 def test_an_env_totals_the_same_alone_as_in_a_batch():
     rng = np.random.default_rng(6)
-    step, readouts, setting, changed = random_step(rng, collide=True)
+    readouts, setting, changed = random_step(rng, collide=True)
     batch, alone = EpisodeTotals.zeros(N_ENVS), EpisodeTotals.zeros(1)
-    batch.add_step(step, readouts, setting, changed, GAP)
+    batch.add_step(readouts, setting, changed, GAP)
     env = [COLLIDING_ENV]
-    alone.add_step(StepTicks(*(ticks[:, env] for ticks in step)), FollowerReadouts(*(r[env] for r in readouts)),
-                   setting[env], changed[env], GAP)
+    alone.add_step(StepReadouts(*(field[env] for field in readouts)), setting[env], changed[env], GAP)
     for name, batch_total, alone_total in zip(batch._fields, batch, alone):
         np.testing.assert_array_equal(alone_total, batch_total[env], err_msg=name)

@@ -84,14 +84,16 @@ class ObservationScales(NamedTuple):
 def observe(state: FollowerState, scales: ObservationScales) -> np.ndarray:
     """Observations (n_envs, n_followers, len(FEATURES)) float32, the features in FEATURES order."""
     features = np.empty((*state.setting.shape, len(FEATURES)), dtype=np.float32)
-    _encode(state, scales, features)
+    _encode(tuple(state), tuple(scales), features)
     return features
 
 
 @numba.njit(cache=True)
 def _encode(state, scales, out):  # noqa: ANN001, ANN202
     """Fill ``out`` (n_envs, n_followers, len(FEATURES)) float32 with the features of ``state``
-    (:class:`FollowerState`), in FEATURES order, clipped to [OBSERVATION_LOW, OBSERVATION_HIGH]."""
+    (:class:`FollowerState`) under ``scales`` (:class:`ObservationScales`), both plain tuples (see
+    :mod:`timegap_env.sim.platoon`), in FEATURES order, clipped to [OBSERVATION_LOW, OBSERVATION_HIGH]."""
+    state, scales = FollowerState(*state), ObservationScales(*scales)
     n_envs, n_followers, n_features = out.shape
     for e in range(n_envs):
         for f in range(n_followers):

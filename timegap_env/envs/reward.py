@@ -1,12 +1,16 @@
 """The reward of ``TimeGapMonitor-v0``: named terms, each <= 0 and about -1 at its worst, weighted and summed.
 
-A step is scored in three steps, each a compiled kernel over named structures:
+A step is scored in three steps, each a compiled function over named structures:
 
-1. :func:`follower_readouts`: per follower, the smallest time-to-collision and the summed squared
-   jerk over the step's ticks (also reported in ``info``);
-2. :func:`reward_terms`: the terms below, per env;
+1. :func:`step_readouts`: what the step's ticks come down to: per follower the smallest
+   time-to-collision, the summed squared jerk and the final speed; per env the deviations of the
+   estimate from the centre line, the alarm ticks, the excursion starts and whether a gap reached 0
+   (the episode totals of :mod:`~timegap_env.envs.totals` are made of the same read-outs);
+2. :func:`reward_terms`: the terms below, per env, from the read-outs;
 3. :func:`weighted_sum`: the reward, the terms weighted by :class:`~timegap_env.config.RewardWeights`
    and added in the order of its fields.
+
+:func:`score_step` runs the three in one compiled call, the env's hot path.
 
 The terms, means over followers (their weights are :class:`~timegap_env.config.RewardWeights`'s); the
 centre line is the chart's, the applied setting, which ramps after a change of setting:
@@ -61,16 +65,30 @@ class StepTicks(NamedTuple):
     accel: np.ndarray  # [m/s^2]
 
 
-class FollowerReadouts(NamedTuple):
-    """Each follower's safety and comfort over a step, arrays (n_envs, n_followers)."""
+class StepReadouts(NamedTuple):
+    """What a step's ticks come down to; per follower (n_envs, n_followers), per env (n_envs,)."""
 
-    min_ttc: np.ndarray  # smallest time-to-collision, inf if never closing in on the predecessor [s]
-    jerk_squared: np.ndarray  # sum over the ticks of jerk^2 [m^2/s^6]
+    min_ttc: np.ndarray  # per follower: smallest time-to-collision, inf if never closing in [s]
+    jerk_squared: np.ndarray  # per follower: sum over the ticks of jerk^2 [m^2/s^6]
+    final_speed: np.ndarray  # per follower: speed at the step's last tick [m/s]
+    deviation_sum: np.ndarray  # per env: sum over follower-ticks of abs(estimate - centre line) [s]
+    max_deviation: np.ndarray  # per env: largest abs(estimate - centre line) [s]
+    alarm_ticks: np.ndarray  # per env: follower-ticks in alarm [-]
+    exceedances: np.ndarray  # per env: excursion starts [-]
+    collided: np.ndarray  # per env: a gap reached 0 [bool]
+
+    @classmethod
+    def empty(cls, n_envs: int, n_followers: int) -> StepReadouts:
+        """Uninitialised read-outs of ``n_envs`` envs of ``n_followers`` followers."""
+        per_follower, per_env = np.empty((3, n_envs, n_followers)), np.empty((4, n_envs))
+        return cls(*per_follower, *per_env, np.empty(n_envs, dtype=bool))
 
 
 class RewardConstants(NamedTuple):
-    """The config's numbers the terms need."""
+    """The config's numbers scoring needs."""
 
+    dt: float  # tick [s]
+    ticks_per_step: int  # ticks in a step [-]
     half_width: float  # L sigma_desired [s]
     ttc_threshold: float  # [s]
     jerk_reference: float  # [m/s^3]
@@ -83,6 +101,8 @@ class RewardConstants(NamedTuple):
     def from_config(cls, config: EnvConfig) -> RewardConstants:
         levels = [float(level) for level in config.setting_levels]
         return cls(
+            dt=float(config.platoon.dt),
+            ticks_per_step=config.ticks_per_decision,
             half_width=float(config.chart.limit_width * config.chart.baseline_std),
             ttc_threshold=float(config.ttc_threshold),
             jerk_reference=float(config.jerk_reference),
@@ -93,23 +113,89 @@ class RewardConstants(NamedTuple):
         )
 
 
+class StepScore(NamedTuple):
+    """What :func:`score_step` gives besides the read-outs."""
+
+    terms: RewardTerms  # each (n_envs,), <= 0
+    reward: np.ndarray  # (n_envs,)
+
+
 def weights_of(config: EnvConfig) -> RewardTerms:
     """The reward weights as :class:`RewardTerms` of floats (the kernel indexes them, so all must be floats)."""
     return RewardTerms(*(float(weight) for weight in dataclasses.astuple(config.reward_weights)))
 
 
-def follower_readouts(step: StepTicks, previous_accel: np.ndarray, dt: float) -> FollowerReadouts:
-    """Smallest TTC and summed squared jerk of each follower over ``step``; ``previous_accel``
-    (n_envs, n_followers) [m/s^2] is the acceleration before its first tick, ``dt`` the tick [s]."""
-    readouts = FollowerReadouts(*np.empty((2, *previous_accel.shape)))
-    _follower_readouts(step, previous_accel, dt, readouts)
+def step_readouts(step: StepTicks, previous_accel: np.ndarray, constants: RewardConstants) -> StepReadouts:
+    """The read-outs of ``step``; ``previous_accel`` (n_envs, n_followers) [m/s^2] is the acceleration before
+    its first tick."""
+    readouts = StepReadouts.empty(*previous_accel.shape)
+    _step_readouts(step, previous_accel, constants, readouts)
     return readouts
 
 
+def reward_terms(
+    readouts: StepReadouts, setting: np.ndarray, changed: np.ndarray, constants: RewardConstants
+) -> RewardTerms:
+    """The terms of the module docstring per env, each (n_envs,) and <= 0; ``setting`` [s] and ``changed``
+    (n_envs, n_followers) are the settings at the end of the step and which of them changed at its start."""
+    terms = RewardTerms(*np.empty((len(REWARD_TERMS), setting.shape[0])))
+    _reward_terms(readouts, setting, changed, constants, terms)
+    return terms
+
+
+def weighted_sum(terms: RewardTerms, weights: RewardTerms) -> np.ndarray:
+    """The reward (n_envs,): the sum of each term times its weight, in REWARD_TERMS order."""
+    reward = np.empty(len(terms[0]))
+    _weighted_sum(terms, weights, reward)
+    return reward
+
+
+def score_step(
+    step: StepTicks,
+    previous_accel: np.ndarray,
+    setting: np.ndarray,
+    changed: np.ndarray,
+    constants: RewardConstants,
+    weights: RewardTerms,
+    readouts: StepReadouts,
+) -> StepScore:
+    """:func:`step_readouts` into ``readouts`` (the caller's, e.g. from ``StepReadouts.empty``, reused step
+    after step), then :func:`reward_terms` and :func:`weighted_sum`, in one compiled call."""
+    n_envs = setting.shape[0]
+    score = StepScore(RewardTerms(*np.empty((len(REWARD_TERMS), n_envs))), np.empty(n_envs))
+    _score(tuple(step), previous_accel, setting, changed, tuple(constants), tuple(weights), tuple(readouts),
+           tuple(score.terms), score.reward)
+    return score
+
+
 @numba.njit(cache=True)
-def _follower_readouts(step, previous_accel, dt, out):  # noqa: ANN001, ANN202
+def _score(step, previous_accel, setting, changed, constants, weights, readouts, terms, reward):  # noqa: ANN001, ANN202, PLR0913
+    """:func:`score_step`; the structures come as plain tuples (see :mod:`timegap_env.sim.platoon`)."""
+    step, constants, readouts = StepTicks(*step), RewardConstants(*constants), StepReadouts(*readouts)
+    weights, terms = RewardTerms(*weights), RewardTerms(*terms)
+    _step_readouts(step, previous_accel, constants, readouts)
+    _reward_terms(readouts, setting, changed, constants, terms)
+    _weighted_sum(terms, weights, reward)
+
+
+@numba.njit(cache=True)
+def _step_readouts(step, previous_accel, constants, out):  # noqa: ANN001, ANN202
     n_ticks, n_envs, n_followers = step.speed.shape
     for e in range(n_envs):
+        deviation_sum = max_deviation = alarm_ticks = exceedances = 0.0
+        collided = False
+        for k in range(n_ticks):
+            tick_deviation = 0.0
+            for f in range(n_followers):
+                deviation = abs(step.tau_mean[k, e, f] - step.center[k, e, f])
+                tick_deviation += deviation
+                max_deviation = max(max_deviation, deviation)
+                alarm_ticks += step.alarm[k, e, f]
+                exceedances += step.exceedance[k, e, f]
+                collided = collided or step.collisions[k, e, f]
+            deviation_sum += tick_deviation
+        out.deviation_sum[e], out.max_deviation[e], out.collided[e] = deviation_sum, max_deviation, collided
+        out.alarm_ticks[e], out.exceedances[e] = alarm_ticks, exceedances
         for f in range(n_followers):
             out.min_ttc[e, f], out.jerk_squared[e, f] = np.inf, 0.0
             for k in range(n_ticks):
@@ -118,36 +204,19 @@ def _follower_readouts(step, previous_accel, dt, out):  # noqa: ANN001, ANN202
                 if closing > 0:
                     out.min_ttc[e, f] = min(out.min_ttc[e, f], step.spacing[k, e, f] / closing)
                 before = previous_accel[e, f] if k == 0 else step.accel[k - 1, e, f]
-                out.jerk_squared[e, f] += ((step.accel[k, e, f] - before) / dt) ** 2
-
-
-def reward_terms(
-    step: StepTicks, readouts: FollowerReadouts, setting: np.ndarray, changed: np.ndarray, constants: RewardConstants
-) -> RewardTerms:
-    """The terms of the module docstring per env, each (n_envs,) and <= 0; ``setting`` [s] and ``changed``
-    (n_envs, n_followers) are the settings at the end of the step and which of them changed at its start."""
-    terms = RewardTerms(*np.empty((len(REWARD_TERMS), setting.shape[0])))
-    _reward_terms(step, readouts, setting, changed, constants, terms)
-    return terms
+                out.jerk_squared[e, f] += ((step.accel[k, e, f] - before) / constants.dt) ** 2
+            out.final_speed[e, f] = step.speed[n_ticks - 1, e, f]
 
 
 @numba.njit(cache=True)
-def _reward_terms(step, readouts, setting, changed, constants, out):  # noqa: ANN001, ANN202
-    n_ticks, n_envs, n_followers = step.tau_mean.shape
+def _reward_terms(readouts, setting, changed, constants, out):  # noqa: ANN001, ANN202
+    n_envs, n_followers = setting.shape
+    n_ticks = constants.ticks_per_step
     follower_ticks = n_ticks * n_followers
     for e in range(n_envs):
-        deviation_sum = alarm_ticks = 0.0
-        collided = False
-        for k in range(n_ticks):
-            tick_deviation = 0.0
-            for f in range(n_followers):
-                tick_deviation += abs(step.tau_mean[k, e, f] - step.center[k, e, f])
-                alarm_ticks += step.alarm[k, e, f]
-                collided = collided or step.collisions[k, e, f]
-            deviation_sum += tick_deviation
         safety = comfort = efficiency = preference = switching = 0.0
         for f in range(n_followers):
-            v = step.speed[-1, e, f]  # the speed at the end of the step [m/s]
+            v = readouts.final_speed[e, f]  # [m/s]
             safety += max(0.0, 1.0 - readouts.min_ttc[e, f] / constants.ttc_threshold)
             comfort += readouts.jerk_squared[e, f] / n_ticks
             efficiency += 1.0 - (v * constants.smallest_level + constants.gap_per_vehicle) / (
@@ -155,21 +224,14 @@ def _reward_terms(step, readouts, setting, changed, constants, out):  # noqa: AN
             )
             preference += abs(setting[e, f] - constants.preferred_setting)
             switching += changed[e, f]
-        out.tracking[e] = -deviation_sum / follower_ticks / constants.half_width
-        out.alarms[e] = -alarm_ticks / follower_ticks
+        out.tracking[e] = -readouts.deviation_sum[e] / follower_ticks / constants.half_width
+        out.alarms[e] = -readouts.alarm_ticks[e] / follower_ticks
         out.safety[e] = -(safety / n_followers)
-        out.collision[e] = -1.0 if collided else -0.0
+        out.collision[e] = -1.0 if readouts.collided[e] else -0.0
         out.comfort[e] = -(comfort / n_followers) / constants.jerk_reference**2
         out.efficiency[e] = -(efficiency / n_followers)
         out.preference[e] = -(preference / n_followers) / constants.level_span
         out.switching[e] = -(switching / n_followers)
-
-
-def weighted_sum(terms: RewardTerms, weights: RewardTerms) -> np.ndarray:
-    """The reward (n_envs,): the sum of each term times its weight, in REWARD_TERMS order."""
-    reward = np.empty(len(terms[0]))
-    _weighted_sum(terms, weights, reward)
-    return reward
 
 
 @numba.njit(cache=True)

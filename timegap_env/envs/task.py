@@ -18,13 +18,11 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from timegap_env.config import EnvConfig
-from timegap_env.envs.action import settings_for
+from timegap_env.envs.action import SettingLadder
 from timegap_env.envs.episodes import Episodes, check_reset_options
 from timegap_env.envs.observation import FollowerState, ObservationScales, observe
 from timegap_env.envs.rendering import RenderFrame
-from timegap_env.envs.reward import (
-    FollowerReadouts, RewardConstants, StepTicks, follower_readouts, reward_terms, weighted_sum, weights_of,
-)
+from timegap_env.envs.reward import RewardConstants, StepReadouts, StepTicks, score_step, weights_of
 from timegap_env.envs.totals import EpisodeTotals
 from timegap_env.monitoring.loop import MonitoredPlatoon
 
@@ -80,10 +78,12 @@ class PlatoonTask:
         self.n_followers = config.platoon.n_followers
         self.ticks_per_decision = config.ticks_per_decision
         self.episodes = Episodes(config, n_envs)
+        self.ladder = SettingLadder(config, n_envs)
         self.loop = MonitoredPlatoon(config.platoon, config.monitor, config.chart, config.sensors, n_envs)
         self.totals = EpisodeTotals.zeros(n_envs)
         self._previous_accel = np.zeros((n_envs, self.n_followers))  # before the next step's first tick [m/s^2]
-        self._readouts = FollowerReadouts(np.full((n_envs, self.n_followers), np.inf), np.zeros((n_envs, self.n_followers)))
+        self._readouts = StepReadouts.empty(n_envs, self.n_followers)  # of the last step, refilled by every step
+        self._readouts.min_ttc[:], self._readouts.jerk_squared[:] = np.inf, 0.0
         self._scales = ObservationScales.from_config(config)
         self._reward_constants = RewardConstants.from_config(config)
         self._weights = weights_of(config)
@@ -115,7 +115,7 @@ class PlatoonTask:
     def step(self, action: np.ndarray) -> StepResult:
         """Apply the action, run one decision interval of ticks, and score it."""
         cfg, loop, platoon = self.config, self.loop, self.loop.platoon
-        changed = loop.change_setting(settings_for(action, cfg, self.n_envs))
+        changed = loop.change_setting(self.ladder.settings(action))
         ticks = loop.ticks + np.arange(self.ticks_per_decision)[:, None]  # (n_ticks, n_envs), before each tick
         leader_speed, leader_accel = self.episodes.leader_at(ticks + 1)
         block = loop.run(leader_speed, leader_accel, self.episodes.v2v_at(ticks))
@@ -125,15 +125,13 @@ class PlatoonTask:
 
         step = StepTicks(block.tau_mean, chart.center, chart.alarm, chart.exceedance, physics.collisions, leader_speed,
                          physics.speed, physics.spacing, physics.accel)
-        readouts = follower_readouts(step, self._previous_accel, cfg.platoon.dt)
-        terms = reward_terms(step, readouts, platoon.setting, changed, self._reward_constants)
-        self.totals.add_step(step, readouts, platoon.setting, changed, self._reward_constants.gap_per_vehicle)
+        score = score_step(step, self._previous_accel, platoon.setting, changed, self._reward_constants, self._weights,
+                           self._readouts)
+        self.totals.add_step(self._readouts, platoon.setting, changed, self._reward_constants.gap_per_vehicle)
         self._previous_accel = physics.accel[-1].copy()
-        self._readouts = readouts
         terminated = platoon.collided.any(axis=1)
         truncated = (loop.ticks >= self.episodes.episode_ticks) & ~terminated
-        return StepResult(reward=weighted_sum(terms, self._weights), terms=terms._asdict(), terminated=terminated,
-                          truncated=truncated)
+        return StepResult(reward=score.reward, terms=score.terms._asdict(), terminated=terminated, truncated=truncated)
 
     # ------------------------------------------------------------------ read-outs
     @property

@@ -8,7 +8,7 @@ import numba
 import numpy as np
 
 from timegap_env.config import EnvConfig
-from timegap_env.envs.reward import FollowerReadouts, StepTicks
+from timegap_env.envs.reward import StepReadouts
 
 
 class EpisodeTotals(NamedTuple):
@@ -38,16 +38,11 @@ class EpisodeTotals(NamedTuple):
             total[mask] = np.inf if name == "min_ttc" else 0.0
 
     def add_step(
-        self,
-        step: StepTicks,
-        readouts: FollowerReadouts,
-        setting: np.ndarray,
-        changed: np.ndarray,
-        gap_per_vehicle: float,
+        self, readouts: StepReadouts, setting: np.ndarray, changed: np.ndarray, gap_per_vehicle: float
     ) -> None:
-        """Add a step; ``setting`` [s] and ``changed`` (n_envs, n_followers) are the settings at its end and which
-        changed at its start, ``gap_per_vehicle`` [m] the standstill spacing plus a vehicle length."""
-        _add_step(self, step, readouts, setting, changed, gap_per_vehicle)
+        """Add a step from its ``readouts``; ``setting`` [s] and ``changed`` (n_envs, n_followers) are the settings
+        at its end and which changed at its start, ``gap_per_vehicle`` [m] the standstill spacing plus a vehicle length."""
+        _add_step(tuple(self), tuple(readouts), setting, changed, float(gap_per_vehicle))
 
     def summary(self, config: EnvConfig) -> dict[str, np.ndarray]:
         """Episode statistics so far under ``config``, each (n_envs,)."""
@@ -69,33 +64,27 @@ class EpisodeTotals(NamedTuple):
 
 
 @numba.njit(cache=True)
-def _add_step(totals, step, readouts, setting, changed, gap_per_vehicle):  # noqa: ANN001, ANN202
-    n_ticks, n_envs, n_followers = step.tau_mean.shape
+def _add_step(totals, readouts, setting, changed, gap_per_vehicle):  # noqa: ANN001, ANN202
+    """:meth:`EpisodeTotals.add_step`; the structures come as plain tuples (see :mod:`timegap_env.sim.platoon`)."""
+    totals, readouts = EpisodeTotals(*totals), StepReadouts(*readouts)
+    n_envs, n_followers = setting.shape
     for e in range(n_envs):
-        max_deviation = alarm_ticks = exceedances = 0.0
-        collided = False
-        for k in range(n_ticks):
-            for f in range(n_followers):
-                max_deviation = max(max_deviation, abs(step.tau_mean[k, e, f] - step.center[k, e, f]))
-                alarm_ticks += step.alarm[k, e, f]
-                exceedances += step.exceedance[k, e, f]
-                collided = collided or step.collisions[k, e, f]
         jerk_squared = switches = setting_sum = capacity = 0.0
         min_ttc = np.inf
         for f in range(n_followers):
-            v = step.speed[-1, e, f]  # the speed at the end of the step [m/s]
+            v = readouts.final_speed[e, f]  # [m/s]
             jerk_squared += readouts.jerk_squared[e, f]
             switches += changed[e, f]
             setting_sum += setting[e, f]
             capacity += 3600.0 * v / (v * setting[e, f] + gap_per_vehicle)  # [veh/h] at the current speed
             min_ttc = min(min_ttc, readouts.min_ttc[e, f])
         totals.steps[e] += 1
-        totals.alarm_ticks[e] += alarm_ticks
-        totals.exceedances[e] += exceedances
-        totals.max_deviation[e] = max(totals.max_deviation[e], max_deviation)
+        totals.alarm_ticks[e] += readouts.alarm_ticks[e]
+        totals.exceedances[e] += readouts.exceedances[e]
+        totals.max_deviation[e] = max(totals.max_deviation[e], readouts.max_deviation[e])
         totals.jerk_squared[e] += jerk_squared / n_followers
         totals.switches[e] += switches
         totals.setting[e] += setting_sum / n_followers
         totals.capacity[e] += capacity / n_followers
-        totals.collision[e] = max(totals.collision[e], 1.0 if collided else 0.0)
+        totals.collision[e] = max(totals.collision[e], 1.0 if readouts.collided[e] else 0.0)
         totals.min_ttc[e] = min(totals.min_ttc[e], min_ttc)

@@ -5,6 +5,7 @@ Each raises ``ValueError`` naming the argument and the value at fault.
 
 from __future__ import annotations
 
+import numba
 import numpy as np
 from numpy.typing import ArrayLike
 
@@ -69,8 +70,19 @@ def env_mask(mask: ArrayLike | None, n_envs: int) -> np.ndarray:
     return array
 
 
-def check_finite(name: str, values: np.ndarray) -> None:
-    """ValueError naming the first non-finite value; called every tick, so it searches only when there is one."""
-    if not np.isfinite(values).all():
-        index = tuple(int(i) for i in np.argwhere(~np.isfinite(values))[0])
-        raise ValueError(f"{name}{list(index)} = {values[index]}: must be finite [s]")
+def check_finite(**named: np.ndarray) -> None:
+    """ValueError naming the first non-finite value of the arrays given by name; called every tick, so a
+    compiled scan looks first and the culprit is searched only when there is one."""
+    for name, values in named.items():
+        if not _all_finite(values.reshape(-1)):
+            index = tuple(int(i) for i in np.argwhere(~np.isfinite(values))[0])
+            raise ValueError(f"{name}{list(index)} = {values[index]}: must be finite [s]")
+
+
+@numba.njit(cache=True)
+def _all_finite(values):  # noqa: ANN001, ANN202
+    """Whether every value of the 1-D array ``values`` is finite."""
+    for value in values:
+        if not np.isfinite(value):
+            return False
+    return True

@@ -102,6 +102,7 @@ class ControlChart:
             starts=np.full((config.exceedance_window_ticks,) + self.shape, -1, dtype=np.int64),
             restarted=np.zeros(self.shape, dtype=np.int64),
         )
+        self._memory_args = tuple(self._memory)  # the same arrays, as the kernel takes them
         self._tick = 0  # ticks charted so far; this tick's ring slot is _tick % window
         self._allocate()
         self.reset(None, center)
@@ -134,7 +135,7 @@ class ControlChart:
     def update(self, tau_estimate: ArrayLike) -> ChartState:
         """Chart one tick's estimate of tau (n_envs, n_vehicles) [s]; return the new state."""
         estimate = batch_array("tau_estimate", tau_estimate, self.shape)
-        check_finite("tau_estimate", estimate)
+        check_finite(tau_estimate=estimate)
         return self.update_block(estimate[None], self.center[None]).tick(0)
 
     def update_block(self, tau_estimates: ArrayLike, centers: ArrayLike) -> ChartState:
@@ -144,16 +145,15 @@ class ControlChart:
         estimates = np.asarray(tau_estimates, dtype=float)
         if estimates.ndim != 3 or estimates.shape[1:] != self.shape or not len(estimates):
             raise ValueError(f"tau_estimates has shape {estimates.shape}: expected (n_ticks >= 1, *{self.shape})")
-        check_finite("tau_estimates", estimates)
         centers = np.asarray(centers, dtype=float)
         if centers.shape != estimates.shape:
             raise ValueError(f"centers has shape {centers.shape}: expected {estimates.shape} like tau_estimates")
-        check_finite("centers", centers)
+        check_finite(tau_estimates=estimates, centers=centers)
         sides = self._sides(estimates, centers).astype(np.int8, copy=False)
         flags, counts = np.empty((2, *sides.shape), dtype=bool), np.empty((2, *sides.shape), dtype=np.int64)
         block = ChartState(center=centers, alarm=flags[0], side=sides, exceedance=flags[1],
                            exceedances_in_window=counts[0], run_length=counts[1])
-        _count_excursions(self._memory, self._tick, block)
+        _count_excursions(self._memory_args, self._tick, tuple(block))
         self._tick += len(sides)
         self.center = centers[-1].copy()
         return block
@@ -304,10 +304,12 @@ def _count_excursions(memory, first_tick, block):  # noqa: ANN001, ANN202
 
     ``block`` (:class:`ChartState` of (n_ticks, n_envs, n_vehicles) arrays) comes in with the
     statistic's sides in ``block.side``; they leave as the charted sides (0 while alarms are held
-    off) and the rest of ``block`` is filled; ``memory`` (:class:`ChartMemory`) carries on. Chart
-    tick t uses ring slot t % window; the start it overwrites leaves the window, and counts down
-    only if it was recorded since the vehicle's last restart.
+    off) and the rest of ``block`` is filled; ``memory`` (:class:`ChartMemory`) carries on. Both
+    come as plain tuples (see :mod:`timegap_env.sim.platoon`). Chart tick t uses ring slot
+    t % window; the start it overwrites leaves the window, and counts down only if it was recorded
+    since the vehicle's last restart.
     """
+    memory, block = ChartMemory(*memory), ChartState(*block)
     side, hold_off, in_window, run_length = memory.side, memory.hold_off, memory.exceedances_in_window, memory.run_length
     n_ticks, n_envs, n_vehicles = block.side.shape
     ring_length = memory.starts.shape[0]

@@ -42,14 +42,13 @@ class WindowMemory(NamedTuple):
 
 
 class WindowRule(NamedTuple):
-    """How measurements are screened, weighted and turned into the posterior; from :class:`MonitorConfig`."""
+    """How measurements are screened and weighted; from :class:`MonitorConfig`."""
 
     max_speed: float  # speeds above this are skipped [m/s]
     max_spacing: float  # spacings above this are skipped [m]
     forgetting: float  # exponential forgetting factor per tick [-]
     suffix_weight: np.ndarray  # (W,) weight of suffix slot p + 1 seen from slot p [-]
     age_weight: np.ndarray  # (W,) weight of slot m when its block is full [-]
-    prior: Prior  # the prior of [s0, tau] but tau's mean, and the noise variance
 
 
 class TimeGapMonitor:
@@ -106,8 +105,9 @@ class TimeGapMonitor:
             forgetting=decay,
             suffix_weight=decay ** np.arange(1, W + 1),
             age_weight=decay ** np.arange(W - 1, -1, -1.0),
-            prior=Prior.from_cov(config.prior_standstill_spacing, config.prior_cov, config.noise_variance),
         )
+        self._prior = Prior.from_cov(config.prior_standstill_spacing, config.prior_cov, config.noise_variance)
+        self._kernel_args = (tuple(self._memory), tuple(self._rule), tuple(self._prior))  # as the kernel takes them
         self._slot = 0 if W else -1  # slot of the next measurement, p; -1: no window
         self._moments: Moments | None = None  # the posterior after the last tick; None: recompute when read
         self.reset(None, setting)
@@ -133,7 +133,8 @@ class TimeGapMonitor:
             )
         ticks = MonitorTicks(used=np.empty(speed.shape, dtype=bool), tau_mean=np.empty(speed.shape))
         moments = Moments(*np.empty((len(Moments._fields),) + self.shape))  # the posterior after the last tick
-        self._slot = _update_kernel(speed, spacing, self._memory, self._slot, self._rule, ticks, moments)
+        memory, rule, prior = self._kernel_args
+        self._slot = _update_kernel(speed, spacing, memory, self._slot, rule, prior, tuple(ticks), tuple(moments))
         self._moments = moments
         return ticks
 
@@ -172,7 +173,7 @@ class TimeGapMonitor:
         """The posterior after the last tick (or change of setting)."""
         if self._moments is None:
             memory = self._memory
-            self._moments = posterior_moments(WindowSums(*memory.window_sums), memory.prior_tau, self._rule.prior)
+            self._moments = posterior_moments(WindowSums(*memory.window_sums), memory.prior_tau, self._prior)
         return self._moments
 
     # ---- read-outs ----------------------------------------------------------------------------
@@ -242,16 +243,19 @@ class TimeGapMonitor:
 
 
 @numba.njit(cache=True)
-def _update_kernel(speed, spacing, memory, slot, rule, out, out_moments):  # noqa: ANN001, ANN202
+def _update_kernel(speed, spacing, memory, slot, rule, prior, out, out_moments):  # noqa: ANN001, ANN202
     """:meth:`TimeGapMonitor.update_block`, tick by tick and vehicle by vehicle, in place; returns the next slot.
 
-    ``memory`` (:class:`WindowMemory`) is updated under ``rule`` (:class:`WindowRule`); ``out``
-    (:class:`MonitorTicks`) gets each tick's verdict and posterior mean of tau, ``out_moments``
-    (:class:`Moments` of (n_envs, n_vehicles) arrays) the whole posterior after the last tick.
+    ``memory`` (:class:`WindowMemory`) is updated under ``rule`` (:class:`WindowRule`) and ``prior``
+    (:class:`Prior`); ``out`` (:class:`MonitorTicks`) gets each tick's verdict and posterior mean of
+    tau, ``out_moments`` (:class:`Moments` of (n_envs, n_vehicles) arrays) the whole posterior after
+    the last tick; each structure comes as a plain tuple (see :mod:`timegap_env.sim.platoon`).
 
     ``slot = -1`` means no window: the window sums are the block sums, which never close.
     The additions are those of the class docstring's drift guard, in the same order.
     """
+    memory, rule, prior = WindowMemory(*memory), WindowRule(*rule), Prior(*prior)
+    out, out_moments = MonitorTicks(*out), Moments(*out_moments)
     slots, block_sum, window_sums = memory.slots, memory.block_sum, memory.window_sums
     n_ticks, n_envs, n_vehicles = speed.shape
     window_ticks = slots.shape[0] - 1
@@ -279,7 +283,7 @@ def _update_kernel(speed, spacing, memory, slot, rule, out, out_moments):  # noq
                     window_sums[0, e, i], window_sums[1, e, i], window_sums[2, e, i], window_sums[3, e, i],
                     window_sums[4, e, i],
                 )
-                moments = posterior_moments(sums, memory.prior_tau[e, i], rule.prior)
+                moments = posterior_moments(sums, memory.prior_tau[e, i], prior)
                 out.tau_mean[k, e, i] = moments.mean_tau
                 if k == n_ticks - 1:
                     for m in range(len(moments)):

@@ -44,29 +44,40 @@ class NoiseModel(NamedTuple):
 class Sensors:
     """The spacing and speed sensors of every follower of ``n_envs`` platoons.
 
-    Per env, shaped (n_envs,): ``keys`` (uint64) of the noise, drawn from ``seed`` and replaced
-    at each episode by the env; ``dropout_probability`` [-], ``config.dropout_probability``
-    until the env draws its own.
+    ``noise`` (:class:`NoiseModel`) holds, per env, shaped (n_envs,): ``keys`` (uint64) of the
+    noise, drawn from ``seed`` and replaced at each episode by the env; ``dropout_probability``
+    [-], ``config.dropout_probability`` until the env draws its own. Both are also attributes of
+    the sensors; change them in place.
     """
 
     def __init__(self, config: SensorConfig = SensorConfig(), n_envs: int = 1, seed: int | None = None) -> None:
         self.config = config
-        self.keys = np.random.default_rng(seed).integers(0, 2**63, size=n_envs, dtype=np.uint64)
-        self.dropout_probability = np.full(n_envs, config.dropout_probability)
+        self.noise = NoiseModel(
+            keys=np.random.default_rng(seed).integers(0, 2**63, size=n_envs, dtype=np.uint64),
+            dropout_probability=np.full(n_envs, config.dropout_probability),
+            spacing_noise_std=float(config.spacing_noise_std),
+            speed_noise_std=float(config.speed_noise_std),
+        )
+        self._noise_args = tuple(self.noise)  # the same arrays, as the kernel takes them
+
+    keys = property(lambda self: self.noise.keys, doc="Noise key of each env (n_envs,) uint64; write in place.")
+    dropout_probability = property(
+        lambda self: self.noise.dropout_probability, doc="Each env's dropout probability (n_envs,); write in place."
+    )
 
     def measure(self, true: Readings, ticks_before: np.ndarray) -> Readings:
         """Readings of the ``true`` spacings and speeds of a block of ticks; env e's block starts after
         ``ticks_before[e]`` ticks since its reset (its first reading is tick ``ticks_before[e] + 1``)."""
-        noise = NoiseModel(self.keys, self.dropout_probability, float(self.config.spacing_noise_std),
-                           float(self.config.speed_noise_std))
         measured = Readings(np.empty_like(true.spacing), np.empty_like(true.speed))
-        _measure(true, ticks_before, noise, measured)
+        _measure(tuple(true), ticks_before, self._noise_args, tuple(measured))
         return measured
 
 
 @numba.njit(cache=True)
 def _measure(true, ticks_before, noise, out):  # noqa: ANN001, ANN202
-    """:meth:`Sensors.measure`: fill ``out`` (:class:`Readings`) from ``true`` under ``noise`` (:class:`NoiseModel`)."""
+    """:meth:`Sensors.measure`: fill ``out`` (:class:`Readings`) from ``true`` under ``noise`` (:class:`NoiseModel`),
+    each a plain tuple (see :mod:`timegap_env.sim.platoon`)."""
+    true, noise, out = Readings(*true), NoiseModel(*noise), Readings(*out)
     n_ticks, n_envs, n_followers = true.spacing.shape
     for k in range(n_ticks):
         for e in range(n_envs):

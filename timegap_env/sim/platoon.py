@@ -23,7 +23,10 @@ feedback, so it cannot be vectorised over time, and as a few dozen NumPy calls
 per tick its cost for small batches was call overhead, not arithmetic.
 :meth:`Platoon.advance` runs a whole block of ticks in one call. The kernel takes
 the named structures below: the state, the block's inputs, the transition
-coefficients, the controller's constants and the arrays it fills.
+coefficients, the controller's constants and the arrays it fills. Like every kernel
+of the package it receives them as plain tuples and names them again on entry:
+numba types a NamedTuple argument in Python on every call, several times slower
+than a plain tuple, and a step makes a dozen such calls.
 """
 
 from __future__ import annotations
@@ -180,6 +183,7 @@ class Platoon:
         self.tick = 0
         self.controller = Controller.from_config(config)
         self.set_dynamics(config.per_follower("actuation_lag"), config.per_follower("actuation_gain"))
+        self._kernel_args = (tuple(self.state), tuple(self.controller))  # the same arrays, as the kernel takes them
 
     # ----------------------------------------------------------------- state
     x = property(lambda self: self.state.x, doc="Front-bumper positions (n_envs, n_vehicles) [m].")
@@ -213,6 +217,7 @@ class Platoon:
         self._zoh = ZOHCoefficients.for_glvd(
             np.broadcast_to(lag, follower_shape), np.broadcast_to(gain, follower_shape), self.config.dt
         )
+        self._zoh_args = tuple(self._zoh)
 
     def reset(
         self,
@@ -298,8 +303,9 @@ class Platoon:
         elif np.shape(v2v) != follower_shape:
             raise ValueError(f"v2v has shape {np.shape(v2v)}: expected {follower_shape} (n_ticks, n_envs, n_followers)")
         ticks = PlatoonTicks.empty(follower_shape)
-        inputs = LeaderTicks(leader_speed, leader_accel, np.ascontiguousarray(v2v, dtype=bool))
-        _advance(self.state, self.tick, inputs, self._zoh, self.controller, ticks)
+        inputs = (leader_speed, leader_accel, np.ascontiguousarray(v2v, dtype=bool))  # a LeaderTicks
+        state, controller = self._kernel_args
+        _advance(state, self.tick, inputs, self._zoh_args, controller, tuple(ticks))
         self.state.v2v[:] = v2v[-1]
         self.tick += n_ticks
         return ticks
@@ -332,10 +338,13 @@ def _advance(state, first_tick, leader, zoh, controller, out):  # noqa: ANN001, 
     """The physics of :meth:`Platoon.advance`, tick by tick, in place; see the module docstring for the model.
 
     ``state`` (:class:`PlatoonState`) is updated, ``out`` (:class:`PlatoonTicks`) filled for the
-    ``leader`` (:class:`LeaderTicks`) of each tick. Followers are updated from the last to the
-    first, so each one still sees its predecessor's state from the start of the tick, as in the
-    continuous model.
+    ``leader`` (:class:`LeaderTicks`) of each tick, under ``zoh`` (:class:`ZOHCoefficients`) and
+    ``controller`` (:class:`Controller`), each passed as a plain tuple. Followers are updated from the
+    last to the first, so each one still sees its predecessor's state from the start of the tick, as
+    in the continuous model.
     """
+    state, leader, zoh = PlatoonState(*state), LeaderTicks(*leader), ZOHCoefficients(*zoh)
+    controller, out = Controller(*controller), PlatoonTicks(*out)
     x, v, a, u = state.x, state.v, state.a, state.u
     n_ticks, n_envs, n_followers = leader.v2v.shape
     buffer_length = state.predecessor_accel.shape[0]
