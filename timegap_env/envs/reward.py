@@ -146,7 +146,7 @@ def reward_terms(
 def weighted_sum(terms: RewardTerms, weights: RewardTerms) -> np.ndarray:
     """The reward (n_envs,): the sum of each term times its weight, in REWARD_TERMS order."""
     reward = np.empty(len(terms[0]))
-    _weighted_sum(terms, weights, reward)
+    _weighted_sum(np.array(terms), np.array(weights), reward)
     return reward
 
 
@@ -162,20 +162,22 @@ def score_step(
     """:func:`step_readouts` into ``readouts`` (the caller's, e.g. from ``StepReadouts.empty``, reused step
     after step), then :func:`reward_terms` and :func:`weighted_sum`, in one compiled call."""
     n_envs = setting.shape[0]
-    score = StepScore(RewardTerms(*np.empty((len(REWARD_TERMS), n_envs))), np.empty(n_envs))
-    _score(tuple(step), previous_accel, setting, changed, tuple(constants), tuple(weights), tuple(readouts),
-           tuple(score.terms), score.reward)
+    terms = np.empty((len(REWARD_TERMS), n_envs))  # one row a term, in REWARD_TERMS order
+    score = StepScore(RewardTerms(*terms), np.empty(n_envs))
+    _score(tuple(step), previous_accel, setting, changed, tuple(constants), np.array(weights), tuple(readouts),
+           tuple(score.terms), terms, score.reward)
     return score
 
 
 @numba.njit(cache=True)
-def _score(step, previous_accel, setting, changed, constants, weights, readouts, terms, reward):  # noqa: ANN001, ANN202, PLR0913
-    """:func:`score_step`; the structures come as plain tuples (see :mod:`timegap_env.sim.platoon`)."""
+def _score(step, previous_accel, setting, changed, constants, weights, readouts, terms, term_rows, reward):  # noqa: ANN001, ANN202, PLR0913
+    """:func:`score_step`; the structures come as plain tuples (see :mod:`timegap_env.sim.platoon`); ``terms``
+    are the rows of ``term_rows`` (n_terms, n_envs), written by name and summed by row against ``weights``
+    (n_terms,), in REWARD_TERMS order (a tuple indexed by a variable is slow in numba)."""
     step, constants, readouts = StepTicks(*step), RewardConstants(*constants), StepReadouts(*readouts)
-    weights, terms = RewardTerms(*weights), RewardTerms(*terms)
     _step_readouts(step, previous_accel, constants, readouts)
-    _reward_terms(readouts, setting, changed, constants, terms)
-    _weighted_sum(terms, weights, reward)
+    _reward_terms(readouts, setting, changed, constants, RewardTerms(*terms))
+    _weighted_sum(term_rows, weights, reward)
 
 
 @numba.njit(cache=True)
@@ -236,7 +238,8 @@ def _reward_terms(readouts, setting, changed, constants, out):  # noqa: ANN001, 
 
 @numba.njit(cache=True)
 def _weighted_sum(terms, weights, out):  # noqa: ANN001, ANN202
+    """``out`` (n_envs,) = sum over t of weights[t] terms[t], ``terms`` (n_terms, n_envs), in row order."""
     for e in range(out.size):
         out[e] = 0.0
-        for t in range(len(terms)):
-            out[e] += weights[t] * terms[t][e]
+        for t in range(terms.shape[0]):
+            out[e] += weights[t] * terms[t, e]

@@ -285,9 +285,10 @@ def _update_kernel(speed, spacing, memory, slot, rule, prior, out, out_moments):
                 )
                 moments = posterior_moments(sums, memory.prior_tau[e, i], prior)
                 out.tau_mean[k, e, i] = moments.mean_tau
-                if k == n_ticks - 1:
-                    for m in range(len(moments)):
-                        out_moments[m][e, i] = moments[m]
+                if k == n_ticks - 1:  # field by field: a tuple indexed by a variable is slow in numba
+                    out_moments.mean_s0[e, i], out_moments.mean_tau[e, i] = moments.mean_s0, moments.mean_tau
+                    out_moments.var_s0[e, i], out_moments.cov_s0_tau[e, i] = moments.var_s0, moments.cov_s0_tau
+                    out_moments.var_tau[e, i] = moments.var_tau
         if slot < 0:  # no window
             continue
         if slot < window_ticks - 1:
