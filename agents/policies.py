@@ -22,7 +22,7 @@ from typing import Any, Protocol, runtime_checkable
 import numpy as np
 
 from timegap_env.config import EnvConfig
-from timegap_env.envs.observation import FEATURES, FollowerView, decode_observation
+from timegap_env.envs.observation import FEATURES, FollowerView, decode_observation, exceedance_scale
 from timegap_env.monitoring.charts import switch_rule
 
 V2V_SETTING = 1.0  # string stable with V2V (CACC) from 1.0 s with the default gains [s]
@@ -144,7 +144,7 @@ class PaperRulePolicy(ObservationPolicy):
         self.switch_exceedances = chart.switch_exceedances if switch_exceedances is None else switch_exceedances
         self.exceedance_window = chart.exceedance_window if exceedance_window is None else exceedance_window
         self.switch_to = chart.switch_to if switch_to is None else switch_to
-        saturation = 2 * chart.switch_exceedances
+        saturation = exceedance_scale(self.config)
         if isinstance(self.switch_exceedances, bool) or not isinstance(self.switch_exceedances, (int, np.integer)):
             raise ValueError(f"switch_exceedances = {self.switch_exceedances!r}: must be an integer")
         if not 1 <= self.switch_exceedances <= saturation:

@@ -2,7 +2,7 @@
 
 import pytest
 
-from timegap_env.config import LeaderConfig, MonitorConfig, PlatoonConfig
+from timegap_env.config import EnvConfig, LeaderConfig, MonitorConfig, PlatoonConfig
 
 
 @pytest.mark.parametrize(
@@ -50,3 +50,17 @@ def test_per_follower_dynamics_accept_one_value_per_follower():
 
 def test_default_monitor_prior_matches_the_simulator():
     assert MonitorConfig().prior_standstill_spacing == PlatoonConfig().standstill_spacing
+
+
+def test_the_envs_leader_lasts_the_episode():
+    assert EnvConfig().leader.duration == EnvConfig().episode_duration == 250.0
+    assert EnvConfig.from_dict({"episode_duration": 500}).leader.duration == 500.0
+    assert EnvConfig.from_dict({"episode_duration": 60.0, "leader": {"duration": 60.0}}).leader.duration == 60.0
+    with pytest.raises(ValueError, match=r"EnvConfig.leader.duration = 100.0: a synthetic leader lasts the episode"):
+        EnvConfig.from_dict({"leader": {"duration": 100.0}})
+
+
+def test_derived_quantities_come_from_their_fields():
+    config = EnvConfig.from_dict({"chart": {"limit_width": 3.0}, "setting_levels": (0.8, 1.6, 2.0)})
+    assert config.chart.half_width == 3.0 * config.chart.baseline_std
+    assert config.setting_span == pytest.approx(1.2, rel=1e-15)

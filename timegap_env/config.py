@@ -126,8 +126,8 @@ class PlatoonConfig(ConfigMixin):
 class LeaderConfig(ConfigMixin):
     """What every leader profile shares: its tick, length and speed band."""
 
-    dt: float = 0.1  # sample period of the profile [s]
-    duration: float = 250.0  # length of a synthetic profile [s]
+    dt: float = PlatoonConfig.dt  # sample period of the profile [s]
+    duration: float = 250.0  # length of a synthetic profile [s]; in the env it is EnvConfig.episode_duration
     speed_band: tuple[float, float] = (20 * MPH, 80 * MPH)  # speeds a profile is kept within [m/s]
     initial_speed: float = 22.0  # speed at t = 0 of an integrated profile [m/s]
     ngsim_min_duration: float = 30.0  # shortest NGSIM vehicle record drawn as a leader [s]
@@ -315,6 +315,11 @@ class ChartConfig(ConfigMixin):
         """Length of the exceedance-counting window in ticks [-]."""
         return int(round(self.exceedance_window / self.dt))
 
+    @property
+    def half_width(self) -> float:
+        """L sigma_desired: from the centre line to either Shewhart limit [s]."""
+        return self.limit_width * self.baseline_std
+
 
 MONITOR_PRESETS: dict[str, MonitorConfig] = {
     "default": MonitorConfig(),
@@ -358,6 +363,8 @@ class EnvConfig(ConfigMixin):
     """Everything ``TimeGapMonitor-v0`` runs with; ``gym.make(..., config={...})`` overrides it.
 
     Nested configs take dicts of their own fields, e.g. ``{"platoon": {"n_followers": 3}}``.
+    A synthetic leader lasts the episode: ``leader.duration`` follows ``episode_duration``
+    (left at its default it is set to it; any other value must equal it).
     """
 
     platoon: PlatoonConfig = PlatoonConfig()
@@ -391,6 +398,12 @@ class EnvConfig(ConfigMixin):
             ticks = getattr(self, field) / dt
             if abs(ticks - round(ticks)) > 1e-9:
                 self._fail(field, getattr(self, field), f"must be a multiple of platoon.dt = {dt}")
+        if not math.isclose(self.leader.duration, self.episode_duration):
+            if self.leader.duration != LeaderConfig.duration:
+                self._fail("leader.duration", self.leader.duration,
+                           f"a synthetic leader lasts the episode: leave it out or make it episode_duration = "
+                           f"{self.episode_duration}")
+            object.__setattr__(self, "leader", self.leader.with_overrides({"duration": float(self.episode_duration)}))
         for name, config in (("monitor", self.monitor), ("chart", self.chart), ("leader", self.leader)):
             if not math.isclose(config.dt, dt):
                 self._fail(f"{name}.dt", config.dt, f"must equal platoon.dt = {dt}")
@@ -438,3 +451,8 @@ class EnvConfig(ConfigMixin):
     def max_episode_steps(self) -> int:
         """Environment steps in a full episode [-]."""
         return int(round(self.episode_duration / self.decision_interval))
+
+    @property
+    def setting_span(self) -> float:
+        """Largest setting level minus the smallest [s]."""
+        return float(self.setting_levels[-1]) - float(self.setting_levels[0])

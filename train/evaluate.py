@@ -125,12 +125,12 @@ def plan_episodes(episodes: int, groups: Sequence[str]) -> list[Episode]:
 
 def build_policies(names: Sequence[str] | None, model: Path) -> dict[str, NamedPolicy]:
     """Policies by CLI name; ``names=None`` is the default set (PPO only if ``model`` exists)."""
-    platoon = EnvConfig()
+    config = EnvConfig()  # the default, whose action mode is one setting for the platoon
     policies: dict[str, Any] = {
-        "rule_platoon": PaperRulePolicy(platoon),
-        "rule_per_vehicle": PaperRulePolicy(platoon.with_overrides({"action_mode": "per_vehicle"})),
-        **{f"fixed_{seconds(policy.setting)}": policy for policy in fixed_policies(platoon)},
-        "v2v_aware": V2VAwarePolicy(platoon),
+        "rule_platoon": PaperRulePolicy(config),
+        "rule_per_vehicle": PaperRulePolicy(config.with_overrides({"action_mode": "per_vehicle"})),
+        **{f"fixed_{seconds(policy.setting)}": policy for policy in fixed_policies(config)},
+        "v2v_aware": V2VAwarePolicy(config),
     }
     wanted = list(policies) + ["ppo"] if names is None else list(names)
     unknown = sorted(set(wanted) - set(policies) - {"ppo"})
@@ -141,7 +141,7 @@ def build_policies(names: Sequence[str] | None, model: Path) -> dict[str, NamedP
             from agents.learned import LearnedPolicy  # torch is slow to import; only when needed
 
             policies["ppo"] = LearnedPolicy.load(model)
-            expected = observation_space(platoon).shape
+            expected = observation_space(config).shape
             if policies["ppo"].observation_shape != expected:
                 raise ValueError(f"--model {model}: takes observations of shape {policies['ppo'].observation_shape}, "
                                  f"the env gives {expected}")
@@ -194,7 +194,7 @@ def run_batch(
             t=arrays.t[episode],
             estimate=arrays.estimate[episode],
             center=arrays.center[episode],
-            half_width=config.chart.limit_width * config.chart.baseline_std,
+            half_width=config.chart.half_width,
             scenario=f"{group} seed {seeds[0]} ({scenarios[0]})",
         )
     return records, prints, profile

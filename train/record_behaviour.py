@@ -2,7 +2,8 @@
 
     python -m train.record_behaviour --out /tmp/before.pkl                       # record
     python -m train.record_behaviour --out /tmp/after.pkl --compare /tmp/before.pkl  # record again and compare
-    python -m train.record_behaviour --out /tmp/after.pkl --compare /tmp/old.pkl --rename time_gap=actual_time_gap
+    python -m train.record_behaviour --out /tmp/after.pkl --compare /tmp/old.pkl \
+        --rename time_gap=actual_time_gap --rename time_gap_setting=setting   # against a recording of eed82b7
 
 Records, through ``gym.make``, ``gym.make_vec`` and ``timegap_env.simulate`` only:
 

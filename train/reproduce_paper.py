@@ -37,14 +37,6 @@ from timegap_env.monitoring import MonitoredPlatoon, switch_rule
 
 PLATOON = PlatoonConfig()  # the paper's Table 1: five followers, T = 0.45 s, K = 1, tau* = 1.6 s, s0 = 5 m
 
-PAPER = {  # the paper's reported numbers (Sec. 3.3)
-    "limits_1_6": (1.35, 1.6, 1.85),
-    "limits_1_0": (0.75, 1.0, 1.25),
-    "range_vehicles_1_2": (1.28, 1.92),
-    "exits_within_50_s": 4,
-    "max_deviation_before": 0.32,
-    "max_deviation_after": 0.17,
-}
 EXIT_WINDOW = 50.0  # the paper counts exits within 50 s [s]
 GENTLE_JERK = 5.0  # a gentler leader for the sensitivity line of the summary [m/s^3]
 SENSOR_SEED = 1
@@ -56,7 +48,7 @@ class LoopRecord:
 
     t: np.ndarray  # (n_ticks,) [s]
     estimate: np.ndarray  # posterior mean of tau [s]
-    true_gap: np.ndarray  # actual (s - s0) / v [s]
+    actual_time_gap: np.ndarray  # (s - s0) / v [s]
     setting: np.ndarray  # time gap setting tau* [s]
     lcl: np.ndarray  # [s]
     ucl: np.ndarray  # [s]
@@ -72,11 +64,10 @@ def run_loop(
     loop = MonitoredPlatoon(PLATOON, monitor, chart_config, SensorConfig(), n_envs=speeds.shape[0],
                             seed=SENSOR_SEED)
     loop.reset(speeds[:, 0], accels[:, 0])
-    s0 = PLATOON.standstill_spacing
     vehicle_1 = np.zeros(PLATOON.n_followers, dtype=bool)
     vehicle_1[0] = True
     switch_tick = np.full(speeds.shape[0], -1)
-    names = ("estimate", "true_gap", "setting", "lcl", "ucl", "exceedance")
+    names = ("estimate", "actual_time_gap", "setting", "lcl", "ucl", "exceedance")
     rows: dict[str, list[np.ndarray]] = {name: [] for name in names}
     for k in range(speeds.shape[1]):
         if k > 0:
@@ -86,7 +77,7 @@ def run_loop(
                 switch_tick[fire.any(axis=1)] = k
                 loop.change_setting(chart_config.switch_to, fire)
         rows["estimate"].append(loop.monitor.tau_mean)
-        rows["true_gap"].append((loop.platoon.spacing - s0) / loop.platoon.v[:, 1:])
+        rows["actual_time_gap"].append(loop.platoon.actual_time_gap)
         rows["setting"].append(loop.platoon.setting.copy())
         rows["lcl"].append(loop.chart.lcl)
         rows["ucl"].append(loop.chart.ucl)
@@ -106,7 +97,7 @@ def plot_profiles(record: LoopRecord, env: int, path: Path) -> None:
     n_followers = record.estimate.shape[2]
     fig, axes = plt.subplots(n_followers, 1, figsize=(10, 2.0 * n_followers), sharex=True, sharey=True)
     for i, ax in enumerate(axes):
-        ax.plot(record.t, record.true_gap[env, :, i], color="0.75", lw=1, label="actual (s − s0)/v")
+        ax.plot(record.t, record.actual_time_gap[env, :, i], color="0.75", lw=1, label="actual (s − s0)/v")
         ax.plot(record.t, record.estimate[env, :, i], color="tab:blue", lw=1, label="posterior mean of τ")
         for limit, style in ((record.lcl, "--"), (record.setting, "-"), (record.ucl, "--")):
             ax.plot(record.t, limit[env, :, i], color="tab:red", ls=style, lw=1)
@@ -179,8 +170,8 @@ def main() -> None:
     gentle_fired = int((gentle_run.switch_tick >= 0).sum())
 
     paper_prior = run_loop(speeds[env : env + 1], accels[env : env + 1], apply_rule=False, monitor=MONITOR_PRESETS["paper"])
-    paper_prior_bias = float(np.mean(paper_prior.estimate[0, 1:] - paper_prior.true_gap[0, 1:]))
-    default_bias = float(np.mean(fixed.estimate[env, 1:] - fixed.true_gap[env, 1:]))
+    paper_prior_bias = float(np.mean(paper_prior.estimate[0, 1:] - paper_prior.actual_time_gap[0, 1:]))
+    default_bias = float(np.mean(fixed.estimate[env, 1:] - fixed.actual_time_gap[env, 1:]))
 
     plot_profiles(fixed, env, args.out / "fig_timegap_profiles.png")
     plot_switch(fixed, switched, env, args.out / "fig_switch.png")

@@ -45,7 +45,7 @@ def make_frame(**overrides: object) -> RenderFrame:
         estimate_history=estimate,
         lcl=lcl,
         ucl=ucl,
-        setting=setting,
+        center=setting,
         alarm=(estimate[-1] < lcl) | (estimate[-1] > ucl),
         v2v=np.array([True, True, False, True, True]),
         collided=np.zeros(N_FOLLOWERS, dtype=bool),
@@ -144,10 +144,10 @@ def test_past_estimates_are_judged_against_the_limits_of_their_time(renderer):
     setting[frame.history_t >= 15.0, 3] = 1.0
     estimate = np.minimum(frame.estimate_history, 1.7)  # everybody inside 1.35 .. 1.85 ...
     estimate[frame.history_t >= 15.0, 3] = 1.0  # ... and follower 4 inside 0.75 .. 1.25 after its switch
-    current = dict(estimate_history=estimate, lcl=setting[-1] - 0.25, ucl=setting[-1] + 0.25, setting=setting[-1])
+    current = dict(estimate_history=estimate, lcl=setting[-1] - 0.25, ucl=setting[-1] + 0.25, center=setting[-1])
     without = chart_band(renderer, renderer.render(dataclasses.replace(frame, **current)))
     assert count(without, ALARM_COLOR) > 100  # its first 15 s look out of control against today's limits
-    recorded = dict(lcl_history=setting - 0.25, ucl_history=setting + 0.25, setting_history=setting)
+    recorded = dict(lcl_history=setting - 0.25, ucl_history=setting + 0.25, center_history=setting)
     with_history = chart_band(renderer, renderer.render(dataclasses.replace(frame, **current, **recorded)))
     assert count(with_history, ALARM_COLOR) == 0
 
@@ -249,7 +249,7 @@ def test_other_sizes_and_platoon_lengths():
         RenderFrame(
             t=frame.t, x=-12.0 * np.arange(11), v=np.full(11, 3.0), vehicle_length=4.5,
             history_t=frame.history_t, estimate_history=history,
-            lcl=np.full(10, 1.35), ucl=np.full(10, 1.85), setting=np.full(10, 1.6),
+            lcl=np.full(10, 1.35), ucl=np.full(10, 1.85), center=np.full(10, 1.6),
             alarm=np.zeros(10, dtype=bool), v2v=np.ones(10, dtype=bool), collided=np.zeros(10, dtype=bool),
         )
     )

@@ -51,8 +51,8 @@ def test_the_render_frame_shows_the_last_history_seconds_with_the_limits_of_thei
         env.step(5 if step < 70 else 2)
     frame = env.unwrapped.task.render_frame(history=60.0)
     assert frame.t == 80.0 and frame.history_t[0] >= 20.0 and frame.history_t[-1] == 80.0
-    assert frame.estimate_history.shape == frame.setting_history.shape == (frame.history_t.size, 5)
+    assert frame.estimate_history.shape == frame.center_history.shape == (frame.history_t.size, 5)
     np.testing.assert_allclose(frame.ucl_history - frame.lcl_history, 0.5)
-    assert frame.setting_history[0, 0] == 1.6 and frame.setting_history[-1, 0] < 1.6  # ramping to 1.0 s
+    assert frame.center_history[0, 0] == 1.6 and frame.center_history[-1, 0] < 1.6  # ramping to 1.0 s
     bare = reset_task(EnvConfig(), 1, seed=0).render_frame(history=60.0)  # no trace: no history
     assert bare.history_t.size == 0 and bare.estimate_history.shape == (0, 5)

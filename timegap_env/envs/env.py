@@ -11,9 +11,8 @@ import numpy as np
 from timegap_env.config import EnvConfig
 from timegap_env.envs.action import action_space
 from timegap_env.envs.observation import observation_space
+from timegap_env.envs.rendering import DEFAULT_TIME_WINDOW
 from timegap_env.envs.task import PlatoonTask
-
-RENDER_HISTORY = 60.0  # seconds of chart history drawn by the renderer [s]
 
 
 class TimeGapMonitorEnv(gym.Env):
@@ -143,8 +142,8 @@ class TimeGapMonitorEnv(gym.Env):
         from timegap_env.envs.rendering import PlatoonRenderer
 
         if self._renderer is None:
-            self._renderer = PlatoonRenderer(self.config.platoon.n_followers, time_window=RENDER_HISTORY)
-        frame = self.task.render_frame(history=RENDER_HISTORY)
+            self._renderer = PlatoonRenderer(self.config.platoon.n_followers)
+        frame = self.task.render_frame(history=DEFAULT_TIME_WINDOW)
         if self.render_mode == "human":
             self._renderer.show(frame)
             return None

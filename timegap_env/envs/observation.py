@@ -33,9 +33,18 @@ FEATURES = (
 )
 DEVIATION_SCALE = 1.0  # [s]
 SPEED_SCALE = 40.0  # [m/s], above the 80 mph band
-OBSERVATION_LOW = np.array([-1, 0, 0, 0, 0, 0, 0, 0, 0], dtype=np.float32)
+OBSERVATION_LOW = np.array([-1 if feature == "deviation" else 0 for feature in FEATURES], dtype=np.float32)
 OBSERVATION_HIGH = np.ones(len(FEATURES), dtype=np.float32)
+# Where each feature sits in a follower's row, for the kernel.
+(_DEVIATION, _ESTIMATE_STD, _PROB_OUTSIDE, _ALARM, _EXCEEDANCES, _TIME_SINCE_ALARM, _SETTING, _SPEED,
+ _V2V) = (FEATURES.index(name) for name in ("deviation", "estimate_std", "prob_outside", "alarm", "exceedances",
+                                            "time_since_alarm", "setting", "speed", "v2v"))
 LADDER_TOLERANCE = 1e-3  # a decoded setting farther than this from every level means a config mismatch [s]
+
+
+def exceedance_scale(config: EnvConfig) -> int:
+    """The exceedance count at which the ``exceedances`` feature reaches 1: twice the paper's rule's k [-]."""
+    return 2 * config.chart.switch_exceedances
 
 
 def observation_space(config: EnvConfig) -> spaces.Box:
@@ -70,14 +79,13 @@ class ObservationScales(NamedTuple):
 
     @classmethod
     def from_config(cls, config: EnvConfig) -> ObservationScales:
-        levels = [float(level) for level in config.setting_levels]
         return cls(
-            half_width=float(config.chart.limit_width * config.chart.baseline_std),
-            exceedance_scale=float(2 * config.chart.switch_exceedances),
+            half_width=float(config.chart.half_width),
+            exceedance_scale=float(exceedance_scale(config)),
             dt=float(config.platoon.dt),
             exceedance_window=float(config.chart.exceedance_window),
-            smallest_level=levels[0],
-            level_span=levels[-1] - levels[0],
+            smallest_level=float(config.setting_levels[0]),
+            level_span=config.setting_span,
         )
 
 
@@ -98,15 +106,17 @@ def _encode(state, scales, out):  # noqa: ANN001, ANN202
     for e in range(n_envs):
         for f in range(n_followers):
             mean, variance, line = state.tau_mean[e, f], state.tau_var[e, f], state.center[e, f]
-            out[e, f, 0] = (mean - line) / DEVIATION_SCALE
-            out[e, f, 1] = math.sqrt(variance) / scales.half_width
-            out[e, f, 2] = outside_probability(mean, variance, line - scales.half_width, line + scales.half_width)
-            out[e, f, 3] = state.side[e, f] != 0
-            out[e, f, 4] = state.exceedances_in_window[e, f] / scales.exceedance_scale
-            out[e, f, 5] = state.run_length[e, f] * scales.dt / scales.exceedance_window
-            out[e, f, 6] = (state.setting[e, f] - scales.smallest_level) / scales.level_span
-            out[e, f, 7] = state.speed[e, f] / SPEED_SCALE
-            out[e, f, 8] = state.v2v[e, f]
+            out[e, f, _DEVIATION] = (mean - line) / DEVIATION_SCALE
+            out[e, f, _ESTIMATE_STD] = math.sqrt(variance) / scales.half_width
+            out[e, f, _PROB_OUTSIDE] = outside_probability(
+                mean, variance, line - scales.half_width, line + scales.half_width
+            )
+            out[e, f, _ALARM] = state.side[e, f] != 0
+            out[e, f, _EXCEEDANCES] = state.exceedances_in_window[e, f] / scales.exceedance_scale
+            out[e, f, _TIME_SINCE_ALARM] = state.run_length[e, f] * scales.dt / scales.exceedance_window
+            out[e, f, _SETTING] = (state.setting[e, f] - scales.smallest_level) / scales.level_span
+            out[e, f, _SPEED] = state.speed[e, f] / SPEED_SCALE
+            out[e, f, _V2V] = state.v2v[e, f]
             for i in range(n_features):
                 out[e, f, i] = min(max(out[e, f, i], OBSERVATION_LOW[i]), OBSERVATION_HIGH[i])
 
@@ -123,17 +133,17 @@ class FollowerView(NamedTuple):
 def decode_observation(observation: np.ndarray, config: EnvConfig) -> FollowerView:
     """Undo the scaling of :func:`observe` for (n_envs, n_followers * len(FEATURES)) observations.
 
-    - ``exceedances`` = count / (2 k), k = ``config.chart.switch_exceedances``, clipped to [0, 1]:
-      count = round(feature * 2 k), exact for counts up to 2 k (larger counts read as 2 k);
+    - ``exceedances`` = count / :func:`exceedance_scale` (2 k, k = ``config.chart.switch_exceedances``), clipped
+      to [0, 1]: count = round(feature * 2 k), exact for counts up to 2 k (larger counts read as 2 k);
     - ``setting`` = (tau* - smallest level) / (largest - smallest level): tau* is the setting last
       asked for (not the ramped value the controller applies yet), mapped to its ladder index;
     - ``v2v`` is 1 in CACC, 0 in ACC.
     """
     n_followers, n_features = config.platoon.n_followers, len(FEATURES)
     features = observation.reshape(observation.shape[0], n_followers, n_features)
-    counts = np.rint(features[..., FEATURES.index("exceedances")] * 2 * config.chart.switch_exceedances)
+    counts = np.rint(features[..., FEATURES.index("exceedances")] * exceedance_scale(config))
     levels = np.asarray(config.setting_levels)
-    setting = levels[0] + features[..., FEATURES.index("setting")] * (levels[-1] - levels[0])  # [s]
+    setting = levels[0] + features[..., FEATURES.index("setting")] * np.float64(config.setting_span)  # [s]
     distance = np.abs(setting[..., None] - levels)
     index = distance.argmin(axis=-1)
     if np.any(np.take_along_axis(distance, index[..., None], axis=-1) > LADDER_TOLERANCE):

@@ -2,7 +2,7 @@
 
 A frame (``PlatoonRenderer.render`` -> (height, width, 3) uint8 RGB) has three bands, top to bottom:
 
-- **title bar**: time, leader speed, the time gap settings tau*, alarm and collision counts;
+- **title bar**: time, leader speed, the applied settings tau* (the centre lines), alarm and collision counts;
 - **road**: highway-env's own graphics (``WorldSurface``, ``RoadGraphics``, ``VehicleGraphics``) of a
   straight three-lane road, the platoon in the middle lane. The view is centred on the platoon's
   middle and zoomed so that the whole platoon fits (never closer than ``MAX_SCALE`` px/m, and never
@@ -13,7 +13,7 @@ A frame (``PlatoonRenderer.render`` -> (height, width, 3) uint8 RGB) has three b
   the posterior mean of its time gap (blue; orange where it lay outside the limits of its time),
   its LCL and UCL (red) and CL = tau* (dashed dark red) as step lines, the current value on the
   right, and on the left a box coloured by state. The limits of the past come from the frame's
-  optional ``lcl_history`` / ``ucl_history`` / ``setting_history``; without them the current
+  optional ``lcl_history`` / ``ucl_history`` / ``center_history``; without them the current
   limits are drawn over the whole history, and after a setting change the older part of the line
   then shows as outside the (new) limits.
 
@@ -112,16 +112,16 @@ class RenderFrame:
     estimate_history: np.ndarray  # (n_history, n_followers) posterior mean of each follower's time gap [s]
     lcl: np.ndarray  # (n_followers,) current lower control limit [s]
     ucl: np.ndarray  # (n_followers,) current upper control limit [s]
-    setting: np.ndarray  # (n_followers,) current time gap setting tau* (the centre line) [s]
+    center: np.ndarray  # (n_followers,) current centre line, the applied setting tau* [s]
     alarm: np.ndarray  # (n_followers,) bool, estimate outside the limits now
     v2v: np.ndarray  # (n_followers,) bool, CACC (V2V) on
     collided: np.ndarray  # (n_followers,) bool
     lcl_history: np.ndarray | None = None  # (n_history, n_followers) LCL at history_t [s]; None: lcl throughout
     ucl_history: np.ndarray | None = None  # (n_history, n_followers) UCL at history_t [s]; None: ucl throughout
-    setting_history: np.ndarray | None = None  # (n_history, n_followers) tau* at history_t [s]; None: setting
+    center_history: np.ndarray | None = None  # (n_history, n_followers) centre line at history_t [s]; None: center
 
 
-_LIMIT_HISTORIES = ("lcl_history", "setting_history", "ucl_history")  # optional RenderFrame fields: LCL, CL, UCL
+_LIMIT_HISTORIES = ("lcl_history", "center_history", "ucl_history")  # optional RenderFrame fields: LCL, CL, UCL
 
 
 class PlatoonRenderer:
@@ -231,22 +231,22 @@ class PlatoonRenderer:
         n_history = np.shape(frame.history_t)[0] if np.ndim(frame.history_t) == 1 else -1
         expected = {
             "x": (n + 1,), "v": (n + 1,), "history_t": (n_history,), "estimate_history": (n_history, n),
-            "lcl": (n,), "ucl": (n,), "setting": (n,), "alarm": (n,), "v2v": (n,), "collided": (n,),
+            "lcl": (n,), "ucl": (n,), "center": (n,), "alarm": (n,), "v2v": (n,), "collided": (n,),
         }
         limit_histories = [name for name in _LIMIT_HISTORIES if getattr(frame, name) is not None]
         expected.update({name: (n_history, n) for name in limit_histories})
         for name, shape in expected.items():
             if np.shape(getattr(frame, name)) != shape:
                 raise ValueError(f"RenderFrame.{name} has shape {np.shape(getattr(frame, name))}, expected {shape}")
-        for name in ("x", "v", "lcl", "ucl", "setting", *limit_histories):
+        for name in ("x", "v", "lcl", "ucl", "center", *limit_histories):
             if not np.all(np.isfinite(getattr(frame, name))):
                 raise ValueError(f"RenderFrame.{name} must be finite")
 
     def _draw_title(self, frame: RenderFrame) -> None:
-        """Title bar: t, leader speed, settings, alarm and collision counts."""
+        """Title bar: t, leader speed, applied settings, alarm and collision counts."""
         import pygame
 
-        settings = np.asarray(frame.setting, dtype=float)
+        settings = np.asarray(frame.center, dtype=float)
         shown = settings[:1] if np.all(settings == settings[0]) else settings
         setting_text = " / ".join(_seconds(s) for s in shown) + " s"
         text = (
@@ -375,7 +375,7 @@ class PlatoonRenderer:
         import pygame
 
         canvas = self._canvas
-        now = np.array([frame.lcl[i], frame.setting[i], frame.ucl[i]], dtype=float)  # LCL, CL, UCL [s]
+        now = np.array([frame.lcl[i], frame.center[i], frame.ucl[i]], dtype=float)  # LCL, CL, UCL [s]
         starts = np.r_[times, frame.t]  # each level holds from its time to the next; the current one to the end
         starts[0] = t_left
         levels = np.vstack([limits, now])

@@ -80,8 +80,8 @@ class StepReadouts(NamedTuple):
     @classmethod
     def empty(cls, n_envs: int, n_followers: int) -> StepReadouts:
         """Uninitialised read-outs of ``n_envs`` envs of ``n_followers`` followers."""
-        per_follower, per_env = np.empty((3, n_envs, n_followers)), np.empty((4, n_envs))
-        return cls(*per_follower, *per_env, np.empty(n_envs, dtype=bool))
+        per_follower, per_env = np.empty((3, n_envs, n_followers)), np.empty((4, n_envs))  # in field order
+        return cls(*per_follower, *per_env, np.empty(n_envs, dtype=bool))  # collided last
 
 
 class RewardConstants(NamedTuple):
@@ -99,15 +99,14 @@ class RewardConstants(NamedTuple):
 
     @classmethod
     def from_config(cls, config: EnvConfig) -> RewardConstants:
-        levels = [float(level) for level in config.setting_levels]
         return cls(
             dt=float(config.platoon.dt),
             ticks_per_step=config.ticks_per_decision,
-            half_width=float(config.chart.limit_width * config.chart.baseline_std),
+            half_width=float(config.chart.half_width),
             ttc_threshold=float(config.ttc_threshold),
             jerk_reference=float(config.jerk_reference),
-            smallest_level=levels[0],
-            level_span=levels[-1] - levels[0],
+            smallest_level=float(config.setting_levels[0]),
+            level_span=config.setting_span,
             preferred_setting=float(config.preferred_setting),
             gap_per_vehicle=float(config.platoon.standstill_spacing + config.platoon.vehicle_length),
         )
@@ -121,7 +120,7 @@ class StepScore(NamedTuple):
 
 
 def weights_of(config: EnvConfig) -> RewardTerms:
-    """The reward weights as :class:`RewardTerms` of floats (the kernel indexes them, so all must be floats)."""
+    """The reward weights as :class:`RewardTerms` of floats, in REWARD_TERMS order."""
     return RewardTerms(*(float(weight) for weight in dataclasses.astuple(config.reward_weights)))
 
 

@@ -97,9 +97,9 @@ class PlatoonTask:
         episodes, loop = self.episodes, self.loop
         for env in np.flatnonzero(mask):
             episodes.draw(env, rngs[env], options)
-        loop.sensors.dropout_probability[mask] = episodes.dropout_probability[mask]
         loop.reset(episodes.leader_speed[:, 0], episodes.leader_accel[:, 0], mask=mask,
-                   setting=self.config.platoon.initial_setting, noise_key=episodes.noise_keys)
+                   setting=self.config.platoon.initial_setting, noise_key=episodes.noise_keys,
+                   dropout_probability=episodes.dropout_probability)
         loop.platoon.set_v2v(episodes.v2v_at(loop.ticks))
         self._previous_accel[mask] = loop.platoon.a[mask, 1:]
         self._readouts.min_ttc[mask] = np.inf
@@ -123,8 +123,11 @@ class PlatoonTask:
         if self.trace is not None:
             self.trace.add(TraceArrays((ticks[:, 0] + 1) * cfg.platoon.dt, block.tau_mean[:, 0], chart.center[:, 0]))
 
-        step = StepTicks(block.tau_mean, chart.center, chart.alarm, chart.exceedance, physics.collisions, leader_speed,
-                         physics.speed, physics.spacing, physics.accel)
+        step = StepTicks(
+            tau_mean=block.tau_mean, center=chart.center, alarm=chart.alarm, exceedance=chart.exceedance,
+            collisions=physics.collisions, leader_speed=leader_speed, speed=physics.speed, spacing=physics.spacing,
+            accel=physics.accel,
+        )
         score = score_step(step, self._previous_accel, platoon.setting, changed, self._reward_constants, self._weights,
                            self._readouts)
         self.totals.add_step(self._readouts, platoon.setting, changed, self._reward_constants.gap_per_vehicle)
@@ -151,12 +154,10 @@ class PlatoonTask:
 
     def info(self) -> dict[str, np.ndarray]:
         """Per-step diagnostics, each (n_envs, n_followers) unless noted."""
-        cfg, monitor, chart, platoon = self.config, self.loop.monitor, self.loop.chart, self.loop.platoon
+        monitor, chart, platoon = self.loop.monitor, self.loop.chart, self.loop.platoon
         half_width = self._scales.half_width
-        with np.errstate(divide="ignore", invalid="ignore"):
-            actual_time_gap = (platoon.spacing - cfg.platoon.standstill_spacing) / platoon.v[:, 1:]
         return {
-            "actual_time_gap": actual_time_gap,  # (s - s0) / v [s]
+            "actual_time_gap": platoon.actual_time_gap,  # (s - s0) / v [s], inf at standstill
             "estimate": monitor.tau_mean,  # posterior mean of tau [s]
             "estimate_std": monitor.tau_std,  # [s]
             "setting": platoon.setting.copy(),  # tau* asked for [s]
@@ -195,11 +196,11 @@ class PlatoonTask:
             estimate_history=trace.estimate[recent],
             lcl=chart.center[0] - half_width,
             ucl=chart.center[0] + half_width,
-            setting=chart.center[0].copy(),
+            center=chart.center[0].copy(),
             alarm=chart.alarm[0].copy(),
             v2v=platoon.v2v[0].copy(),
             collided=platoon.collided[0].copy(),
             lcl_history=centers - half_width,
             ucl_history=centers + half_width,
-            setting_history=centers,
+            center_history=centers,
         )

@@ -135,7 +135,7 @@ def stochastic_human(
         new_targets=rng.uniform(low, high, size=n),
     )
     motion = _HumanMotion(*(float(value) for value in (leader.initial_speed, decay, params.speed_gain, dt, low, high)))
-    return LeaderProfile.from_acceleration(_pursue_targets(draws, motion), leader, name="stochastic_human")
+    return LeaderProfile.from_acceleration(_pursue_targets(tuple(draws), tuple(motion)), leader, name="stochastic_human")
 
 
 # Compiled loops; each runs in order because every step depends on the speed reached so far.
@@ -152,7 +152,9 @@ def _jerk_limited_phase(accel, current, target, jerk_step, speed, dt):  # noqa: 
 
 @numba.njit(cache=True)
 def _pursue_targets(draws, motion):  # noqa: ANN001, ANN202
-    """The stochastic human's acceleration [m/s^2]: speed_gain (target - v) plus an AR(1) noise."""
+    """The stochastic human's acceleration [m/s^2]: speed_gain (target - v) plus an AR(1) noise; ``draws``
+    (:class:`_HumanDraws`) and ``motion`` (:class:`_HumanMotion`) come as plain tuples, as in every kernel."""
+    draws, motion = _HumanDraws(*draws), _HumanMotion(*motion)
     accel = np.empty(draws.innovations.size)
     speed, target, noise = motion.initial_speed, motion.initial_speed, 0.0
     for k in range(draws.innovations.size):

@@ -76,7 +76,7 @@ def check_finite(**named: np.ndarray) -> None:
     for name, values in named.items():
         if not _all_finite(values.reshape(-1)):
             index = tuple(int(i) for i in np.argwhere(~np.isfinite(values))[0])
-            raise ValueError(f"{name}{list(index)} = {values[index]}: must be finite [s]")
+            raise ValueError(f"{name}{list(index)} = {values[index]}: must be finite")
 
 
 @numba.njit(cache=True)

@@ -12,8 +12,8 @@ and keeps, per vehicle:
 - ``run_length``: ticks since the last alarm tick (0 on an alarm tick) or since the chart was
   last (re)started [ticks].
 
-The centre line is the setting tau*: while a new setting ramps in, the line (and the limits)
-follow the applied setting tick by tick.
+The centre line (``center``) is the applied setting tau*: after a change of setting it ramps
+towards the new setting with the controller, and the limits move with it tick by tick.
 
 Charts: :class:`ShewhartChart` (the paper's), and the two standard SPC alternatives on the same
 estimate, :class:`EwmaChart` and :class:`CusumChart`, registered by kind in :data:`CHARTS`.
@@ -48,7 +48,7 @@ class ChartState(NamedTuple):
     """A chart after a tick, arrays (n_envs, n_vehicles); from :meth:`ControlChart.update_block`,
     one per tick, arrays (n_ticks, n_envs, n_vehicles)."""
 
-    center: np.ndarray  # tau* the chart is centred on [s]
+    center: np.ndarray  # the centre line, the applied setting tau* [s]
     alarm: np.ndarray  # charted statistic outside its limits now [bool]
     side: np.ndarray  # -1 below the lower limit, +1 above the upper, 0 inside [-]
     exceedance: np.ndarray  # an excursion started this tick [bool]
@@ -91,7 +91,7 @@ class ControlChart:
     ) -> None:
         self.config = config
         self.shape = batch_shape(n_envs, n_vehicles)
-        self.center = np.empty(self.shape)  # tau* [s]
+        self.center = np.empty(self.shape)  # the centre line, the applied setting tau* [s]
         # A start counts only if it is no older than the vehicle's last (re)start, so re-centring never clears the ring.
         self._memory = ChartMemory(
             side=np.zeros(self.shape, dtype=np.int8),
@@ -159,7 +159,7 @@ class ControlChart:
         return block
 
     def recenter(self, center: ArrayLike, mask: ArrayLike | None = None) -> None:
-        """Centre the chart on a new tau* ``center`` [s] for the vehicles in ``mask``.
+        """Centre the chart on ``center`` [s] (the applied setting) for the vehicles in ``mask``.
 
         ``mask``: bool, broadcastable to (n_envs, n_vehicles), None = all. Their excursion
         history is cleared (it was measured against the old limits), their statistic restarts
@@ -215,15 +215,15 @@ class ShewhartChart(ControlChart):
     @property
     def lcl(self) -> np.ndarray:
         """Lower control limit (n_envs, n_vehicles) [s]."""
-        return self.center - self.config.limit_width * self.config.baseline_std
+        return self.center - self.config.half_width
 
     @property
     def ucl(self) -> np.ndarray:
         """Upper control limit (n_envs, n_vehicles) [s]."""
-        return self.center + self.config.limit_width * self.config.baseline_std
+        return self.center + self.config.half_width
 
     def _sides(self, estimates: np.ndarray, centers: np.ndarray) -> np.ndarray:
-        half_width = self.config.limit_width * self.config.baseline_std
+        half_width = self.config.half_width
         return _outside(estimates, centers - half_width, centers + half_width)
 
     def _restart(self, mask: np.ndarray) -> None:

@@ -65,17 +65,21 @@ class MonitoredPlatoon:
         mask: np.ndarray | None = None,
         setting: np.ndarray | float | None = None,
         noise_key: np.ndarray | None = None,
+        dropout_probability: np.ndarray | None = None,
     ) -> None:
         """Equilibrium platoons for the envs in ``mask`` (None = all) at ``setting`` [s] (default the
         config's initial setting), monitors and charts centred on it.
 
-        ``noise_key`` (n_envs,) uint64, optional: new sensor-noise keys for the envs in ``mask``.
+        Optional, (n_envs,), read where ``mask``: ``noise_key`` (uint64), new sensor-noise keys;
+        ``dropout_probability`` [-], new sensor dropout rates.
         """
         env_mask = np.ones(self.platoon.n_envs, dtype=bool) if mask is None else np.asarray(mask, dtype=bool)
         self.platoon.reset(leader_speed, leader_accel, mask=env_mask, setting=setting)
         self.ticks[env_mask] = 0
         if noise_key is not None:
             self.sensors.keys[env_mask] = np.asarray(noise_key, dtype=np.uint64)[env_mask]
+        if dropout_probability is not None:
+            self.sensors.dropout_probability[env_mask] = np.asarray(dropout_probability, dtype=float)[env_mask]
         self.monitor.reset(env_mask, self.platoon.setting)
         self.chart.reset(env_mask, self.platoon.setting)
 

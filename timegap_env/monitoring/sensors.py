@@ -52,14 +52,15 @@ class Sensors:
 
     def __init__(self, config: SensorConfig = SensorConfig(), n_envs: int = 1, seed: int | None = None) -> None:
         self.config = config
-        self.noise = NoiseModel(
+        self._noise = NoiseModel(
             keys=np.random.default_rng(seed).integers(0, 2**63, size=n_envs, dtype=np.uint64),
             dropout_probability=np.full(n_envs, config.dropout_probability),
             spacing_noise_std=float(config.spacing_noise_std),
             speed_noise_std=float(config.speed_noise_std),
         )
-        self._noise_args = tuple(self.noise)  # the same arrays, as the kernel takes them
+        self._noise_args = tuple(self._noise)  # the same arrays, as the kernel takes them
 
+    noise = property(lambda self: self._noise, doc="The :class:`NoiseModel` (its arrays change in place).")
     keys = property(lambda self: self.noise.keys, doc="Noise key of each env (n_envs,) uint64; write in place.")
     dropout_probability = property(
         lambda self: self.noise.dropout_probability, doc="Each env's dropout probability (n_envs,); write in place."

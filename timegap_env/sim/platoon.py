@@ -88,6 +88,12 @@ def glvd_tick(x, v, a, u, zoh):  # noqa: ANN001, ANN201
     return x_next, v_next, a_next
 
 
+def actual_time_gap(spacing: np.ndarray, speed: np.ndarray, standstill_spacing: float) -> np.ndarray:
+    """The time gap a follower really keeps, (s - s0) / v [s]: inf at standstill (NaN at s = s0 too)."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return (spacing - standstill_spacing) / speed
+
+
 @numba.njit(cache=True)
 def ramp_toward(applied, setting, max_change):  # noqa: ANN001, ANN201
     """The applied setting [s] one tick later: it moves towards ``setting`` [s] by at most ``max_change`` [s]."""
@@ -125,10 +131,12 @@ class Controller(NamedTuple):
 
     @classmethod
     def from_config(cls, config: PlatoonConfig) -> Controller:
-        return cls(*(float(value) for value in (
-            config.dt, config.k_s, config.k_v, config.k_a, config.k_f, config.accel_min, config.accel_max,
-            config.standstill_spacing, config.vehicle_length, config.setting_ramp_rate * config.dt,
-        )))
+        return cls(
+            dt=float(config.dt), k_s=float(config.k_s), k_v=float(config.k_v), k_a=float(config.k_a),
+            k_f=float(config.k_f), accel_min=float(config.accel_min), accel_max=float(config.accel_max),
+            standstill_spacing=float(config.standstill_spacing), vehicle_length=float(config.vehicle_length),
+            max_setting_change=float(config.setting_ramp_rate * config.dt),
+        )
 
 
 class LeaderTicks(NamedTuple):
@@ -151,15 +159,15 @@ class PlatoonTicks(NamedTuple):
     @classmethod
     def empty(cls, shape: tuple[int, int, int]) -> PlatoonTicks:
         """Uninitialised arrays of ``shape`` (n_ticks, n_envs, n_followers)."""
-        return cls(*np.empty((4, *shape)), np.empty(shape, dtype=bool))
+        return cls(*np.empty((len(cls._fields) - 1, *shape)), np.empty(shape, dtype=bool))  # collisions last
 
 
 class Platoon:
     """``n_envs`` platoons of one leader and ``config.n_followers`` followers, stepped together.
 
     The state is :attr:`state`, a :class:`PlatoonState`; its arrays are also attributes of the
-    platoon (``x``, ``v``, ``a``, ``u``, ``setting``, ``applied_setting``, ``v2v``, ``collided``).
-    ``tick`` counts the ticks since the last reset of every env.
+    platoon (``x``, ``v``, ``a``, ``u``, ``setting``, ``applied_setting``, ``v2v``, ``collided``),
+    changed in place, never replaced. ``tick`` counts the ticks since the last reset of every env.
     """
 
     def __init__(self, config: PlatoonConfig = PlatoonConfig(), n_envs: int = 1) -> None:
@@ -169,7 +177,7 @@ class Platoon:
         self.n_envs = int(n_envs)
         self.n_followers = config.n_followers
         vehicles, followers = (self.n_envs, self.n_followers + 1), (self.n_envs, self.n_followers)
-        self.state = PlatoonState(
+        self._state = PlatoonState(
             x=np.zeros(vehicles),
             v=np.zeros(vehicles),
             a=np.zeros(vehicles),
@@ -181,26 +189,33 @@ class Platoon:
             predecessor_accel=np.zeros((config.v2v_delay_ticks + 1, *followers)),
         )
         self.tick = 0
-        self.controller = Controller.from_config(config)
+        self._controller = Controller.from_config(config)
         self.set_dynamics(config.per_follower("actuation_lag"), config.per_follower("actuation_gain"))
-        self._kernel_args = (tuple(self.state), tuple(self.controller))  # the same arrays, as the kernel takes them
+        self._kernel_args = (tuple(self._state), tuple(self._controller))  # the same arrays, as the kernel takes them
 
     # ----------------------------------------------------------------- state
-    x = property(lambda self: self.state.x, doc="Front-bumper positions (n_envs, n_vehicles) [m].")
-    v = property(lambda self: self.state.v, doc="Speeds (n_envs, n_vehicles) [m/s].")
-    a = property(lambda self: self.state.a, doc="Accelerations (n_envs, n_vehicles) [m/s^2].")
-    u = property(lambda self: self.state.u, doc="Last commands (n_envs, n_vehicles) [m/s^2].")
-    setting = property(lambda self: self.state.setting, doc="Settings asked for (n_envs, n_followers) [s].")
+    state = property(lambda self: self._state, doc="The platoons' :class:`PlatoonState` (its arrays change in place).")
+    controller = property(lambda self: self._controller, doc="The controller's :class:`Controller` constants.")
+    x = property(lambda self: self._state.x, doc="Front-bumper positions (n_envs, n_vehicles) [m].")
+    v = property(lambda self: self._state.v, doc="Speeds (n_envs, n_vehicles) [m/s].")
+    a = property(lambda self: self._state.a, doc="Accelerations (n_envs, n_vehicles) [m/s^2].")
+    u = property(lambda self: self._state.u, doc="Last commands (n_envs, n_vehicles) [m/s^2].")
+    setting = property(lambda self: self._state.setting, doc="Settings asked for (n_envs, n_followers) [s].")
     applied_setting = property(
-        lambda self: self.state.applied_setting, doc="Settings the controller uses (n_envs, n_followers) [s]."
+        lambda self: self._state.applied_setting, doc="Settings the controller uses (n_envs, n_followers) [s]."
     )
-    v2v = property(lambda self: self.state.v2v, doc="CACC on (n_envs, n_followers) [bool].")
-    collided = property(lambda self: self.state.collided, doc="Gap <= 0 was reached (n_envs, n_followers) [bool].")
+    v2v = property(lambda self: self._state.v2v, doc="CACC on (n_envs, n_followers) [bool].")
+    collided = property(lambda self: self._state.collided, doc="Gap <= 0 was reached (n_envs, n_followers) [bool].")
 
     @property
     def spacing(self) -> np.ndarray:
         """Bumper-to-bumper gap of each follower to its predecessor, (n_envs, n_followers) [m]."""
         return self.x[:, :-1] - self.x[:, 1:] - self.config.vehicle_length
+
+    @property
+    def actual_time_gap(self) -> np.ndarray:
+        """(s - s0) / v of each follower, (n_envs, n_followers) [s]; see :func:`actual_time_gap`."""
+        return actual_time_gap(self.spacing, self.v[:, 1:], self.config.standstill_spacing)
 
     # ----------------------------------------------------------------- setup
     def set_dynamics(self, lag: np.ndarray, gain: np.ndarray) -> None:
@@ -233,7 +248,7 @@ class Platoon:
         setting, applied at once, becomes ``setting`` [s] (default ``config.initial_setting``,
         broadcast to (n_envs, n_followers)) and V2V returns to ``config.v2v``.
         """
-        cfg, state = self.config, self.state
+        cfg, state = self.config, self._state
         mask = np.ones(self.n_envs, dtype=bool) if mask is None else np.asarray(mask, dtype=bool)
         speed = per_env("leader_speed", leader_speed, self.n_envs)[mask]
         accel = per_env("leader_accel", leader_accel, self.n_envs)[mask]
@@ -259,7 +274,7 @@ class Platoon:
 
     def request_setting(self, setting: np.ndarray | float, mask: np.ndarray | None = None) -> None:
         """Ask for a new time gap setting [s] (broadcast to (n_envs, n_followers)); the controller ramps to it."""
-        current = self.state.setting
+        current = self._state.setting
         setting = np.asarray(setting, dtype=float)
         if setting.shape != current.shape:
             setting = np.broadcast_to(setting, current.shape)
@@ -269,11 +284,11 @@ class Platoon:
 
     def ramp_ticks(self, setting: np.ndarray) -> np.ndarray:
         """Ticks the applied setting needs to reach ``setting`` [s] (n_envs, n_followers) from where it is now."""
-        return np.ceil(np.abs(setting - self.state.applied_setting) / self.controller.max_setting_change)
+        return np.ceil(np.abs(setting - self._state.applied_setting) / self._controller.max_setting_change)
 
     def set_v2v(self, enabled: np.ndarray | bool) -> None:
         """Switch CACC (True) or ACC (False) per follower, broadcast to (n_envs, n_followers)."""
-        self.state.v2v[:] = np.broadcast_to(np.asarray(enabled, dtype=bool), self.state.v2v.shape)
+        self._state.v2v[:] = np.broadcast_to(np.asarray(enabled, dtype=bool), self._state.v2v.shape)
 
     # ----------------------------------------------------------------- physics
     def step(self, leader_speed: np.ndarray | float, leader_accel: np.ndarray | float) -> np.ndarray:
@@ -299,14 +314,14 @@ class Platoon:
         leader_accel = self._per_tick("leader_accel", leader_accel, n_ticks)
         follower_shape = (n_ticks, self.n_envs, self.n_followers)
         if v2v is None:
-            v2v = np.broadcast_to(self.state.v2v, follower_shape)
+            v2v = np.broadcast_to(self._state.v2v, follower_shape)
         elif np.shape(v2v) != follower_shape:
             raise ValueError(f"v2v has shape {np.shape(v2v)}: expected {follower_shape} (n_ticks, n_envs, n_followers)")
         ticks = PlatoonTicks.empty(follower_shape)
-        inputs = (leader_speed, leader_accel, np.ascontiguousarray(v2v, dtype=bool))  # a LeaderTicks
+        inputs = tuple(LeaderTicks(speed=leader_speed, accel=leader_accel, v2v=np.ascontiguousarray(v2v, dtype=bool)))
         state, controller = self._kernel_args
         _advance(state, self.tick, inputs, self._zoh_args, controller, tuple(ticks))
-        self.state.v2v[:] = v2v[-1]
+        self._state.v2v[:] = v2v[-1]
         self.tick += n_ticks
         return ticks
 

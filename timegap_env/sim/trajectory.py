@@ -9,7 +9,7 @@ import numpy as np
 from timegap_env.config import PlatoonConfig
 from timegap_env.leaders.profile import LeaderProfile
 from timegap_env.leaders.scenarios import make_leader
-from timegap_env.sim.platoon import Platoon
+from timegap_env.sim.platoon import Platoon, actual_time_gap
 
 # Below this speed the time gap (s - s0) / v is not meaningful and is reported as NaN [m/s].
 TIME_GAP_MIN_SPEED = 1.0
@@ -49,8 +49,7 @@ class Trajectory:
     def actual_time_gap(self) -> np.ndarray:
         """Actual time gap (s - s0) / v of each follower, NaN below ``TIME_GAP_MIN_SPEED`` [s]."""
         speed = self.v[:, 1:]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            gap = (self.spacing - self.config.standstill_spacing) / speed
+        gap = actual_time_gap(self.spacing, speed, self.config.standstill_spacing)
         return np.where(speed >= TIME_GAP_MIN_SPEED, gap, np.nan)
 
     @property
