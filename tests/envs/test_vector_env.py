@@ -2,9 +2,11 @@
 
 import gymnasium as gym
 import numpy as np
+import pytest
 from gymnasium.vector import AutoresetMode, SyncVectorEnv
 
 from timegap_env.config import EnvConfig
+from timegap_env.leaders import default_ngsim_path
 
 LEVELS = EnvConfig().setting_levels
 
@@ -58,3 +60,26 @@ def test_a_finished_episode_reports_its_last_observation_and_summary_then_restar
     assert not np.array_equal(np.stack(infos["final_obs"]), obs)  # obs is the new episode's first
     _, _, _, truncated, _ = envs.step(np.array([5, 5]))
     assert not truncated.any()
+
+
+def test_envs_that_do_not_reset_keep_their_v2v_status_when_others_do():
+    """Episodes of different lengths (NGSIM leaders) reset at different steps; an outage starting or ending
+    exactly then must show in the observations as it does in single envs."""
+    if not default_ngsim_path().exists():
+        pytest.skip(f"NGSIM data absent at {default_ngsim_path()}")
+    config = {"v2v_loss_probability": 1.0, "v2v_loss_duration_range": (3.0, 6.0), "episode_duration": 40.0}
+    n = 32
+    native = gym.make_vec("TimeGapMonitor-v0", num_envs=n, vectorization_mode="vector_entry_point", config=config)
+    reference = SyncVectorEnv([lambda: gym.make("TimeGapMonitor-v0", config=config) for _ in range(n)],
+                              autoreset_mode=AutoresetMode.SAME_STEP)
+    options = {"scenario": "ngsim_in_band"}
+    native.reset(seed=3, options=options)
+    reference.reset(seed=3, options=options)
+    rng, partial_resets = np.random.default_rng(0), 0
+    for step in range(200):
+        actions = rng.integers(0, len(LEVELS), size=n)
+        got, want = native.step(actions), reference.step(actions)
+        np.testing.assert_array_equal(got[0], want[0], err_msg=f"step {step}")
+        done = got[2] | got[3]
+        partial_resets += bool(done.any() and not done.all())
+    assert partial_resets > 10

@@ -100,7 +100,7 @@ class PlatoonTask:
         loop.reset(episodes.leader_speed[:, 0], episodes.leader_accel[:, 0], mask=mask,
                    setting=self.config.platoon.initial_setting, noise_key=episodes.noise_keys,
                    dropout_probability=episodes.dropout_probability)
-        loop.platoon.set_v2v(episodes.v2v_at(loop.ticks))
+        loop.platoon.set_v2v(episodes.v2v_at(loop.ticks), mask=mask)  # the others keep their last tick's
         self._previous_accel[mask] = loop.platoon.a[mask, 1:]
         self._readouts.min_ttc[mask] = np.inf
         self._readouts.jerk_squared[mask] = 0.0

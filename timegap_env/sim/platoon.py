@@ -286,9 +286,11 @@ class Platoon:
         """Ticks the applied setting needs to reach ``setting`` [s] (n_envs, n_followers) from where it is now."""
         return np.ceil(np.abs(setting - self._state.applied_setting) / self._controller.max_setting_change)
 
-    def set_v2v(self, enabled: np.ndarray | bool) -> None:
-        """Switch CACC (True) or ACC (False) per follower, broadcast to (n_envs, n_followers)."""
-        self._state.v2v[:] = np.broadcast_to(np.asarray(enabled, dtype=bool), self._state.v2v.shape)
+    def set_v2v(self, enabled: np.ndarray | bool, mask: np.ndarray | None = None) -> None:
+        """Switch CACC (True) or ACC (False) per follower, broadcast to (n_envs, n_followers), for the envs
+        in ``mask`` ((n_envs,) bool, None = all)."""
+        enabled = np.broadcast_to(np.asarray(enabled, dtype=bool), self._state.v2v.shape)
+        np.copyto(self._state.v2v, enabled, where=True if mask is None else np.asarray(mask, dtype=bool)[:, None])
 
     # ----------------------------------------------------------------- physics
     def step(self, leader_speed: np.ndarray | float, leader_accel: np.ndarray | float) -> np.ndarray:
