@@ -19,8 +19,9 @@ from timegap_env.config import (
     LeaderConfig, MonitorConfig, PlatoonConfig, RewardWeights, SensorConfig, SinusoidConfig, StochasticHumanConfig,
 )
 from timegap_env.leaders import (
-    SCENARIOS, LeaderProfile, aggressive_cycles, default_ngsim_path, hard_braking, idm_leader, make_leader, read_ngsim,
-    sinusoid, stochastic_human, vehicle_ids, vehicle_profile,
+    SCENARIOS, LeaderProfile, OpenAccRun, aggressive_cycles, default_ngsim_path, default_openacc_dir, hard_braking,
+    idm_leader, make_leader, openacc_paths, read_ngsim, read_openacc, sinusoid, stochastic_human, vehicle_ids,
+    vehicle_profile,
 )
 from timegap_env.monitoring import TimeGapMonitor, posterior
 from timegap_env.sim import Trajectory, platoon_string_stability, simulate, string_stability
@@ -36,9 +37,9 @@ if ENV_ID not in registry:
 
 __all__ = [
     "ENV_ID", "MONITOR_PRESETS", "SCENARIOS", "AggressiveCyclesConfig", "ChartConfig", "EnvConfig",
-    "HardBrakingConfig", "HumanLeaderConfig", "LeaderConfig", "LeaderProfile", "MonitorConfig", "PlatoonConfig",
-    "RewardWeights", "SensorConfig", "SinusoidConfig", "StochasticHumanConfig", "TimeGapMonitor", "Trajectory",
-    "aggressive_cycles", "default_ngsim_path", "hard_braking", "idm_leader", "make_leader",
-    "platoon_string_stability", "posterior", "read_ngsim", "simulate", "sinusoid", "stochastic_human",
-    "string_stability", "vehicle_ids", "vehicle_profile",
+    "HardBrakingConfig", "HumanLeaderConfig", "LeaderConfig", "LeaderProfile", "MonitorConfig", "OpenAccRun",
+    "PlatoonConfig", "RewardWeights", "SensorConfig", "SinusoidConfig", "StochasticHumanConfig", "TimeGapMonitor",
+    "Trajectory", "aggressive_cycles", "default_ngsim_path", "default_openacc_dir", "hard_braking", "idm_leader",
+    "make_leader", "openacc_paths", "platoon_string_stability", "posterior", "read_ngsim", "read_openacc", "simulate",
+    "sinusoid", "stochastic_human", "string_stability", "vehicle_ids", "vehicle_profile",
 ]

@@ -130,10 +130,10 @@ class LeaderConfig(ConfigMixin):
     duration: float = 250.0  # length of a synthetic profile [s]; in the env it is EnvConfig.episode_duration
     speed_band: tuple[float, float] = (20 * MPH, 80 * MPH)  # speeds a profile is kept within [m/s]
     initial_speed: float = 22.0  # speed at t = 0 of an integrated profile [m/s]
-    ngsim_min_duration: float = 30.0  # shortest NGSIM vehicle record drawn as a leader [s]
+    min_recorded_duration: float = 30.0  # shortest recorded leader (NGSIM vehicle, OpenACC lead car) drawn [s]
 
     def __post_init__(self) -> None:
-        self._positive("dt", "duration", "ngsim_min_duration")
+        self._positive("dt", "duration", "min_recorded_duration")
         self._band("speed_band")
         speed = self._finite("initial_speed")
         low, high = self.speed_band

@@ -20,7 +20,7 @@ def test_ngsim_families_draw_real_vehicles_by_seed(family):
         pytest.skip(f"NGSIM data absent at {default_ngsim_path()}")
     first, again = make_leader(family, 4), make_leader(family, 4)
     np.testing.assert_array_equal(first.speed, again.speed)
-    assert first.name.startswith("ngsim-") and first.duration >= LeaderConfig().ngsim_min_duration
+    assert first.name.startswith("ngsim-") and first.duration >= LeaderConfig().min_recorded_duration
     names = {make_leader(family, seed).name for seed in range(6)}
     assert len(names) > 1
     if family == "ngsim_in_band":

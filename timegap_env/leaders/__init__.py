@@ -3,17 +3,20 @@
 - :mod:`~timegap_env.leaders.profile`: :class:`LeaderProfile`, from speeds, accelerations or a CSV;
 - :mod:`~timegap_env.leaders.synthetic`: seeded synthetic families (the paper's aggressive cycles, ...);
 - :mod:`~timegap_env.leaders.ngsim`: real NGSIM I-80 drivers;
+- :mod:`~timegap_env.leaders.openacc`: real commercial ACC platoons (OpenACC), and their lead cars;
 - :mod:`~timegap_env.leaders.idm`: highway-env's IDM driver reacting to a disturbance;
 - :mod:`~timegap_env.leaders.scenarios`: the named scenarios of ``make_leader`` and the env.
 """
 
 from timegap_env.leaders.idm import idm_leader
 from timegap_env.leaders.ngsim import default_ngsim_path, read_ngsim, vehicle_ids, vehicle_profile
+from timegap_env.leaders.openacc import OpenAccRun, default_openacc_dir, openacc_paths, read_openacc
 from timegap_env.leaders.profile import LeaderProfile
 from timegap_env.leaders.scenarios import SCENARIOS, get_scenario, make_leader
 from timegap_env.leaders.synthetic import aggressive_cycles, hard_braking, sinusoid, stochastic_human
 
 __all__ = [
-    "SCENARIOS", "LeaderProfile", "aggressive_cycles", "default_ngsim_path", "get_scenario", "hard_braking",
-    "idm_leader", "make_leader", "read_ngsim", "sinusoid", "stochastic_human", "vehicle_ids", "vehicle_profile",
+    "SCENARIOS", "LeaderProfile", "OpenAccRun", "aggressive_cycles", "default_ngsim_path", "default_openacc_dir",
+    "get_scenario", "hard_braking", "idm_leader", "make_leader", "openacc_paths", "read_ngsim", "read_openacc",
+    "sinusoid", "stochastic_human", "vehicle_ids", "vehicle_profile",
 ]

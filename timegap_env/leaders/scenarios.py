@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from timegap_env.config import LeaderConfig
-from timegap_env.leaders import idm, ngsim, synthetic
+from timegap_env.leaders import idm, ngsim, openacc, synthetic
 from timegap_env.leaders.profile import LeaderProfile
 
 LeaderFamily = Callable[[int | None, LeaderConfig], LeaderProfile]
@@ -40,7 +40,7 @@ def ngsim_leader(seed: int | None, leader: LeaderConfig, *, within_band: bool) -
             f"NGSIM data not found at {path}: set ${ngsim.PATH_VARIABLE} to an NGSIM trajectory CSV"
         )
     table = _ngsim_table(path)
-    vehicle = np.random.default_rng(seed).choice(ngsim.vehicle_ids(table, min_duration=leader.ngsim_min_duration))
+    vehicle = np.random.default_rng(seed).choice(ngsim.vehicle_ids(table, min_duration=leader.min_recorded_duration))
     return ngsim.vehicle_profile(table, int(vehicle), within_band=leader if within_band else None)
 
 
@@ -51,6 +51,7 @@ LEADER_FAMILIES: dict[str, LeaderFamily] = {
     "stochastic_human": lambda seed, leader: synthetic.stochastic_human(seed, leader=leader),
     "ngsim": lambda seed, leader: ngsim_leader(seed, leader, within_band=False),
     "ngsim_in_band": lambda seed, leader: ngsim_leader(seed, leader, within_band=True),
+    "openacc": openacc.openacc_leader,  # the human-driven lead car of a real ACC platoon (OpenACC AstaZero)
     # highway-env's IDM driver reacting to scripted hard braking ahead of it
     "idm": lambda seed, leader: idm.idm_leader(synthetic.hard_braking(seed, leader=leader), seed=seed),
 }
