@@ -23,7 +23,7 @@ from timegap_env.leaders import (
     idm_leader, make_leader, openacc_paths, read_ngsim, read_openacc, sinusoid, stochastic_human, vehicle_ids,
     vehicle_profile,
 )
-from timegap_env.monitoring import TimeGapMonitor, posterior
+from timegap_env.monitoring import TimeGapEstimate, TimeGapMonitor, estimate_time_gap, posterior
 from timegap_env.sim import Trajectory, platoon_string_stability, simulate, string_stability
 
 ENV_ID = "TimeGapMonitor-v0"
@@ -38,8 +38,8 @@ if ENV_ID not in registry:
 __all__ = [
     "ENV_ID", "MONITOR_PRESETS", "SCENARIOS", "AggressiveCyclesConfig", "ChartConfig", "EnvConfig",
     "HardBrakingConfig", "HumanLeaderConfig", "LeaderConfig", "LeaderProfile", "MonitorConfig", "OpenAccRun",
-    "PlatoonConfig", "RewardWeights", "SensorConfig", "SinusoidConfig", "StochasticHumanConfig", "TimeGapMonitor",
-    "Trajectory", "aggressive_cycles", "default_ngsim_path", "default_openacc_dir", "hard_braking", "idm_leader",
+    "PlatoonConfig", "RewardWeights", "SensorConfig", "SinusoidConfig", "StochasticHumanConfig", "TimeGapEstimate", "TimeGapMonitor",
+    "Trajectory", "aggressive_cycles", "default_ngsim_path", "default_openacc_dir", "estimate_time_gap", "hard_braking", "idm_leader",
     "make_leader", "openacc_paths", "platoon_string_stability", "posterior", "read_ngsim", "read_openacc", "simulate",
     "sinusoid", "stochastic_human", "string_stability", "vehicle_ids", "vehicle_profile",
 ]

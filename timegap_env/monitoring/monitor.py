@@ -29,6 +29,7 @@ class MonitorTicks(NamedTuple):
 
     used: np.ndarray  # the measurement was used (else skipped) [bool]
     tau_mean: np.ndarray  # posterior mean of tau after the tick [s]
+    tau_var: np.ndarray  # posterior variance of tau after the tick [s^2]
 
 
 class WindowMemory(NamedTuple):
@@ -131,7 +132,8 @@ class TimeGapMonitor:
             raise ValueError(
                 f"speed, spacing have shapes {speed.shape}, {spacing.shape}: expected (n_ticks >= 1, *{self.shape})"
             )
-        ticks = MonitorTicks(used=np.empty(speed.shape, dtype=bool), tau_mean=np.empty(speed.shape))
+        ticks = MonitorTicks(used=np.empty(speed.shape, dtype=bool), tau_mean=np.empty(speed.shape),
+                             tau_var=np.empty(speed.shape))
         moments = Moments(*np.empty((len(Moments._fields),) + self.shape))  # the posterior after the last tick
         memory, rule, prior = self._kernel_args
         self._slot = _update_kernel(speed, spacing, memory, self._slot, rule, prior, tuple(ticks), tuple(moments))
@@ -247,8 +249,8 @@ def _update_kernel(speed, spacing, memory, slot, rule, prior, out, out_moments):
     """:meth:`TimeGapMonitor.update_block`, tick by tick and vehicle by vehicle, in place; returns the next slot.
 
     ``memory`` (:class:`WindowMemory`) is updated under ``rule`` (:class:`WindowRule`) and ``prior``
-    (:class:`Prior`); ``out`` (:class:`MonitorTicks`) gets each tick's verdict and posterior mean of
-    tau, ``out_moments`` (:class:`Moments` of (n_envs, n_vehicles) arrays) the whole posterior after
+    (:class:`Prior`); ``out`` (:class:`MonitorTicks`) gets each tick's verdict and posterior mean and
+    variance of tau, ``out_moments`` (:class:`Moments` of (n_envs, n_vehicles) arrays) the whole posterior after
     the last tick; each structure comes as a plain tuple (see :mod:`timegap_env.sim.platoon`).
 
     ``slot = -1`` means no window: the window sums are the block sums, which never close.
@@ -284,7 +286,7 @@ def _update_kernel(speed, spacing, memory, slot, rule, prior, out, out_moments):
                     window_sums[4, e, i],
                 )
                 moments = posterior_moments(sums, memory.prior_tau[e, i], prior)
-                out.tau_mean[k, e, i] = moments.mean_tau
+                out.tau_mean[k, e, i], out.tau_var[k, e, i] = moments.mean_tau, moments.var_tau
                 if k == n_ticks - 1:  # field by field: a tuple indexed by a variable is slow in numba
                     out_moments.mean_s0[e, i], out_moments.mean_tau[e, i] = moments.mean_s0, moments.mean_tau
                     out_moments.var_s0[e, i], out_moments.cov_s0_tau[e, i] = moments.var_s0, moments.cov_s0_tau
