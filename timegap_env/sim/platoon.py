@@ -95,6 +95,31 @@ def actual_time_gap(spacing: np.ndarray, speed: np.ndarray, standstill_spacing: 
 
 
 @numba.njit(cache=True)
+def cth_command(spacing, speed, predecessor_speed, accel, feedforward, setting, controller):  # noqa: ANN001, ANN201
+    """The CTH controller's command [m/s^2], clipped to the controller's bounds, for a follower at ``spacing`` [m]
+    and ``speed`` [m/s] with acceleration ``accel`` [m/s^2] behind a predecessor at ``predecessor_speed`` [m/s],
+    under the applied ``setting`` tau* [s] and :class:`Controller` ``controller``; ``feedforward`` is (1 with
+    V2V else 0, the predecessor's delayed acceleration [m/s^2])."""
+    spacing_error = spacing - controller.standstill_spacing - setting * speed
+    command = (
+        controller.k_s * spacing_error
+        + controller.k_v * (predecessor_speed - speed)
+        + controller.k_a * accel
+        + controller.k_f * feedforward[0] * feedforward[1]
+    )
+    return min(max(command, controller.accel_min), controller.accel_max)
+
+
+@numba.njit(cache=True)
+def follower_tick(x, v, a, command, zoh):  # noqa: ANN001, ANN201
+    """:func:`glvd_tick` of one follower (scalars), which does not reverse: below 0 m/s it stays at standstill."""
+    x_next, v_next, a_next = glvd_tick(x, v, a, command, zoh)
+    if v_next < 0.0:
+        v_next, a_next = 0.0, max(a_next, 0.0)
+    return x_next, v_next, a_next
+
+
+@numba.njit(cache=True)
 def ramp_toward(applied, setting, max_change):  # noqa: ANN001, ANN201
     """The applied setting [s] one tick later: it moves towards ``setting`` [s] by at most ``max_change`` [s]."""
     return applied + min(max(setting - applied, -max_change), max_change)
@@ -376,21 +401,13 @@ def _advance(state, first_tick, leader, zoh, controller, out):  # noqa: ANN001, 
                 state.applied_setting[e, f] = applied
                 state.predecessor_accel[slot, e, f] = a[e, i - 1]
                 spacing = x[e, i - 1] - x[e, i] - controller.vehicle_length
-                spacing_error = spacing - controller.standstill_spacing - applied * v[e, i]
-                command = (
-                    controller.k_s * spacing_error
-                    + controller.k_v * (v[e, i - 1] - v[e, i])
-                    + controller.k_a * a[e, i]
-                    + controller.k_f * (1.0 if leader.v2v[k, e, f] else 0.0) * state.predecessor_accel[delayed_slot, e, f]
-                )
-                command = min(max(command, controller.accel_min), controller.accel_max)
+                feedforward = 1.0 if leader.v2v[k, e, f] else 0.0, state.predecessor_accel[delayed_slot, e, f]
+                command = cth_command(spacing, v[e, i], v[e, i - 1], a[e, i], feedforward, applied, controller)
                 coefficients = ZOHCoefficients(
                     zoh.a_from_a[e, f], zoh.a_from_u[e, f], zoh.v_from_a[e, f], zoh.v_from_u[e, f],
                     zoh.x_from_a[e, f], zoh.x_from_u[e, f], zoh.dt,
                 )
-                x_next, v_next, a_next = glvd_tick(x[e, i], v[e, i], a[e, i], command, coefficients)
-                if v_next < 0.0:  # a vehicle does not reverse: it stays at standstill
-                    v_next, a_next = 0.0, max(a_next, 0.0)
+                x_next, v_next, a_next = follower_tick(x[e, i], v[e, i], a[e, i], command, coefficients)
                 x[e, i], v[e, i], a[e, i], u[e, i] = x_next, v_next, a_next, command
             x[e, 0] += 0.5 * (v[e, 0] + leader.speed[k, e]) * zoh.dt
             v[e, 0] = leader.speed[k, e]
