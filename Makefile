@@ -4,7 +4,7 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: install demo test train bench clean
+.PHONY: install demo test train bench calibrate clean
 
 install: $(STAMP)
 
@@ -18,6 +18,7 @@ demo: $(STAMP)
 	MPLBACKEND=Agg $(PY) -m train.demo
 	MPLBACKEND=Agg $(PY) -m train.reproduce_paper
 	MPLBACKEND=Agg $(PY) -m train.evaluate
+	MPLBACKEND=Agg $(PY) -m train.field_validation
 
 test: $(STAMP)
 	MPLBACKEND=Agg $(PY) -m pytest -q
@@ -27,6 +28,9 @@ train: $(STAMP)
 
 bench: $(STAMP)
 	MPLBACKEND=Agg $(PY) -m train.bench
+
+calibrate: $(STAMP)
+	MPLBACKEND=Agg $(PY) -m train.calibrate_openacc
 
 clean:
 	rm -rf $(VENV) build *.egg-info .pytest_cache

@@ -8,6 +8,7 @@ import pytest
 
 from timegap_env.config import LeaderConfig
 from timegap_env.leaders import default_openacc_dir, make_leader, openacc_paths, read_openacc
+from timegap_env.leaders.openacc import repeated_runs
 
 GOOD = """Date,8,10,2019
 Vehicle_order,LEAD,CAR_A,CAR_B,SPARE,
@@ -113,3 +114,14 @@ def test_the_openacc_family_replays_real_lead_cars():
     assert first.name.startswith("openacc-astazero_") and first.dt == 0.1
     assert np.isfinite(first.speed).all() and first.duration >= LeaderConfig().min_recorded_duration
     assert len({make_leader("openacc", seed).name for seed in range(8)}) > 2
+
+
+def test_a_run_cut_out_of_another_is_found(tmp_path):
+    longer = read_openacc(write(tmp_path, GOOD, "long.csv"))
+    lines = GOOD.splitlines()
+    part = read_openacc(write(tmp_path, "\n".join(lines[:6] + lines[7:9]) + "\n", "part.csv"))  # its 2nd and 3rd records
+    other = read_openacc(write(tmp_path, GOOD.replace("8.2,1.0,,8.3", "8.2,1.0,,8.5"), "other.csv"))
+    assert repeated_runs([longer, part]) == {"part": "long"}
+    assert repeated_runs([other, part]) == {}  # a speed differs
+    if default_openacc_dir().exists():
+        assert repeated_runs(shared_runs()) == {"astazero_dynamic_part22": "astazero_dynamic_part23"}

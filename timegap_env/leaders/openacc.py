@@ -26,6 +26,7 @@ import dataclasses
 import datetime
 import gzip
 import os
+from collections.abc import Sequence
 from pathlib import Path
 from typing import TextIO
 
@@ -183,6 +184,32 @@ def _open_text(path: Path) -> TextIO:
     if path.suffix == ".gz":
         return gzip.open(path, "rt", newline="")
     return path.open(newline="")
+
+
+def repeated_runs(runs: Sequence[OpenAccRun]) -> dict[str, str]:
+    """Runs whose every record repeats part of a longer run of the same day: {repeat: the longer run}.
+
+    Two records are the same when the times match and every car the two files share has identical
+    speeds (NaN included); the data's publisher cut the original runs into parts, and some overlap.
+    """
+    repeats = {}
+    for i, short in enumerate(runs):
+        for j, long in enumerate(runs):
+            if j == i or long.date != short.date or long.t.size < short.t.size or long.name in repeats:
+                continue
+            if long.t.size == short.t.size and j > i:
+                continue  # of two equally long copies, the later one is the repeat
+            offset = int(round((short.t[0] - long.t[0]) / TICK))
+            if offset < 0 or offset + short.t.size > long.t.size:
+                continue
+            stretch = slice(offset, offset + short.t.size)
+            shared = [name for name in dict.fromkeys(short.vehicles) if name in long.vehicles]
+            same = [np.array_equal(short.speed[:, short.vehicles.index(name)],
+                                   long.speed[stretch, long.vehicles.index(name)], equal_nan=True) for name in shared]
+            if np.allclose(short.t, long.t[stretch]) and shared and all(same):
+                repeats[short.name] = long.name
+                break
+    return repeats
 
 
 def openacc_leader(seed: int | None, leader: LeaderConfig) -> LeaderProfile:
