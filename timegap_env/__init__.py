@@ -24,7 +24,9 @@ from timegap_env.leaders import (
     vehicle_profile,
 )
 from timegap_env.monitoring import TimeGapEstimate, TimeGapMonitor, estimate_time_gap, posterior
-from timegap_env.sim import Trajectory, platoon_string_stability, simulate, string_stability
+from timegap_env.sim import (
+    COMMERCIAL_ACC, Trajectory, acc_platoon, acc_presets, platoon_string_stability, simulate, string_stability,
+)
 
 ENV_ID = "TimeGapMonitor-v0"
 
@@ -36,7 +38,7 @@ if ENV_ID not in registry:
     )
 
 __all__ = [
-    "ENV_ID", "MONITOR_PRESETS", "SCENARIOS", "AggressiveCyclesConfig", "ChartConfig", "EnvConfig",
+    "COMMERCIAL_ACC", "ENV_ID", "MONITOR_PRESETS", "acc_platoon", "acc_presets", "SCENARIOS", "AggressiveCyclesConfig", "ChartConfig", "EnvConfig",
     "HardBrakingConfig", "HumanLeaderConfig", "LeaderConfig", "LeaderProfile", "MonitorConfig", "OpenAccRun",
     "PlatoonConfig", "RewardWeights", "SensorConfig", "SinusoidConfig", "StochasticHumanConfig", "TimeGapEstimate", "TimeGapMonitor",
     "Trajectory", "aggressive_cycles", "default_ngsim_path", "default_openacc_dir", "estimate_time_gap", "hard_braking", "idm_leader",
