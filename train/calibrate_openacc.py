@@ -41,7 +41,7 @@ import numpy as np
 from timegap_env.config import PlatoonConfig
 from timegap_env.leaders.openacc import OpenAccRun, default_openacc_dir, openacc_paths, read_openacc, repeated_runs
 from timegap_env.sim.calibration import (
-    BOUNDS, FollowerFit, FollowerModel, Segment, fit_constant_time_gap, fit_follower, record_segments,
+    BOUNDS, SETTING_BOUNDS, FollowerFit, FollowerModel, Segment, fit_constant_time_gap, fit_follower, record_segments,
     simulate_constant_time_gap, simulate_follower,
 )
 from timegap_env.sim.presets import COMMERCIAL_ACC, PRESETS_PATH, write_presets
@@ -311,7 +311,7 @@ def write_report(
     m = median.model
     lines += [f"| **{COMMERCIAL_ACC}** (median) | {m.lag:.2f} | {m.k_s:.3f} | {m.k_v:.2f} | {m.standstill_spacing:.1f} | "
               f"{m.accel_min:.1f} / {m.accel_max:.1f} | {_setting(median, 'S')} | {_setting(median, 'L')} | | |", "",
-              "`*`: the fit sits at the parameter's bound (`timegap_env.sim.calibration.BOUNDS`). Where the speed hardly "
+              "`*`: the fit sits at the parameter's bound (`timegap_env.sim.calibration.BOUNDS`, `SETTING_BOUNDS`). Where the speed hardly "
               "varies within a car's segments, s0 and τ* trade off against each other (only s0 + τ* v is pinned down).", "",
               "## Held-out runs: spacing RMSE [m] / speed RMSE [m/s] (spacing RMSE with each segment's mean error removed)", "",
               "| car | held-out segments, duration | " + " | ".join(MODELS) + " |", "|---|---|---|---|---|"]
@@ -365,7 +365,11 @@ def _bounded(name: str, value: float, digits: int) -> str:
 
 
 def _setting(fit: FollowerFit, setting: str) -> str:
-    return f"{fit.settings[setting]:.2f}" if setting in fit.settings else "–"
+    """The fitted tau* at ``setting`` [s], starred at a bound of the fit; a dash where the car has none."""
+    if setting not in fit.settings:
+        return "–"
+    value = fit.settings[setting]
+    return f"{value:.2f}" + ("*" if min(abs(value - bound) for bound in SETTING_BOUNDS) < 1e-6 else "")
 
 
 if __name__ == "__main__":
