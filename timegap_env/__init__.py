@@ -38,10 +38,10 @@ if ENV_ID not in registry:
     )
 
 __all__ = [
-    "COMMERCIAL_ACC", "ENV_ID", "MONITOR_PRESETS", "acc_platoon", "acc_presets", "SCENARIOS", "AggressiveCyclesConfig", "ChartConfig", "EnvConfig",
+    "COMMERCIAL_ACC", "ENV_ID", "MONITOR_PRESETS", "SCENARIOS", "AggressiveCyclesConfig", "ChartConfig", "EnvConfig",
     "HardBrakingConfig", "HumanLeaderConfig", "LeaderConfig", "LeaderProfile", "MonitorConfig", "OpenAccRun",
     "PlatoonConfig", "RewardWeights", "SensorConfig", "SinusoidConfig", "StochasticHumanConfig", "TimeGapEstimate", "TimeGapMonitor",
-    "Trajectory", "aggressive_cycles", "default_ngsim_path", "default_openacc_dir", "estimate_time_gap", "hard_braking", "idm_leader",
+    "Trajectory", "acc_platoon", "acc_presets", "aggressive_cycles", "default_ngsim_path", "default_openacc_dir", "estimate_time_gap", "hard_braking", "idm_leader",
     "make_leader", "openacc_paths", "platoon_string_stability", "posterior", "read_ngsim", "read_openacc", "simulate",
     "sinusoid", "stochastic_human", "string_stability", "vehicle_ids", "vehicle_profile",
 ]
