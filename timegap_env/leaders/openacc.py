@@ -229,6 +229,12 @@ def openacc_leader(seed: int | None, leader: LeaderConfig) -> LeaderProfile:
 _STRETCHES: dict[Path, list[tuple[str, np.ndarray]]] = {}  # per directory, read once per process
 
 
+def valid_stretches(valid: np.ndarray) -> list[tuple[int, int]]:
+    """The (start, end) index pairs, end exclusive, of the runs of True in the 1-D mask ``valid``."""
+    edges = np.flatnonzero(np.diff(np.r_[0, np.asarray(valid, dtype=np.int8), 0]))
+    return [(int(start), int(end)) for start, end in zip(edges[::2], edges[1::2])]
+
+
 def _lead_car_stretches(directory: Path) -> list[tuple[str, np.ndarray]]:
     """(run name, the lead car's longest gap-free speed series [m/s]) of every run that recorded its lead car."""
     if directory not in _STRETCHES:
@@ -237,10 +243,9 @@ def _lead_car_stretches(directory: Path) -> list[tuple[str, np.ndarray]]:
             run = read_openacc(path)
             if 1 in run.absent_positions:
                 continue
-            valid = np.isfinite(run.speed[:, 0])
-            edges = np.flatnonzero(np.diff(np.r_[0, valid.astype(np.int8), 0]))  # starts and ends of valid runs
-            starts, ends = edges[::2], edges[1::2]
-            longest = int(np.argmax(ends - starts))
-            stretches.append((run.name, run.speed[starts[longest] : ends[longest], 0]))
+            recorded = valid_stretches(np.isfinite(run.speed[:, 0]))
+            if recorded:  # the column may be there but empty
+                start, end = max(recorded, key=lambda stretch: stretch[1] - stretch[0])
+                stretches.append((run.name, run.speed[start:end, 0]))
         _STRETCHES[directory] = stretches
     return _STRETCHES[directory]

@@ -33,6 +33,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from timegap_env.config import PlatoonConfig
+from timegap_env.leaders.openacc import valid_stretches
 from timegap_env.sim.platoon import Controller, ZOHCoefficients, cth_command, follower_tick
 
 # Bounds of the fitted parameters: physically plausible, and wide enough not to bind on real cars.
@@ -70,9 +71,8 @@ def record_segments(
     trapezoid rule) plus the recorded spacing, so the recorded follower reproduces the recorded spacing.
     """
     valid = np.isfinite(speed) & np.isfinite(predecessor_speed) & np.isfinite(spacing) & (spacing > 0)
-    edges = np.flatnonzero(np.diff(np.r_[0, valid.astype(np.int8), 0]))  # starts and ends of valid stretches
     segments = []
-    for start, end in zip(edges[::2], edges[1::2]):
+    for start, end in valid_stretches(valid):
         if (end - start - 1) * dt < min_duration:
             continue
         v, s = speed[start:end], spacing[start:end]
