@@ -12,6 +12,7 @@ from timegap_env.sim.calibration import (
 
 TRUE = FollowerModel(lag=0.8, k_s=0.12, k_v=0.45, standstill_spacing=3.0, accel_min=-3.0, accel_max=1.5)
 SETTINGS = {"S": 1.2, "L": 2.4}
+KNOWN = PlatoonConfig(standstill_spacing=TRUE.standstill_spacing, accel_min=TRUE.accel_min)  # what the fit holds
 
 
 def recorded_follower(seed: int, setting: float, noise: SensorConfig) -> list[Segment]:
@@ -28,14 +29,14 @@ def recorded_follower(seed: int, setting: float, noise: SensorConfig) -> list[Se
     return record_segments(*noisy, config.dt, min_duration=30.0)
 
 
-def fit_three_runs(noise: SensorConfig):
+def fit_three_runs(noise: SensorConfig, seeds: tuple[int, int, int] = (1, 2, 3)):
     """The fit on three recorded runs of the TRUE follower: two at setting S, one at L."""
     segments, names = [], []
-    for seed, name in ((1, "S"), (2, "L"), (3, "S")):
+    for seed, name in zip(seeds, ("S", "L", "S")):
         found = recorded_follower(seed, SETTINGS[name], noise)
         segments += found
         names += [name] * len(found)
-    return segments, names, fit_follower(segments, names)
+    return segments, names, fit_follower(segments, names, KNOWN)
 
 
 @pytest.mark.parametrize(
@@ -43,17 +44,19 @@ def fit_three_runs(noise: SensorConfig):
     [
         # GNSS-grade records: 5 cm spacing, 2 cm/s speed noise
         (SensorConfig(spacing_noise_std=0.05, speed_noise_std=0.02),
-         {"setting": 0.01, "s0": 0.1, "k_s": 0.05, "k_v": 0.05, "lag": 0.10, "accel_max": 0.05}),
+         {"setting": 0.01, "k_s": 0.05, "k_v": 0.05, "lag": 0.10, "accel_max": 0.05}),
         # the project's sensors (0.1 m, 0.1 m/s): the speed noise, integrated into the predecessor's position,
-        # biases the lag most; over six seeds the errors reached lag -41 %, k_s +16 %, k_v -8 %, s0 0.17 m, tau* 0.011 s
-        (SensorConfig(), {"setting": 0.02, "s0": 0.3, "k_s": 0.25, "k_v": 0.15, "lag": 0.5, "accel_max": 0.1}),
+        # biases the lag most; over six triples of seeds the errors reached lag -40 %, k_s +16 %, k_v -9 %,
+        # highest command -0.03 m/s^2, tau* 0.007 s (these seeds: the worst)
+        (SensorConfig(), {"setting": 0.02, "k_s": 0.25, "k_v": 0.15, "lag": 0.5, "accel_max": 0.1}),
     ],
 )
 def test_the_fit_recovers_known_parameters_from_noisy_records(noise, tolerance):
-    """The follower's braking stays above its accel_min in these runs: that bound is not recoverable from them."""
+    """s0 and the lowest command are held at the truth, as the calibration holds them (its braking stays above
+    accel_min in these runs: that bound is not recoverable from them)."""
     segments, names, fit = fit_three_runs(noise)
     assert fit.settings == pytest.approx(SETTINGS, abs=tolerance["setting"])
-    assert fit.model.standstill_spacing == pytest.approx(TRUE.standstill_spacing, abs=tolerance["s0"])
+    assert (fit.model.standstill_spacing, fit.model.accel_min) == (TRUE.standstill_spacing, TRUE.accel_min)
     assert fit.model.k_s == pytest.approx(TRUE.k_s, rel=tolerance["k_s"])
     assert fit.model.k_v == pytest.approx(TRUE.k_v, rel=tolerance["k_v"])
     assert fit.model.lag == pytest.approx(TRUE.lag, rel=tolerance["lag"])
@@ -64,7 +67,7 @@ def test_the_fit_recovers_known_parameters_from_noisy_records(noise, tolerance):
 
 def test_without_noise_the_fit_is_exact():
     segments = recorded_follower(1, 1.2, SensorConfig(spacing_noise_std=0.0, speed_noise_std=0.0))
-    fit = fit_follower(segments, ["S"] * len(segments))
+    fit = fit_follower(segments, ["S"] * len(segments), KNOWN)
     assert fit.settings["S"] == pytest.approx(1.2, abs=1e-3) and fit.model.k_s == pytest.approx(TRUE.k_s, rel=1e-2)
     assert fit.spacing_rmse < 0.01
 

@@ -38,6 +38,8 @@ from timegap_env.leaders.profile import LeaderProfile
 PATH_VARIABLE = "TIMEGAP_OPENACC_PATH"  # a directory of OpenACC files
 SHARED_DIR = Path("shared", "data", "openacc")
 TICK = 0.1  # time between two records [s]
+STANDSTILL_SPEED = 0.1  # a car slower than this stands still [m/s]
+MIN_STANDSTILL_TIME = 2.0  # a follower's standstill spacing needs at least this much standing still [s]
 TICK_TOLERANCE = 1e-6  # a time step farther than this from TICK is an error [s]
 METADATA = ("Date", "Vehicle_order", "Number_of_vehicles", "ACC", "Distance_setting")
 DISTANCE_SETTINGS = ("S", "M", "L", "SL")  # shortest, medium, longest, a mix of short and long
@@ -218,7 +220,7 @@ def openacc_leader(seed: int | None, leader: LeaderConfig) -> LeaderProfile:
     directory = default_openacc_dir()
     if not directory.exists():
         raise FileNotFoundError(f"OpenACC data not found at {directory}: set ${PATH_VARIABLE} to a directory of OpenACC files")
-    stretches = [stretch for stretch in _lead_car_stretches(directory) if stretch[1].size * TICK >= leader.min_recorded_duration]
+    stretches = [stretch for stretch in lead_car_speeds(directory) if stretch[1].size * TICK >= leader.min_recorded_duration]
     if not stretches:
         raise ValueError(f"no OpenACC run in {directory} has {leader.min_recorded_duration} s of lead-car speeds without a gap")
     name, speed = stretches[np.random.default_rng(seed).integers(len(stretches))]
@@ -229,14 +231,24 @@ def openacc_leader(seed: int | None, leader: LeaderConfig) -> LeaderProfile:
 _STRETCHES: dict[Path, list[tuple[str, np.ndarray]]] = {}  # per directory, read once per process
 
 
+def standstill_spacings(run: OpenAccRun) -> list[tuple[str, float]]:
+    """(car, median spacing [m]) of every follower of ``run`` that stood still (speed below STANDSTILL_SPEED, its
+    spacing recorded) for MIN_STANDSTILL_TIME or more: the standstill spacing s0 the car keeps."""
+    with np.errstate(invalid="ignore"):
+        still = (np.abs(run.speed[:, 1:]) < STANDSTILL_SPEED) & np.isfinite(run.spacing)
+    return [(run.vehicles[j + 1], float(np.median(run.spacing[still[:, j], j])))
+            for j in np.flatnonzero(still.sum(axis=0) * TICK >= MIN_STANDSTILL_TIME)]
+
+
 def valid_stretches(valid: np.ndarray) -> list[tuple[int, int]]:
     """The (start, end) index pairs, end exclusive, of the runs of True in the 1-D mask ``valid``."""
     edges = np.flatnonzero(np.diff(np.r_[0, np.asarray(valid, dtype=np.int8), 0]))
     return [(int(start), int(end)) for start, end in zip(edges[::2], edges[1::2])]
 
 
-def _lead_car_stretches(directory: Path) -> list[tuple[str, np.ndarray]]:
-    """(run name, the lead car's longest gap-free speed series [m/s]) of every run that recorded its lead car."""
+def lead_car_speeds(directory: Path) -> list[tuple[str, np.ndarray]]:
+    """(run name, the lead car's longest gap-free speed series [m/s]) of every run in ``directory`` that recorded its
+    lead car, sorted by name; read once per process."""
     if directory not in _STRETCHES:
         stretches = []
         for path in openacc_paths(directory):

@@ -12,9 +12,13 @@ What can be fitted. Without V2V the closed loop of T da/dt = -a + K u, u = k_s d
 depends on T, K, k_s, k_v and k_a only through (1 - K k_a) / T, K k_s / T and K k_v / T as long as
 the command stays within its bounds: spacing and speed records cannot tell K from the gains, nor
 k_a from T. So the fit holds K = 1 and k_a at :class:`~timegap_env.config.PlatoonConfig`'s and fits
-the lag T, the gains k_s and k_v, the standstill spacing s0, the command's bounds (commercial ACCs
-accelerate and brake gently) and one tau* per distance setting. The analytic string stability
-(``string_stability``) depends on the same combinations, so it does not depend on that choice.
+the lag T, the gains k_s and k_v, the highest command (commercial ACCs accelerate gently) and one
+tau* per distance setting (:data:`FITTED`). Two more parameters come from ``base`` instead:
+s0, because where a car's speed hardly varies only s0 + tau* v is pinned down and a free s0 trades
+off against tau* (on OpenACC it ran to 13 m with tau* at 0.1 s), so the caller measures it (the
+spacing of stopped cars); and the lowest command, because recorded ACC driving seldom brakes at
+the car's limit, so records do not reveal it. The analytic string stability (``string_stability``)
+depends on the same combinations as the closed loop, so it does not depend on these choices.
 
 Two references, fitted to the same segments: :func:`simulate_constant_time_gap`, a follower that
 always keeps s = s0 + tau v (x' = (x_predecessor - x - s0) / tau; tau and s0 fitted), and the
@@ -36,18 +40,18 @@ from timegap_env.config import PlatoonConfig
 from timegap_env.leaders.openacc import valid_stretches
 from timegap_env.sim.platoon import Controller, ZOHCoefficients, cth_command, follower_tick
 
-# Bounds of the fitted parameters: physically plausible, and wide enough not to bind on real cars.
+FITTED = ("lag", "k_s", "k_v", "accel_max")  # the FollowerModel fields fit_follower fits; the rest come from base
+# Bounds of the fitted parameters: physically plausible; a fit that ends on one is reported as such.
 BOUNDS = {
     "lag": (0.05, 5.0),  # T [s]
     "k_s": (1e-3, 3.0),  # [1/s^2]
     "k_v": (0.0, 5.0),  # [1/s]
-    "standstill_spacing": (0.0, 20.0),  # s0 [m]
-    "accel_min": (-8.0, -0.3),  # [m/s^2]
     "accel_max": (0.3, 4.0),  # [m/s^2]
 }
 SETTING_BOUNDS = (0.1, 6.0)  # tau* [s]
+STANDSTILL_SPACING_BOUNDS = (0.0, 20.0)  # s0 of the constant time-gap reference [m]
 STARTS = (1.0, 0.5, 2.0)  # the fit starts from the base follower's lag and gains times each of these [-]
-START_ACCEL_BOUNDS = (-3.0, 2.0)  # ... and from these command bounds, inside the bounds' range [m/s^2]
+START_ACCEL_MAX = 2.0  # ... and from this highest command [m/s^2]
 MAX_EVALUATIONS = 300  # of the residuals, per start [-]
 
 
@@ -83,8 +87,8 @@ def record_segments(
 
 
 class FollowerModel(NamedTuple):
-    """The follower's parameters that :func:`fit_follower` can fit (gain K = 1 and k_a are held, see the module
-    docstring); tau* is apart, one per distance setting."""
+    """A follower in ACC as the calibration sees it (gain K = 1 and k_a held, see the module docstring; :data:`FITTED`
+    the fields it fits); tau* is apart, one per distance setting."""
 
     lag: float  # GLVD T [s]
     k_s: float  # gain on the spacing error [1/s^2]
@@ -105,16 +109,16 @@ class FollowerFit:
     """A car's fitted follower: the model, tau* per distance setting, and how well it fitted."""
 
     model: FollowerModel
-    settings: dict[str, float]  # tau* [s] per distance setting
+    settings: dict[str, float]  # tau* [s] by distance setting ("S", "L")
     spacing_rmse: float  # over the segments it was fitted on [m]
     n_segments: int
     duration: float  # of those segments [s]
 
-    def platoon_config(self, setting: str, base: PlatoonConfig = PlatoonConfig(), **overrides: object) -> PlatoonConfig:
-        """A platoon of this car in ACC at distance ``setting``: ``base`` with this follower (gain 1), ``overrides`` on top."""
+    def platoon_config(self, distance_setting: str, base: PlatoonConfig = PlatoonConfig(), **overrides: object) -> PlatoonConfig:
+        """A platoon of this car in ACC at ``distance_setting``: ``base`` with this follower (gain 1), ``overrides`` on top."""
         fields = {"actuation_lag": self.model.lag, "actuation_gain": 1.0, "k_s": self.model.k_s, "k_v": self.model.k_v,
                   "standstill_spacing": self.model.standstill_spacing, "accel_min": self.model.accel_min,
-                  "accel_max": self.model.accel_max, "initial_setting": self.settings[setting], "v2v": False,
+                  "accel_max": self.model.accel_max, "initial_setting": self.settings[distance_setting], "v2v": False,
                   **overrides}
         return base.with_overrides(fields)
 
@@ -176,39 +180,33 @@ def simulate_constant_time_gap(
 
 
 def fit_follower(
-    segments: Sequence[Segment], setting_names: Sequence[str], base: PlatoonConfig = PlatoonConfig(), free: bool = True
+    segments: Sequence[Segment], distance_settings: Sequence[str], base: PlatoonConfig = PlatoonConfig(), free: bool = True
 ) -> FollowerFit:
-    """Fit to ``segments`` (``setting_names[i]`` the distance setting of segment i) the follower model and one tau*
-    per setting, minimising the squared spacing error over all segments. ``free=False`` fits only tau* and
-    keeps ``base``'s follower: the reference "default follower, tau* fitted"."""
-    names = sorted(set(setting_names))
-    index = [names.index(name) for name in setting_names]
-    _, initial_settings = static_fit(segments, index, len(names))
+    """Fit to ``segments`` (``distance_settings[i]`` the distance setting of segment i) the :data:`FITTED`
+    parameters and one tau* per distance setting, minimising the squared spacing error over all segments; the
+    other parameters are ``base``'s. ``free=False`` fits only tau*: the reference "default follower, tau* fitted"."""
+    names = sorted(set(distance_settings))
+    index = [names.index(name) for name in distance_settings]
     base_model = FollowerModel.of(base)
+    n_fitted = len(FITTED) if free else 0
+
+    def model_of(p: np.ndarray) -> FollowerModel:
+        return base_model._replace(**{name: float(value) for name, value in zip(FITTED, p[:n_fitted])})
 
     def spacing_errors(p: np.ndarray) -> np.ndarray:
-        model = FollowerModel(*p[: len(FollowerModel._fields)]) if free else base_model
-        settings = p[len(FollowerModel._fields):] if free else p
-        kernel_model = _kernel_model(model, base)
-        return np.concatenate([_simulate(segment, kernel_model, settings[i])[0] - segment.spacing
+        kernel_model = _kernel_model(model_of(p), base)
+        return np.concatenate([_simulate(segment, kernel_model, p[n_fitted + i])[0] - segment.spacing
                                for segment, i in zip(segments, index)])
 
-    lower = [SETTING_BOUNDS[0]] * len(names)
-    upper = [SETTING_BOUNDS[1]] * len(names)
-    if free:
-        lower = [BOUNDS[name][0] for name in FollowerModel._fields] + lower
-        upper = [BOUNDS[name][1] for name in FollowerModel._fields] + upper
-        initial_s0 = static_fit(segments, index, len(names))[0]
-        starts = [[base_model.lag * scale, base_model.k_s * scale, base_model.k_v * scale, initial_s0,
-                   *START_ACCEL_BOUNDS, *initial_settings] for scale in STARTS]
-    else:
-        starts = [list(initial_settings)]
+    _, initial_settings = static_fit(segments, index, len(names))
+    lower = [BOUNDS[name][0] for name in FITTED[:n_fitted]] + [SETTING_BOUNDS[0]] * len(names)
+    upper = [BOUNDS[name][1] for name in FITTED[:n_fitted]] + [SETTING_BOUNDS[1]] * len(names)
+    starts = [[base_model.lag * scale, base_model.k_s * scale, base_model.k_v * scale, START_ACCEL_MAX][:n_fitted]
+              + list(initial_settings) for scale in (STARTS if free else STARTS[:1])]
     best = _best_fit(spacing_errors, starts, lower, upper)
-    model = FollowerModel(*best.x[: len(FollowerModel._fields)]) if free else base_model
-    settings = best.x[len(FollowerModel._fields):] if free else best.x
     return FollowerFit(
-        model=FollowerModel(*(float(value) for value in model)),
-        settings={name: float(value) for name, value in zip(names, settings)},
+        model=model_of(best.x),
+        settings={name: float(value) for name, value in zip(names, best.x[n_fitted:])},
         spacing_rmse=float(np.sqrt(2.0 * best.cost / sum(segment.speed.size for segment in segments))),
         n_segments=len(segments),
         duration=float(sum(segment.speed.size - 1 for segment in segments) * base.dt),
@@ -216,19 +214,19 @@ def fit_follower(
 
 
 def fit_constant_time_gap(
-    segments: Sequence[Segment], setting_names: Sequence[str], dt: float
+    segments: Sequence[Segment], distance_settings: Sequence[str], dt: float
 ) -> tuple[float, dict[str, float]]:
-    """The reference constant time-gap follower fitted to ``segments``: (s0 [m], tau [s] per setting)."""
-    names = sorted(set(setting_names))
-    index = [names.index(name) for name in setting_names]
+    """The reference constant time-gap follower fitted to ``segments``: (s0 [m], tau [s] per distance setting)."""
+    names = sorted(set(distance_settings))
+    index = [names.index(name) for name in distance_settings]
     initial_s0, initial_settings = static_fit(segments, index, len(names))
 
     def spacing_errors(p: np.ndarray) -> np.ndarray:
         return np.concatenate([simulate_constant_time_gap(segment, p[1 + i], p[0], dt)[0] - segment.spacing
                                for segment, i in zip(segments, index)])
 
-    lower = [BOUNDS["standstill_spacing"][0]] + [SETTING_BOUNDS[0]] * len(names)
-    upper = [BOUNDS["standstill_spacing"][1]] + [SETTING_BOUNDS[1]] * len(names)
+    lower = [STANDSTILL_SPACING_BOUNDS[0]] + [SETTING_BOUNDS[0]] * len(names)
+    upper = [STANDSTILL_SPACING_BOUNDS[1]] + [SETTING_BOUNDS[1]] * len(names)
     best = _best_fit(spacing_errors, [[initial_s0, *initial_settings]], lower, upper)
     return float(best.x[0]), {name: float(value) for name, value in zip(names, best.x[1:])}
 

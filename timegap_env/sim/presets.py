@@ -1,7 +1,7 @@
 """Followers calibrated to real commercial ACC cars (OpenACC), ready to simulate.
 
 ``acc_presets()`` maps each car model (e.g. ``"TESLA_MODEL3"``) and ``COMMERCIAL_ACC``, the median
-car, to its :class:`~timegap_env.sim.calibration.FollowerFit`; ``acc_platoon(car, setting)`` is a
+car, to its :class:`~timegap_env.sim.calibration.FollowerFit`; ``acc_platoon(car, distance_setting)`` is a
 :class:`~timegap_env.config.PlatoonConfig` of that car in ACC at distance setting ``"S"`` or ``"L"``::
 
     timegap_env.simulate("paper", timegap_env.acc_platoon("TESLA_MODEL3", "L"))
@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import functools
 import json
-import math
 from pathlib import Path
 
 from timegap_env.config import PlatoonConfig
@@ -34,7 +33,7 @@ def acc_presets(path: Path = PRESETS_PATH) -> dict[str, FollowerFit]:
         car: FollowerFit(
             model=FollowerModel(**entry["model"]),
             settings=entry["settings"],
-            spacing_rmse=math.nan if entry["spacing_rmse"] is None else entry["spacing_rmse"],
+            spacing_rmse=entry["spacing_rmse"],
             n_segments=entry["n_segments"],
             duration=entry["duration"],
         )
@@ -42,16 +41,16 @@ def acc_presets(path: Path = PRESETS_PATH) -> dict[str, FollowerFit]:
     }
 
 
-def acc_platoon(car: str = COMMERCIAL_ACC, setting: str = "S", base: PlatoonConfig = PlatoonConfig(),
+def acc_platoon(car: str = COMMERCIAL_ACC, distance_setting: str = "S", base: PlatoonConfig = PlatoonConfig(),
                 **overrides: object) -> PlatoonConfig:
-    """``base`` with every follower the calibrated ``car`` in ACC at distance ``setting``; ``overrides`` on top."""
+    """``base`` with every follower the calibrated ``car`` in ACC at ``distance_setting``; ``overrides`` on top."""
     presets = acc_presets()
     if car not in presets:
         raise ValueError(f"car = {car!r}: no calibrated preset; known: {sorted(presets)}")
     fit = presets[car]
-    if setting not in fit.settings:
-        raise ValueError(f"setting = {setting!r}: {car} was calibrated at {sorted(fit.settings)}")
-    return fit.platoon_config(setting, base, **overrides)
+    if distance_setting not in fit.settings:
+        raise ValueError(f"distance_setting = {distance_setting!r}: {car} was calibrated at {sorted(fit.settings)}")
+    return fit.platoon_config(distance_setting, base, **overrides)
 
 
 def write_presets(path: Path, fits: dict[str, FollowerFit], source: str) -> None:
@@ -60,7 +59,7 @@ def write_presets(path: Path, fits: dict[str, FollowerFit], source: str) -> None
         car: {
             "model": fit.model._asdict(),
             "settings": dict(sorted(fit.settings.items())),
-            "spacing_rmse": None if math.isnan(fit.spacing_rmse) else fit.spacing_rmse,
+            "spacing_rmse": fit.spacing_rmse,
             "n_segments": fit.n_segments,
             "duration": fit.duration,
         }
