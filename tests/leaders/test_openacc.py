@@ -74,6 +74,7 @@ def test_people_driving_have_no_distance_setting(tmp_path):
         ("Time,", "Clock,", "missing column 'Time'"),
         ("10.1,8.1,1.0,12.6", "10.1,8.1,1.0,twelve", r"row 8, column 'IVS1' = 'twelve' is not a number"),
         ("10.2,", "10.25,", r"time steps must be 0.1 s; rows 8 and 9 are 0.15 s apart"),
+        ("10.1,8.1", ",8.1", "row 8, column 'Time' is empty"),
         ("10.2,8.2,1.0,,8.3,1.0,13.2,8.4,1.0\n", "10.2,8.2\n", "row 9 has 2 fields, the header 9"),
     ],
 )
