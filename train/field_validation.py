@@ -686,8 +686,9 @@ def main() -> None:
     parser.add_argument("--out", type=Path, default=Path("results/field"), help="where the report and figures go")
     parser.add_argument("--runs", nargs="+", metavar="NAME", help="only these runs (file names without suffix)")
     args = parser.parse_args()
-    if not args.data.is_dir():
-        sys.exit(f"field_validation: OpenACC data not found at {args.data} (set --data or $TIMEGAP_OPENACC_PATH)")
+    if not args.data.is_dir():  # make demo goes on without it: the committed report stays
+        print(f"field_validation: skipped, OpenACC data not found at {args.data} (set --data or $TIMEGAP_OPENACC_PATH)")
+        return
 
     # Data: read, drop repeats, split into halves, keep the followers with both columns.
     runs = load_runs(args.data, args.runs)
