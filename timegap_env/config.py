@@ -81,6 +81,7 @@ class PlatoonConfig(ConfigMixin):
     k_a: float = -0.3  # gain on own acceleration [-]
     k_f: float = 0.6  # feed-forward gain on the predecessor's acceleration over V2V [-]
     v2v_delay: float = 0.1  # V2V delay theta of the feed-forward, a multiple of dt [s]
+    max_v2v_latency: float = 1.0  # longest extra V2V delay a degradation may add; sizes the message buffer [s]
     v2v: bool = True  # followers start in CACC (True) or ACC, k_f = 0 (False)
     accel_min: float = -8.0  # lowest commanded acceleration (hard braking, ~0.8 g) [m/s^2]
     accel_max: float = 4.0  # highest commanded acceleration [m/s^2]
@@ -91,7 +92,7 @@ class PlatoonConfig(ConfigMixin):
         if self.n_followers < 1:
             self._fail("n_followers", self.n_followers, "must be >= 1")
         self._positive("dt", "initial_setting", "setting_ramp_rate", "vehicle_length")
-        for field in ("standstill_spacing", "v2v_delay"):
+        for field in ("standstill_spacing", "v2v_delay", "max_v2v_latency"):
             if self._finite(field) < 0:
                 self._fail(field, getattr(self, field), "must be >= 0")
         for field in ("k_s", "k_v", "k_a", "k_f", "accel_min", "accel_max"):
@@ -100,9 +101,10 @@ class PlatoonConfig(ConfigMixin):
             self._fail("accel_min", (self.accel_min, self.accel_max), "need accel_min < 0 < accel_max")
         if not isinstance(self.v2v, (bool, np.bool_)):
             self._fail("v2v", self.v2v, "must be True or False")
-        delay_ticks = self.v2v_delay / self.dt
-        if abs(delay_ticks - round(delay_ticks)) > 1e-9:
-            self._fail("v2v_delay", self.v2v_delay, f"must be a multiple of dt = {self.dt}")
+        for field in ("v2v_delay", "max_v2v_latency"):
+            delay_ticks = getattr(self, field) / self.dt
+            if abs(delay_ticks - round(delay_ticks)) > 1e-9:
+                self._fail(field, getattr(self, field), f"must be a multiple of dt = {self.dt}")
         for field in ("actuation_lag", "actuation_gain"):
             self.per_follower(field)
 
@@ -110,6 +112,11 @@ class PlatoonConfig(ConfigMixin):
     def v2v_delay_ticks(self) -> int:
         """V2V delay theta in ticks [-]."""
         return int(round(self.v2v_delay / self.dt))
+
+    @property
+    def max_v2v_latency_ticks(self) -> int:
+        """``max_v2v_latency`` in ticks [-]."""
+        return int(round(self.max_v2v_latency / self.dt))
 
     def per_follower(self, field: str) -> np.ndarray:
         """``actuation_lag`` or ``actuation_gain`` as an array of shape (n_followers,), validated."""

@@ -53,7 +53,7 @@ class MonitoredPlatoon:
             if not np.isclose(config.dt, platoon.dt):
                 raise ValueError(f"{name}.dt = {config.dt}: must equal PlatoonConfig.dt = {platoon.dt}")
         self.platoon = Platoon(platoon, n_envs)
-        self.sensors = Sensors(sensors, n_envs, seed)
+        self.sensors = Sensors(sensors, n_envs, seed, platoon.n_followers)
         self.monitor = TimeGapMonitor(n_envs, platoon.n_followers, platoon.initial_setting, monitor)
         self.chart = make_chart(n_envs, platoon.n_followers, platoon.initial_setting, chart)
         self.ticks = np.zeros(n_envs, dtype=np.int64)

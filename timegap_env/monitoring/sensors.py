@@ -4,11 +4,13 @@ Every tick a follower reads its bumper-to-bumper spacing [m] and its speed [m/s]
 zero-mean Gaussian noise (``SensorConfig``'s standard deviations); with an env's dropout
 probability the whole reading is missing (NaN in both). The monitor skips missing readings.
 
-The noise is counter-based: a reading's three uniforms are a hash (SplitMix64) of the env's
-noise key, the tick since reset, the follower and the stream, so no random generator state is
-carried between ticks. An env's readings therefore depend only on its own key and ticks, never
-on which other envs share the batch or how ticks are grouped into blocks: a vector of envs
-reproduces the same envs run one by one.
+The noise is counter-based (:mod:`timegap_env.sim.counter_noise`): a reading's three uniforms are
+a hash of the env's noise key, the tick since reset, the follower and the stream, so an env's
+readings depend only on its own key and ticks: a vector of envs reproduces the same envs run one
+by one.
+
+A degraded radar (:class:`SensorFaults`, set per episode) adds, while its degradation acts, a
+bias [m] to the spacing reading and more spacing noise [m].
 """
 
 from __future__ import annotations
@@ -19,9 +21,8 @@ import numba
 import numpy as np
 
 from timegap_env.config import SensorConfig
+from timegap_env.sim.counter_noise import counter_uniform
 
-_SPLITMIX_INCREMENT = np.uint64(0x9E3779B97F4A7C15)  # SplitMix64 constants (Steele, Lea & Flood 2014)
-_SPLITMIX_MULTIPLIERS = (np.uint64(0xBF58476D1CE4E5B9), np.uint64(0x94D049BB133111EB))
 _UNIFORM_STREAMS = 3  # per follower and tick: two for the Gaussian pair, one for the dropout
 
 
@@ -41,16 +42,35 @@ class NoiseModel(NamedTuple):
     speed_noise_std: float  # [m/s]
 
 
+class SensorFaults(NamedTuple):
+    """A degraded radar per follower, arrays (n_envs, n_followers): it acts in ticks [start, end) since reset."""
+
+    start: np.ndarray  # int64 first tick it acts [ticks]
+    end: np.ndarray  # int64 first tick it no longer acts; start == end: never [ticks]
+    spacing_bias: np.ndarray  # added to the spacing reading [m]
+    spacing_noise_std: np.ndarray  # the spacing noise's std while it acts, replacing the config's [m]
+
+    @classmethod
+    def none(cls, n_envs: int, n_followers: int, spacing_noise_std: float) -> SensorFaults:
+        """No degradation: empty windows, no bias, the config's noise."""
+        shape = (n_envs, n_followers)
+        return cls(np.zeros(shape, dtype=np.int64), np.zeros(shape, dtype=np.int64), np.zeros(shape),
+                   np.full(shape, spacing_noise_std))
+
+
 class Sensors:
     """The spacing and speed sensors of every follower of ``n_envs`` platoons.
 
     ``noise`` (:class:`NoiseModel`) holds, per env, shaped (n_envs,): ``keys`` (uint64) of the
     noise, drawn from ``seed`` and replaced at each episode by the env; ``dropout_probability``
     [-], ``config.dropout_probability`` until the env draws its own. Both are also attributes of
-    the sensors; change them in place.
+    the sensors; change them in place. ``faults`` (:class:`SensorFaults`, (n_envs, n_followers)
+    arrays, none at first) is the degraded radar of each follower; change it in place too.
     """
 
-    def __init__(self, config: SensorConfig = SensorConfig(), n_envs: int = 1, seed: int | None = None) -> None:
+    def __init__(
+        self, config: SensorConfig = SensorConfig(), n_envs: int = 1, seed: int | None = None, n_followers: int = 1
+    ) -> None:  # n_followers sizes ``faults``; readings of another width are measured without faults
         self.config = config
         self._noise = NoiseModel(
             keys=np.random.default_rng(seed).integers(0, 2**63, size=n_envs, dtype=np.uint64),
@@ -59,8 +79,11 @@ class Sensors:
             speed_noise_std=float(config.speed_noise_std),
         )
         self._noise_args = tuple(self._noise)  # the same arrays, as the kernel takes them
+        self._faults = SensorFaults.none(n_envs, n_followers, config.spacing_noise_std)
+        self._fault_args = tuple(self._faults)
 
     noise = property(lambda self: self._noise, doc="The :class:`NoiseModel` (its arrays change in place).")
+    faults = property(lambda self: self._faults, doc="The :class:`SensorFaults` (its arrays change in place).")
     keys = property(lambda self: self.noise.keys, doc="Noise key of each env (n_envs,) uint64; write in place.")
     dropout_probability = property(
         lambda self: self.noise.dropout_probability, doc="Each env's dropout probability (n_envs,); write in place."
@@ -69,16 +92,22 @@ class Sensors:
     def measure(self, true: Readings, ticks_before: np.ndarray) -> Readings:
         """Readings of the ``true`` spacings and speeds of a block of ticks; env e's block starts after
         ``ticks_before[e]`` ticks since its reset (its first reading is tick ``ticks_before[e] + 1``)."""
+        faults = self._fault_args
+        if true.spacing.shape[1:] != self._faults.start.shape:
+            if np.any(self._faults.start < self._faults.end):
+                raise ValueError(f"readings of shape {true.spacing.shape}: the sensors' faults are set for "
+                                 f"{self._faults.start.shape} (n_envs, n_followers)")
+            faults = tuple(SensorFaults.none(*true.spacing.shape[1:], self.config.spacing_noise_std))
         measured = Readings(np.empty_like(true.spacing), np.empty_like(true.speed))
-        _measure(tuple(true), ticks_before, self._noise_args, tuple(measured))
+        _measure(tuple(true), ticks_before, self._noise_args, faults, tuple(measured))
         return measured
 
 
 @numba.njit(cache=True)
-def _measure(true, ticks_before, noise, out):  # noqa: ANN001, ANN202
-    """:meth:`Sensors.measure`: fill ``out`` (:class:`Readings`) from ``true`` under ``noise`` (:class:`NoiseModel`),
-    each a plain tuple (see :mod:`timegap_env.sim.platoon`)."""
-    true, noise, out = Readings(*true), NoiseModel(*noise), Readings(*out)
+def _measure(true, ticks_before, noise, faults, out):  # noqa: ANN001, ANN202
+    """:meth:`Sensors.measure`: fill ``out`` (:class:`Readings`) from ``true`` under ``noise`` (:class:`NoiseModel`)
+    and ``faults`` (:class:`SensorFaults`), each a plain tuple (see :mod:`timegap_env.sim.platoon`)."""
+    true, noise, faults, out = Readings(*true), NoiseModel(*noise), SensorFaults(*faults), Readings(*out)
     n_ticks, n_envs, n_followers = true.spacing.shape
     for k in range(n_ticks):
         for e in range(n_envs):
@@ -93,21 +122,16 @@ def _measure(true, ticks_before, noise, out):  # noqa: ANN001, ANN202
                     continue
                 radius = np.sqrt(-2.0 * np.log(u0))  # Box-Muller: two independent standard normals
                 angle = 2.0 * np.pi * u1
-                out.spacing[k, e, f] = true.spacing[k, e, f] + noise.spacing_noise_std * radius * np.cos(angle)
+                if faults.start[e, f] <= tick - 1 < faults.end[e, f]:  # the reading after physics tick tick - 1
+                    out.spacing[k, e, f] = (true.spacing[k, e, f] + faults.spacing_bias[e, f]
+                                            + faults.spacing_noise_std[e, f] * radius * np.cos(angle))
+                else:
+                    out.spacing[k, e, f] = true.spacing[k, e, f] + noise.spacing_noise_std * radius * np.cos(angle)
                 out.speed[k, e, f] = true.speed[k, e, f] + noise.speed_noise_std * radius * np.sin(angle)
 
 
 @numba.njit(cache=True)
 def _uniform(key, tick, follower, stream, n_followers):  # noqa: ANN001, ANN202
-    """The uniform in (0, 1) of counter tick * 3 n_followers + 3 follower + stream, hashed with the env's key."""
+    """The uniform in (0, 1) of counter tick * 3 n_followers + 3 follower + stream under the env's key."""
     counter = np.uint64(tick) * np.uint64(_UNIFORM_STREAMS * n_followers) + np.uint64(_UNIFORM_STREAMS * follower + stream)
-    bits = _splitmix64(_splitmix64(counter * _SPLITMIX_INCREMENT + key))
-    return (float(bits >> np.uint64(11)) + 0.5) * 2.0**-53
-
-
-@numba.njit(cache=True)
-def _splitmix64(x):  # noqa: ANN001, ANN202
-    """SplitMix64 finaliser: a well-mixed uint64 hash of the uint64 ``x``."""
-    x = (x ^ (x >> np.uint64(30))) * _SPLITMIX_MULTIPLIERS[0]
-    x = (x ^ (x >> np.uint64(27))) * _SPLITMIX_MULTIPLIERS[1]
-    return x ^ (x >> np.uint64(31))
+    return counter_uniform(key, counter)

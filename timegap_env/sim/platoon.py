@@ -12,6 +12,12 @@ with u held over each tick (zero-order hold) and the GLVD integrated exactly
 over the tick, not with Euler. The feed-forward term comes over V2V with a
 delay of ``v2v_delay_ticks`` ticks; a follower without V2V (ACC mode) drops it.
 
+A follower may be degraded (:class:`FollowerFaults`, set per episode by
+:mod:`timegap_env.sim.degradation`): while its degradation acts, its GLVD transition,
+controller gains and highest command are the degraded ones, its V2V messages arrive
+later or are lost (the feed-forward then holds the last one received), and its radar
+adds a bias to the spacing the controller sees. Nothing of this shows in the V2V flag.
+
 Three time gaps, three names: the **setting** is what was asked for; the
 **applied setting** is the tau* the controller uses, which follows a new setting
 at ``setting_ramp_rate`` (the ramp law, :func:`ramp_toward` and
@@ -37,6 +43,7 @@ import numba
 import numpy as np
 
 from timegap_env.config import PlatoonConfig
+from timegap_env.sim.counter_noise import counter_uniform
 
 
 class ZOHCoefficients(NamedTuple):
@@ -137,7 +144,10 @@ class PlatoonState(NamedTuple):
     applied_setting: np.ndarray  # per follower: the tau* the controller uses, ramped towards the setting [s]
     v2v: np.ndarray  # per follower: CACC on (V2V feed-forward) [bool]
     collided: np.ndarray  # per follower: gap <= 0 was reached; sticky [bool]
-    predecessor_accel: np.ndarray  # (v2v_delay_ticks + 1, n_envs, n_followers) ring of recent predecessor accelerations [m/s^2]
+    predecessor_accel: np.ndarray  # (v2v_delay_ticks + max_v2v_latency_ticks + 1, n_envs, n_followers) ring of
+    # recent predecessor accelerations [m/s^2]
+    received_accel: np.ndarray  # per follower: the last predecessor acceleration a V2V message delivered [m/s^2]
+    ticks: np.ndarray  # (n_envs,) int64 ticks since each env's reset [-]
 
 
 class Controller(NamedTuple):
@@ -153,6 +163,7 @@ class Controller(NamedTuple):
     standstill_spacing: float  # s0 [m]
     vehicle_length: float  # [m]
     max_setting_change: float  # largest change of the applied setting in one tick [s]
+    v2v_delay_ticks: int  # V2V delay theta of the feed-forward [ticks]
 
     @classmethod
     def from_config(cls, config: PlatoonConfig) -> Controller:
@@ -160,8 +171,40 @@ class Controller(NamedTuple):
             dt=float(config.dt), k_s=float(config.k_s), k_v=float(config.k_v), k_a=float(config.k_a),
             k_f=float(config.k_f), accel_min=float(config.accel_min), accel_max=float(config.accel_max),
             standstill_spacing=float(config.standstill_spacing), vehicle_length=float(config.vehicle_length),
-            max_setting_change=float(config.setting_ramp_rate * config.dt),
+            max_setting_change=float(config.setting_ramp_rate * config.dt), v2v_delay_ticks=config.v2v_delay_ticks,
         )
+
+
+class FollowerFaults(NamedTuple):
+    """Each follower's degradation as the physics sees it, arrays (n_envs, n_followers) unless noted. It acts in
+    ticks [start, end) since the env's reset; outside that window the follower is nominal."""
+
+    start: np.ndarray  # int64 first tick it acts [ticks]
+    end: np.ndarray  # int64 first tick it no longer acts; start == end: never [ticks]
+    dynamics: ZOHCoefficients  # the GLVD transition while it acts (its lag and gain)
+    k_s: np.ndarray  # controller gain on the spacing error while it acts [1/s^2]
+    k_v: np.ndarray  # controller gain on the speed difference while it acts [1/s]
+    accel_max: np.ndarray  # highest command while it acts [m/s^2]
+    extra_delay: np.ndarray  # int64 V2V delay added while it acts [ticks]
+    packet_loss: np.ndarray  # chance per tick that a V2V message is lost while it acts [-]
+    spacing_bias: np.ndarray  # added by the radar to the spacing the controller sees while it acts [m]
+    keys: np.ndarray  # (n_envs,) uint64 keys of the packet-loss draws (counter-based, as the sensors')
+
+    @classmethod
+    def none(cls, config: PlatoonConfig, nominal: ZOHCoefficients, n_envs: int) -> FollowerFaults:
+        """No degradation: empty windows, nominal parameters (copies), no delay, loss or bias."""
+        shape = (n_envs, config.n_followers)
+        return cls(
+            start=np.zeros(shape, dtype=np.int64), end=np.zeros(shape, dtype=np.int64),
+            dynamics=ZOHCoefficients(*(np.broadcast_to(c, shape).copy() for c in nominal[:-1]), nominal.dt),
+            k_s=np.full(shape, float(config.k_s)), k_v=np.full(shape, float(config.k_v)),
+            accel_max=np.full(shape, float(config.accel_max)), extra_delay=np.zeros(shape, dtype=np.int64),
+            packet_loss=np.zeros(shape), spacing_bias=np.zeros(shape), keys=np.zeros(n_envs, dtype=np.uint64),
+        )
+
+    def as_kernel_tuple(self) -> tuple:
+        """The plain nested tuple the kernel takes (see the module docstring)."""
+        return (*self[:2], tuple(self.dynamics), *self[3:])
 
 
 class LeaderTicks(NamedTuple):
@@ -191,8 +234,9 @@ class Platoon:
     """``n_envs`` platoons of one leader and ``config.n_followers`` followers, stepped together.
 
     The state is :attr:`state`, a :class:`PlatoonState`; its arrays are also attributes of the
-    platoon (``x``, ``v``, ``a``, ``u``, ``setting``, ``applied_setting``, ``v2v``, ``collided``),
-    changed in place, never replaced. ``tick`` counts the ticks since the last reset of every env.
+    platoon (``x``, ``v``, ``a``, ``u``, ``setting``, ``applied_setting``, ``v2v``, ``collided``,
+    ``ticks``), changed in place, never replaced. :attr:`faults` (:class:`FollowerFaults`, none at
+    first) holds each follower's degradation; change its arrays in place too.
     """
 
     def __init__(self, config: PlatoonConfig = PlatoonConfig(), n_envs: int = 1) -> None:
@@ -211,12 +255,15 @@ class Platoon:
             applied_setting=np.full(followers, config.initial_setting),
             v2v=np.full(followers, bool(config.v2v)),
             collided=np.zeros(followers, dtype=bool),
-            predecessor_accel=np.zeros((config.v2v_delay_ticks + 1, *followers)),
+            predecessor_accel=np.zeros((config.v2v_delay_ticks + config.max_v2v_latency_ticks + 1, *followers)),
+            received_accel=np.zeros(followers),
+            ticks=np.zeros(self.n_envs, dtype=np.int64),
         )
-        self.tick = 0
         self._controller = Controller.from_config(config)
         self.set_dynamics(config.per_follower("actuation_lag"), config.per_follower("actuation_gain"))
+        self._faults = FollowerFaults.none(config, self._zoh, self.n_envs)
         self._kernel_args = (tuple(self._state), tuple(self._controller))  # the same arrays, as the kernel takes them
+        self._fault_args = self._faults.as_kernel_tuple()
 
     # ----------------------------------------------------------------- state
     state = property(lambda self: self._state, doc="The platoons' :class:`PlatoonState` (its arrays change in place).")
@@ -231,6 +278,9 @@ class Platoon:
     )
     v2v = property(lambda self: self._state.v2v, doc="CACC on (n_envs, n_followers) [bool].")
     collided = property(lambda self: self._state.collided, doc="Gap <= 0 was reached (n_envs, n_followers) [bool].")
+    ticks = property(lambda self: self._state.ticks, doc="Ticks since each env's reset (n_envs,) [-].")
+    faults = property(lambda self: self._faults, doc="Each follower's :class:`FollowerFaults` (arrays change in place).")
+    nominal_dynamics = property(lambda self: self._zoh, doc="The nominal GLVD :class:`ZOHCoefficients` per follower.")
 
     @property
     def spacing(self) -> np.ndarray:
@@ -294,8 +344,8 @@ class Platoon:
         state.v2v[mask] = bool(cfg.v2v)
         state.collided[mask] = False
         state.predecessor_accel[:, mask] = state.a[mask, :-1]
-        if n_reset == self.n_envs:
-            self.tick = 0
+        state.received_accel[mask] = state.a[mask, :-1]
+        state.ticks[mask] = 0
 
     def request_setting(self, setting: np.ndarray | float, mask: np.ndarray | None = None) -> None:
         """Ask for a new time gap setting [s] (broadcast to (n_envs, n_followers)); the controller ramps to it."""
@@ -347,9 +397,8 @@ class Platoon:
         ticks = PlatoonTicks.empty(follower_shape)
         inputs = tuple(LeaderTicks(speed=leader_speed, accel=leader_accel, v2v=np.ascontiguousarray(v2v, dtype=bool)))
         state, controller = self._kernel_args
-        _advance(state, self.tick, inputs, self._zoh_args, controller, tuple(ticks))
+        _advance(state, inputs, self._zoh_args, controller, self._fault_args, tuple(ticks))
         self._state.v2v[:] = v2v[-1]
-        self.tick += n_ticks
         return ticks
 
     def _per_tick(self, name: str, value: np.ndarray, n_ticks: int | None = None) -> np.ndarray:
@@ -376,36 +425,57 @@ def per_env(name: str, value: np.ndarray | float, n_envs: int) -> np.ndarray:
 
 
 @numba.njit(cache=True)
-def _advance(state, first_tick, leader, zoh, controller, out):  # noqa: ANN001, ANN202
+def _advance(state, leader, zoh, controller, faults, out):  # noqa: ANN001, ANN202
     """The physics of :meth:`Platoon.advance`, tick by tick, in place; see the module docstring for the model.
 
     ``state`` (:class:`PlatoonState`) is updated, ``out`` (:class:`PlatoonTicks`) filled for the
-    ``leader`` (:class:`LeaderTicks`) of each tick, under ``zoh`` (:class:`ZOHCoefficients`) and
-    ``controller`` (:class:`Controller`), each passed as a plain tuple. Followers are updated from the
-    last to the first, so each one still sees its predecessor's state from the start of the tick, as
-    in the continuous model.
+    ``leader`` (:class:`LeaderTicks`) of each tick, under ``zoh`` (:class:`ZOHCoefficients`),
+    ``controller`` (:class:`Controller`) and ``faults`` (:class:`FollowerFaults`), each passed as a
+    plain tuple. Followers are updated from the last to the first, so each one still sees its
+    predecessor's state from the start of the tick, as in the continuous model.
     """
     state, leader, zoh = PlatoonState(*state), LeaderTicks(*leader), ZOHCoefficients(*zoh)
     controller, out = Controller(*controller), PlatoonTicks(*out)
+    start, end, degraded_zoh = faults[0], faults[1], ZOHCoefficients(*faults[2])
+    faults = FollowerFaults(start, end, degraded_zoh, *faults[3:])
     x, v, a, u = state.x, state.v, state.a, state.u
     n_ticks, n_envs, n_followers = leader.v2v.shape
     buffer_length = state.predecessor_accel.shape[0]
-    delay = buffer_length - 1
+    nominal_delay = controller.v2v_delay_ticks
     for k in range(n_ticks):
-        tick = first_tick + k
-        slot, delayed_slot = tick % buffer_length, (tick - delay) % buffer_length
         for e in range(n_envs):
+            tick = state.ticks[e] + k
+            slot = tick % buffer_length
             for i in range(n_followers, 0, -1):  # vehicle i is follower f = i - 1
                 f = i - 1
                 applied = ramp_toward(state.applied_setting[e, f], state.setting[e, f], controller.max_setting_change)
                 state.applied_setting[e, f] = applied
                 state.predecessor_accel[slot, e, f] = a[e, i - 1]
                 spacing = x[e, i - 1] - x[e, i] - controller.vehicle_length
-                feedforward = 1.0 if leader.v2v[k, e, f] else 0.0, state.predecessor_accel[delayed_slot, e, f]
-                command = cth_command(spacing, v[e, i], v[e, i - 1], a[e, i], feedforward, applied, controller)
+                active = faults.start[e, f] <= tick < faults.end[e, f]
+                if active:
+                    delay = nominal_delay + faults.extra_delay[e, f]
+                    lost = leader.v2v[k, e, f] and counter_uniform(
+                        faults.keys[e], np.uint64(tick * n_followers + f)) < faults.packet_loss[e, f]
+                    if not lost:
+                        state.received_accel[e, f] = state.predecessor_accel[(tick - delay) % buffer_length, e, f]
+                    follower_controller = Controller(
+                        controller.dt, faults.k_s[e, f], faults.k_v[e, f], controller.k_a, controller.k_f,
+                        controller.accel_min, faults.accel_max[e, f], controller.standstill_spacing,
+                        controller.vehicle_length, controller.max_setting_change, controller.v2v_delay_ticks,
+                    )
+                    seen_spacing = spacing + faults.spacing_bias[e, f]
+                    dynamics = degraded_zoh
+                else:
+                    state.received_accel[e, f] = state.predecessor_accel[(tick - nominal_delay) % buffer_length, e, f]
+                    follower_controller = controller
+                    seen_spacing = spacing
+                    dynamics = zoh
+                feedforward = 1.0 if leader.v2v[k, e, f] else 0.0, state.received_accel[e, f]
+                command = cth_command(seen_spacing, v[e, i], v[e, i - 1], a[e, i], feedforward, applied, follower_controller)
                 coefficients = ZOHCoefficients(
-                    zoh.a_from_a[e, f], zoh.a_from_u[e, f], zoh.v_from_a[e, f], zoh.v_from_u[e, f],
-                    zoh.x_from_a[e, f], zoh.x_from_u[e, f], zoh.dt,
+                    dynamics.a_from_a[e, f], dynamics.a_from_u[e, f], dynamics.v_from_a[e, f], dynamics.v_from_u[e, f],
+                    dynamics.x_from_a[e, f], dynamics.x_from_u[e, f], dynamics.dt,
                 )
                 x_next, v_next, a_next = follower_tick(x[e, i], v[e, i], a[e, i], command, coefficients)
                 x[e, i], v[e, i], a[e, i], u[e, i] = x_next, v_next, a_next, command
@@ -420,3 +490,5 @@ def _advance(state, first_tick, leader, zoh, controller, out):  # noqa: ANN001, 
                 out.speed[k, e, f] = v[e, f + 1]
                 out.accel[k, e, f] = a[e, f + 1]
                 out.applied_setting[k, e, f] = state.applied_setting[e, f]
+    for e in range(n_envs):
+        state.ticks[e] += n_ticks
