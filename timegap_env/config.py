@@ -18,6 +18,10 @@ import numpy as np
 MPH = 0.44704  # [m/s per mph]
 ACTION_MODES = ("platoon", "per_vehicle")  # one setting for all followers, or one each
 CHART_KINDS = ("shewhart", "ewma", "cusum")  # the charts of timegap_env.monitoring.charts.CHARTS
+# What can go wrong with a follower (timegap_env.sim.degradation); only v2v_outage shows (the V2V flag drops).
+DEGRADATION_KINDS = (
+    "lag", "gain", "v2v_latency", "packet_loss", "v2v_outage", "radar_bias", "radar_noise", "commercial_acc",
+)
 
 
 class ConfigMixin:
@@ -361,6 +365,57 @@ class RewardWeights(ConfigMixin):
                 self._fail(field.name, getattr(self, field.name), "must be >= 0")
 
 
+def _default_degradation_weights() -> dict[str, float]:
+    return {"none": 1.0, **{kind: 1.0 for kind in DEGRADATION_KINDS}}
+
+
+@dataclasses.dataclass(frozen=True)
+class DegradationConfig(ConfigMixin):
+    """What degradation each episode draws (:mod:`timegap_env.sim.degradation`): one kind, or none.
+
+    The kind comes from ``kind_weights``; it hits each follower with ``follower_probability`` (at
+    least one), with a size drawn from the kind's range; it starts at 0 or, with
+    ``midway_onset_probability``, somewhere in the episode's middle half, and ends before the
+    episode with ``recovery_probability``. A V2V outage always ends (it lasts
+    ``v2v_outage_duration_range``); a commercial ACC car is what it is from start to end.
+    """
+
+    kind_weights: dict[str, float] = dataclasses.field(default_factory=_default_degradation_weights)  # kind -> weight
+    lag_factor_range: tuple[float, float] = (1.5, 2.5)  # actuation lag T multiplied by [-]
+    gain_range: tuple[float, float] = (0.6, 0.85)  # actuation gain K [-]
+    v2v_latency_range: tuple[float, float] = (0.2, 0.6)  # V2V delay added, a multiple of dt when drawn [s]
+    packet_loss_range: tuple[float, float] = (0.3, 0.9)  # chance per tick that a V2V message is lost [-]
+    v2v_outage_duration_range: tuple[float, float] = (20.0, 80.0)  # how long the V2V link is down [s]
+    radar_bias_range: tuple[float, float] = (1.0, 4.0)  # |bias| of the radar's spacing, sign drawn [m]
+    radar_noise_range: tuple[float, float] = (0.3, 1.0)  # std of the radar's spacing noise while degraded [m]
+    follower_probability: float = 1.0  # chance each follower is hit; at least one is [-]
+    midway_onset_probability: float = 0.5  # chance the degradation starts mid-episode rather than at 0 [-]
+    recovery_probability: float = 0.3  # chance it ends before the episode does [-]
+
+    def __post_init__(self) -> None:
+        known = ("none", *DEGRADATION_KINDS)
+        if not isinstance(self.kind_weights, Mapping) or not self.kind_weights:
+            self._fail("kind_weights", self.kind_weights, f"must be a non-empty dict kind -> weight, kinds {known}")
+        unknown = sorted(set(self.kind_weights) - set(known))
+        if unknown:
+            self._fail("kind_weights", self.kind_weights, f"unknown kinds {unknown}; known: {list(known)}")
+        weights = list(self.kind_weights.values())
+        if not all(isinstance(w, (int, float)) and math.isfinite(w) and w >= 0 for w in weights) or sum(weights) <= 0:
+            self._fail("kind_weights", self.kind_weights, "weights must be finite, >= 0, not all 0")
+        for field in ("lag_factor_range", "gain_range", "v2v_latency_range", "packet_loss_range",
+                      "v2v_outage_duration_range", "radar_bias_range", "radar_noise_range"):
+            self._band(field)
+        if self.lag_factor_range[0] < 1:
+            self._fail("lag_factor_range", self.lag_factor_range, "a degraded lag is at least the nominal one (>= 1)")
+        if not (0 < self.gain_range[0] and self.gain_range[1] <= 1):
+            self._fail("gain_range", self.gain_range, "a degraded gain lies in (0, 1]")
+        if self.packet_loss_range[1] >= 1:
+            self._fail("packet_loss_range", self.packet_loss_range, "a loss probability must stay below 1")
+        for field in ("follower_probability", "midway_onset_probability", "recovery_probability"):
+            if not 0 <= self._finite(field) <= 1:
+                self._fail(field, getattr(self, field), "must be in [0, 1]")
+
+
 def _default_scenario_weights() -> dict[str, float]:
     return {"aggressive_cycles": 1.0, "sinusoid": 1.0, "hard_braking": 1.0, "stochastic_human": 1.0}
 
@@ -386,16 +441,14 @@ class EnvConfig(ConfigMixin):
     setting_levels: tuple[float, ...] = (0.6, 0.8, 1.0, 1.2, 1.4, 1.6, 1.8, 2.0, 2.2)  # settings to choose from [s]
     preferred_setting: float = 1.6  # the setting the driver chose [s]
     scenario_weights: dict[str, float] = dataclasses.field(default_factory=_default_scenario_weights)  # family -> weight
-    v2v_loss_probability: float = 0.5  # chance per episode that some followers fall back from CACC to ACC [-]
-    v2v_loss_duration_range: tuple[float, float] = (20.0, 80.0)  # how long such a V2V loss lasts [s]
-    v2v_loss_follower_probability: float = 1.0  # chance each follower is hit; 1 = channel-wide outage [-]
+    degradation: DegradationConfig = DegradationConfig()  # what can go wrong with the followers, drawn per episode
     dropout_probability_range: tuple[float, float] = (0.0, 0.05)  # per-episode sensor dropout rate drawn from [-]
     ttc_threshold: float = 4.0  # time-to-collision below which safety is penalised [s]
     jerk_reference: float = 2.0  # jerk that costs one comfort unit [m/s^3]
 
     def __post_init__(self) -> None:
         nested = {"platoon": PlatoonConfig, "leader": LeaderConfig, "sensors": SensorConfig, "monitor": MonitorConfig,
-                  "chart": ChartConfig, "reward_weights": RewardWeights}
+                  "chart": ChartConfig, "reward_weights": RewardWeights, "degradation": DegradationConfig}
         for field, kind in nested.items():
             if not isinstance(getattr(self, field), kind):
                 self._fail(field, getattr(self, field), f"must be a {kind.__name__} (or a dict of its fields)")
@@ -428,10 +481,9 @@ class EnvConfig(ConfigMixin):
         weights = list(self.scenario_weights.values())
         if not all(isinstance(w, (int, float)) and math.isfinite(w) and w >= 0 for w in weights) or sum(weights) <= 0:
             self._fail("scenario_weights", self.scenario_weights, "weights must be finite, >= 0, not all 0")
-        for field in ("v2v_loss_probability", "v2v_loss_follower_probability"):
-            if not 0 <= self._finite(field) <= 1:
-                self._fail(field, getattr(self, field), "must be in [0, 1]")
-        self._band("v2v_loss_duration_range", low_min=dt)
+        if self.degradation.v2v_latency_range[1] > self.platoon.max_v2v_latency + 1e-9:
+            self._fail("degradation.v2v_latency_range", self.degradation.v2v_latency_range,
+                       f"must stay within platoon.max_v2v_latency = {self.platoon.max_v2v_latency} s")
         low, high = self.dropout_probability_range
         if not 0 <= low <= high < 1:
             self._fail("dropout_probability_range", self.dropout_probability_range, "need 0 <= low <= high < 1")

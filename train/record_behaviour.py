@@ -48,7 +48,7 @@ EPISODES: list[dict[str, Any]] = [  # gym.make config, reset seed and options, a
     {"config": None, "seed": 7, "options": {"leader_speed": 20.0 + 3.0 * np.sin(np.arange(1500) * 0.02)},
      "actions": 107},
     {"config": {"platoon": {"actuation_lag": 1.0, "actuation_gain": 0.6, "initial_setting": 0.6},
-                "v2v_loss_probability": 1.0, "setting_levels": (0.6, 0.7)},
+                "degradation": {"kind_weights": {"v2v_outage": 1.0}}, "setting_levels": (0.6, 0.7)},
      "seed": 0, "options": {"scenario": "hard_braking"}, "actions": 108},
 ]
 VECTOR_ENVS, VECTOR_STEPS = 4, 300
@@ -106,7 +106,7 @@ def record_vector_env() -> dict[str, Any]:
 
 
 def record_render() -> np.ndarray:
-    env = gym.make(timegap_env.ENV_ID, render_mode="rgb_array", config={"v2v_loss_probability": 0.0})
+    env = gym.make(timegap_env.ENV_ID, render_mode="rgb_array", config={"degradation": {"kind_weights": {"none": 1.0}}})
     env.reset(seed=0, options={"scenario": "aggressive_cycles"})
     for step in range(40):
         env.step(5 if step < 10 else 2)

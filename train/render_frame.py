@@ -28,7 +28,7 @@ def main() -> None:
     parser.add_argument("--out", type=Path, default=Path("results/env_frame.png"))
     args = parser.parse_args()
     levels = list(timegap_env.EnvConfig().setting_levels)
-    env = gym.make(timegap_env.ENV_ID, render_mode="rgb_array", config={"v2v_loss_probability": 0.0})
+    env = gym.make(timegap_env.ENV_ID, render_mode="rgb_array", config={"degradation": {"kind_weights": {"none": 1.0}}})
     env.reset(seed=args.seed, options={"scenario": "aggressive_cycles"})
     for step in range(FRAME_STEP):
         env.step(levels.index(1.6) if step < SWITCH_STEP else levels.index(1.0))

@@ -53,7 +53,8 @@ def test_spaces():
         ({"setting_levels": (1.0,)}, r"setting_levels = \(1.0,\)"),
         ({"reward_weights": {"safety": -1.0}}, r"RewardWeights.safety = -1.0"),
         ({"scenario_weights": {"rush_hour": 1.0}}, r"unknown families \['rush_hour'\]"),
-        ({"v2v_loss_probability": 2.0}, r"v2v_loss_probability = 2.0"),
+        ({"degradation": {"recovery_probability": 2.0}}, r"DegradationConfig.recovery_probability = 2.0"),
+        ({"degradation": {"kind_weights": {"brake_fade": 1.0}}}, r"unknown kinds \['brake_fade'\]"),
     ],
 )
 def test_bad_config_is_named(config, message):
@@ -106,7 +107,7 @@ def test_reward_is_the_weighted_sum_of_its_terms():
 
 
 def test_setting_change_ramps_and_recentres_the_chart():
-    env = gym.make("TimeGapMonitor-v0", config={"v2v_loss_probability": 0.0})
+    env = gym.make("TimeGapMonitor-v0", config={"degradation": {"kind_weights": {"none": 1.0}}})
     env.reset(seed=4)
     _, _, _, _, info = env.step(level_index(1.0))
     assert np.allclose(info["setting"], 1.0)
@@ -134,7 +135,7 @@ def test_named_scenario_and_user_leader():
 
 
 def test_v2v_outages_happen_and_show_in_the_observation():
-    env = gym.make("TimeGapMonitor-v0", config={"v2v_loss_probability": 1.0})
+    env = gym.make("TimeGapMonitor-v0", config={"degradation": {"kind_weights": {"v2v_outage": 1.0}}})
     obs, _ = env.reset(seed=5)
     seen_acc = False
     for _ in range(250):
@@ -149,7 +150,7 @@ def test_v2v_outages_happen_and_show_in_the_observation():
 
 def test_collision_terminates_with_the_collision_penalty():
     speed = np.r_[np.full(30, 30.0), np.maximum(30.0 - 2.0 * np.arange(1, 20), 0.0), np.zeros(300)]  # 20 m/s^2 stop
-    env = gym.make("TimeGapMonitor-v0", config={"v2v_loss_probability": 0.0})
+    env = gym.make("TimeGapMonitor-v0", config={"degradation": {"kind_weights": {"none": 1.0}}})
     env.reset(seed=0, options={"leader_speed": speed})
     for _ in range(60):
         _, reward, terminated, truncated, info = env.step(level_index(0.6))

@@ -6,7 +6,7 @@ import pytest
 from timegap_env.config import EnvConfig
 from timegap_env.envs.episodes import Episodes, check_reset_options
 
-CONFIG = EnvConfig.from_dict({"v2v_loss_probability": 1.0, "v2v_loss_follower_probability": 0.5})
+CONFIG = EnvConfig.from_dict({"degradation": {"follower_probability": 0.5}})
 
 
 def draw(config: EnvConfig, n_envs: int, env: int, seed: int, options: dict | None = None) -> Episodes:
@@ -23,22 +23,36 @@ def test_an_env_draws_the_same_episode_alone_or_in_a_batch():
 
 
 def test_every_draw_is_in_its_configured_range():
-    for seed in range(20):
+    ranges = {"lag": CONFIG.degradation.lag_factor_range, "gain": CONFIG.degradation.gain_range,
+              "v2v_latency": CONFIG.degradation.v2v_latency_range, "packet_loss": CONFIG.degradation.packet_loss_range,
+              "radar_noise": CONFIG.degradation.radar_noise_range}
+    kinds = set()
+    for seed in range(60):
         episodes = draw(CONFIG, 1, 0, seed)
-        start, end = episodes.v2v_loss_start[0], episodes.v2v_loss_end[0]
-        lost = end > start
-        assert lost.any()  # at least one follower loses V2V when the outage happens
-        assert np.all((end[lost] - start[lost]) * 0.1 >= 20.0 - 1e-9) and np.all((end - start) * 0.1 <= 80.0 + 1e-9)
+        duration = episodes.episode_ticks[0] * 0.1
+        for degradation in episodes.degradations[0]:
+            kinds.add(degradation.kind)
+            assert degradation.followers and 0 <= degradation.onset < duration
+            assert degradation.end is None or degradation.onset < degradation.end < duration
+            if degradation.kind in ranges:
+                low, high = ranges[degradation.kind]
+                assert low - 0.05 <= degradation.size <= high + 0.05, degradation  # latency rounded to ticks
+            if degradation.kind == "radar_bias":
+                assert 1.0 <= abs(degradation.size) <= 4.0
+            if degradation.kind == "v2v_outage":
+                assert 20.0 - 1e-9 <= degradation.end - degradation.onset <= 80.0 + 1e-9
         assert 0.0 <= episodes.dropout_probability[0] <= 0.05
         assert episodes.scenario[0] in CONFIG.scenario_weights
+    assert kinds == set(CONFIG.degradation.kind_weights) - {"none"}  # every kind is drawn in 60 episodes
 
 
-def test_v2v_is_down_exactly_during_the_outage():
-    episodes = draw(CONFIG, 1, 0, seed=1)
-    ticks = np.arange(episodes.episode_ticks[0] + 1)[:, None]
-    v2v = episodes.v2v_at(ticks)[:, 0]  # (n_ticks, n_followers)
-    start, end = episodes.v2v_loss_start[0], episodes.v2v_loss_end[0]
-    np.testing.assert_array_equal(v2v, ~((ticks >= start) & (ticks < end)))
+def test_a_pinned_degradation_leaves_the_other_draws_as_they_were():
+    drawn = draw(CONFIG, 1, 0, seed=3)
+    pinned = draw(CONFIG, 1, 0, seed=3, options={"degradation": {"kind": "gain", "size": 0.7, "followers": [2]}})
+    assert [(d.kind, d.size, d.followers) for d in pinned.degradations[0]] == [("gain", 0.7, (2,))]
+    assert pinned.scenario[0] == drawn.scenario[0] and pinned.noise_keys[0] == drawn.noise_keys[0]
+    np.testing.assert_array_equal(pinned.leader_speed, drawn.leader_speed)
+    assert draw(CONFIG, 1, 0, seed=3, options={"degradation": None}).degradations[0] == ()
 
 
 def test_the_users_leader_is_cut_to_the_episode_and_padded_to_whole_decisions():

@@ -12,8 +12,8 @@ LEVELS = EnvConfig().setting_levels
 
 
 def test_vector_env_equals_single_envs_step_by_step():
-    config = {"episode_duration": 6.0, "v2v_loss_probability": 1.0, "v2v_loss_duration_range": (1.0, 3.0),
-              "dropout_probability_range": (0.0, 0.1)}
+    config = {"episode_duration": 6.0, "dropout_probability_range": (0.0, 0.1),
+              "degradation": {"v2v_outage_duration_range": (1.0, 3.0), "midway_onset_probability": 0.7}}
     n = 3
     native = gym.make_vec("TimeGapMonitor-v0", num_envs=n, vectorization_mode="vector_entry_point", config=config)
     reference = SyncVectorEnv([lambda: gym.make("TimeGapMonitor-v0", config=config) for _ in range(n)],
@@ -29,6 +29,33 @@ def test_vector_env_equals_single_envs_step_by_step():
         for got, want in zip(step_native[:4], step_reference[:4]):
             np.testing.assert_array_equal(got, want, err_msg=f"step {step}")
         np.testing.assert_array_equal(step_native[4]["estimate"][~step_native[3]], step_reference[4]["estimate"][~step_native[3]])
+
+
+@pytest.mark.parametrize("kind, size", [("lag", 2.0), ("gain", 0.7), ("v2v_latency", 0.5), ("packet_loss", 0.6),
+                                        ("radar_bias", 2.0), ("radar_noise", 0.8), ("commercial_acc", None)])
+def test_vector_env_equals_single_envs_under_every_degradation(kind, size):
+    """Pinned at reset with a midway onset; autoresets then draw their own from the default mix."""
+    config = {"episode_duration": 8.0}
+    pinned = {"degradation": {"kind": kind, "onset": 2.0, **({} if size is None else {"size": size})}}
+    if kind == "commercial_acc":
+        pinned["degradation"]["onset"] = 0.0
+    n = 3
+    native = gym.make_vec("TimeGapMonitor-v0", num_envs=n, vectorization_mode="vector_entry_point", config=config)
+    reference = SyncVectorEnv([lambda: gym.make("TimeGapMonitor-v0", config=config) for _ in range(n)],
+                              autoreset_mode=AutoresetMode.SAME_STEP)
+    _, info_native = native.reset(seed=11, options=pinned)
+    _, info_reference = reference.reset(seed=11, options=pinned)
+    assert set(info_native["degradation"]["kind"].ravel()) == {kind}
+    rng = np.random.default_rng(1)
+    for step in range(20):
+        actions = rng.integers(0, len(LEVELS), size=n)
+        step_native, step_reference = native.step(actions), reference.step(actions)
+        for got, want in zip(step_native[:4], step_reference[:4]):
+            np.testing.assert_array_equal(got, want, err_msg=f"{kind}, step {step}")
+        running = ~(step_native[2] | step_native[3])
+        for name in ("gain", "v2v_delay", "radar_bias", "smallest_stable_setting"):
+            np.testing.assert_array_equal(step_native[4]["degradation"][name][running],
+                                          step_reference[4]["degradation"][name][running])
 
 
 def test_vector_env_without_step_diagnostics_steps_the_same():
@@ -67,7 +94,8 @@ def test_envs_that_do_not_reset_keep_their_v2v_status_when_others_do():
     exactly then must show in the observations as it does in single envs."""
     if not default_ngsim_path().exists():
         pytest.skip(f"NGSIM data absent at {default_ngsim_path()}")
-    config = {"v2v_loss_probability": 1.0, "v2v_loss_duration_range": (3.0, 6.0), "episode_duration": 40.0}
+    config = {"degradation": {"kind_weights": {"v2v_outage": 1.0}, "v2v_outage_duration_range": (3.0, 6.0)},
+              "episode_duration": 40.0}
     n = 32
     native = gym.make_vec("TimeGapMonitor-v0", num_envs=n, vectorization_mode="vector_entry_point", config=config)
     reference = SyncVectorEnv([lambda: gym.make("TimeGapMonitor-v0", config=config) for _ in range(n)],

@@ -68,13 +68,20 @@ class TimeGapMonitorEnv(gym.Env):
     ## Starting State
 
     Each reset draws a leader from ``scenario_weights`` (default: aggressive cycles,
-    sinusoid, hard braking, stochastic human driving, 250 s in 20-80 mph), a V2V
-    outage (probability 0.5: by default every follower falls back to ACC for 20-80 s)
-    and a sensor dropout rate (0-5 %), all from the env's seed. The followers start in equilibrium
+    sinusoid, hard braking, stochastic human driving, 250 s in 20-80 mph), a degradation
+    of some followers from ``degradation`` (:class:`timegap_env.config.DegradationConfig`:
+    a longer actuation lag, a lower gain, V2V latency or packet loss, a V2V outage, a biased
+    or noisy radar, commercial ACC cars, or none; only the outage shows in the V2V flag) and
+    a sensor dropout rate (0-5 %), all from the env's seed. The followers start in equilibrium
     at ``platoon.initial_setting`` (1.6 s). ``reset(options={"scenario": name})`` picks a family
     (see ``timegap_env.SCENARIOS``, e.g. ``"ngsim_in_band"``, ``"idm"``);
     ``reset(options={"leader_speed": array})`` runs your own leader speed series
-    [m/s at 10 Hz].
+    [m/s at 10 Hz]; ``reset(options={"degradation": {"kind": "gain", "size": 0.7,
+    "followers": [1, 2], "onset": 60.0, "end": None}})`` pins the degradation (a list of such
+    dicts for several, None for none; see :mod:`timegap_env.sim.degradation`).
+    ``info["degradation"]`` is the ground truth of every step: each follower's degradation,
+    its true parameters and the smallest string-stable setting for them. It is for oracles
+    and evaluation; the observation never holds it.
 
     ## Episode End
 
@@ -133,6 +140,7 @@ class TimeGapMonitorEnv(gym.Env):
         info: dict[str, Any] = {name: value[0] for name, value in self.task.info().items()}
         info["collision"] = bool(info["collision"])
         info["scenario"] = self.task.scenario[0]
+        info["degradation"] = {name: value[0] for name, value in self.task.ground_truth().items()}
         return info
 
     def render(self) -> np.ndarray | None:

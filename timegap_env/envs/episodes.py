@@ -1,10 +1,11 @@
 """What each env's episode is made of, drawn at reset from the env's own generator.
 
 An episode is a leader speed profile (a family drawn from ``EnvConfig.scenario_weights``, a
-named scenario, or the user's own speed series), a V2V outage (some followers fall back from
-CACC to ACC for a while), a sensor dropout rate and a sensor-noise key. The draws use the
-generator in a fixed order, so an env seeded alike draws alike whether it runs alone or in a
-batch.
+named scenario, or the user's own speed series), a degradation of some followers (drawn from
+``EnvConfig.degradation``, or pinned, see :mod:`timegap_env.sim.degradation`), a sensor dropout
+rate and a noise key. The draws use the generator in a fixed order, so an env seeded alike draws
+alike whether it runs alone or in a batch, and pinning the leader or the degradation leaves the
+other draws as they were.
 """
 
 from __future__ import annotations
@@ -19,8 +20,10 @@ import numpy as np
 from timegap_env.config import EnvConfig
 from timegap_env.leaders.profile import LeaderProfile
 from timegap_env.leaders.scenarios import SCENARIOS, make_leader
+from timegap_env.sim.degradation import Degradation, draw_degradation, parse_degradations
 
-RESET_OPTIONS = ("leader_speed", "scenario")  # the keys reset(options=...) takes
+RESET_OPTIONS = ("leader_speed", "scenario", "degradation")  # the keys reset(options=...) takes
+PACKET_LOSS_STREAM = np.uint64(0x5DEECE66D)  # the packet-loss key is the noise key xor this (another stream)
 
 
 def check_reset_options(options: Mapping[str, Any] | None) -> dict[str, Any]:
@@ -37,9 +40,9 @@ class Episodes:
 
     Per env: ``leader_speed`` [m/s] and ``leader_accel`` [m/s^2] (n_envs, max_ticks + 1), the
     leader at every tick, held at its last value beyond the profile; ``episode_ticks`` (n_envs,)
-    ticks in the episode; ``v2v_loss_start`` / ``v2v_loss_end`` (n_envs, n_followers), the first
-    tick without V2V and the first with it again (equal: no outage); ``dropout_probability``
-    (n_envs,) [-]; ``noise_keys`` (n_envs,) uint64; ``scenario`` (n_envs,), the leader's name.
+    ticks in the episode; ``degradations`` (a tuple of :class:`~timegap_env.sim.degradation.Degradation`
+    per env); ``dropout_probability`` (n_envs,) [-]; ``noise_keys`` (n_envs,) uint64 of the sensor noise
+    and ``packet_loss_keys`` of the V2V losses; ``scenario`` (n_envs,), the leader's name.
     """
 
     def __init__(self, config: EnvConfig, n_envs: int) -> None:
@@ -48,13 +51,11 @@ class Episodes:
             raise ValueError(f"EnvConfig.scenario_weights has unknown families {unknown}; known: {sorted(SCENARIOS)}")
         self.config = config
         self.ticks_per_decision = config.ticks_per_decision
-        n_followers = config.platoon.n_followers
         max_ticks = config.max_episode_steps * self.ticks_per_decision
         self.leader_speed = np.zeros((n_envs, max_ticks + 1))  # [m/s]
         self.leader_accel = np.zeros((n_envs, max_ticks + 1))  # [m/s^2]
         self.episode_ticks = np.full(n_envs, max_ticks)
-        self.v2v_loss_start = np.zeros((n_envs, n_followers), dtype=np.int64)
-        self.v2v_loss_end = np.zeros((n_envs, n_followers), dtype=np.int64)
+        self.degradations: list[tuple[Degradation, ...]] = [() for _ in range(n_envs)]
         self.dropout_probability = np.zeros(n_envs)
         self.noise_keys = np.zeros(n_envs, dtype=np.uint64)
         self.scenario = np.full(n_envs, "", dtype=object)
@@ -67,7 +68,8 @@ class Episodes:
 
         ``{"scenario": name}`` picks a scenario; ``{"leader_speed": array}`` runs the user's leader
         speed series [m/s] at ``platoon.dt`` (truncated to the episode, padded to whole decisions by
-        holding its last speed).
+        holding its last speed); ``{"degradation": ...}`` pins the degradation (a dict of
+        :data:`~timegap_env.sim.degradation.DESCRIPTION_KEYS`, a list of them, or None for none).
         """
         cfg = self.config
         if "leader_speed" in options:
@@ -78,7 +80,9 @@ class Episodes:
             if not math.isclose(profile.dt, cfg.platoon.dt, rel_tol=1e-9):
                 raise ValueError(f"scenario {family!r} has dt = {profile.dt} s; the env runs at {cfg.platoon.dt} s")
         self._load_leader(env, profile)
-        self._draw_v2v_loss(env, rng)
+        n_followers, dt = cfg.platoon.n_followers, cfg.platoon.dt
+        drawn = draw_degradation(rng, cfg.degradation, n_followers, self.episode_ticks[env] * dt, dt)
+        self.degradations[env] = parse_degradations(options["degradation"], n_followers) if "degradation" in options else drawn
         self.dropout_probability[env] = rng.uniform(*cfg.dropout_probability_range)
         self.noise_keys[env] = rng.integers(0, 2**63, dtype=np.uint64)
 
@@ -95,35 +99,23 @@ class Episodes:
         self.episode_ticks[env] = ticks
         self.scenario[env] = profile.name
 
-    def _draw_v2v_loss(self, env: int, rng: np.random.Generator) -> None:
-        """V2V loss for some followers, with ``v2v_loss_probability``."""
-        cfg = self.config
-        self.v2v_loss_start[env] = self.v2v_loss_end[env] = 0
-        if rng.random() < cfg.v2v_loss_probability:
-            n_followers = cfg.platoon.n_followers
-            losing = rng.random(n_followers) < cfg.v2v_loss_follower_probability
-            losing[rng.integers(n_followers)] = True  # at least one follower
-            duration = int(round(rng.uniform(*cfg.v2v_loss_duration_range) / cfg.platoon.dt))
-            start = int(rng.integers(0, max(self.episode_ticks[env] - duration, 0) + 1))
-            self.v2v_loss_start[env, losing] = start
-            self.v2v_loss_end[env, losing] = start + duration
-
     def leader_at(self, ticks: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The leader's speed [m/s] and acceleration [m/s^2] at ``ticks`` (n_ticks, n_envs), held after the episode."""
         ticks = np.minimum(ticks, self.episode_ticks)
         envs = np.arange(ticks.shape[-1])
         return self.leader_speed[envs, ticks], self.leader_accel[envs, ticks]
 
-    def v2v_at(self, ticks: np.ndarray) -> np.ndarray:
-        """CACC status of every follower at ``ticks``, (..., n_envs) -> (..., n_envs, n_followers)."""
-        ticks = ticks[..., None]
-        return ~((ticks >= self.v2v_loss_start) & (ticks < self.v2v_loss_end))
+    @property
+    def packet_loss_keys(self) -> np.ndarray:
+        """Each env's key of its V2V packet losses (n_envs,) uint64, another stream than its sensor noise."""
+        return self.noise_keys ^ PACKET_LOSS_STREAM
 
     def fingerprint(self, env: int) -> str:
-        """A hash of everything ``env``'s episode drew: leader, outage, dropout rate and noise key."""
+        """A hash of everything ``env``'s episode drew: leader, degradation, dropout rate and noise key."""
         digest = hashlib.sha256()
         ticks = int(self.episode_ticks[env])
-        for array in (self.leader_speed[env, : ticks + 1], self.episode_ticks[env], self.v2v_loss_start[env],
-                      self.v2v_loss_end[env], self.dropout_probability[env], self.noise_keys[env]):
+        for array in (self.leader_speed[env, : ticks + 1], self.episode_ticks[env], self.dropout_probability[env],
+                      self.noise_keys[env]):
             digest.update(np.ascontiguousarray(array).tobytes())
+        digest.update(repr(self.degradations[env]).encode())
         return digest.hexdigest()

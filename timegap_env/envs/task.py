@@ -97,10 +97,11 @@ class PlatoonTask:
         episodes, loop = self.episodes, self.loop
         for env in np.flatnonzero(mask):
             episodes.draw(env, rngs[env], options)
+            loop.degrade(env, episodes.degradations[env], episodes.packet_loss_keys[env])
         loop.reset(episodes.leader_speed[:, 0], episodes.leader_accel[:, 0], mask=mask,
                    setting=self.config.platoon.initial_setting, noise_key=episodes.noise_keys,
                    dropout_probability=episodes.dropout_probability)
-        loop.platoon.set_v2v(episodes.v2v_at(loop.ticks), mask=mask)  # the others keep their last tick's
+        loop.platoon.set_v2v(loop.degradation.v2v_up(loop.ticks), mask=mask)  # the others keep their last tick's
         self._previous_accel[mask] = loop.platoon.a[mask, 1:]
         self._readouts.min_ttc[mask] = np.inf
         self._readouts.jerk_squared[mask] = 0.0
@@ -118,7 +119,7 @@ class PlatoonTask:
         changed = loop.change_setting(self.ladder.settings(action))
         ticks = loop.ticks + np.arange(self.ticks_per_decision)[:, None]  # (n_ticks, n_envs), before each tick
         leader_speed, leader_accel = self.episodes.leader_at(ticks + 1)
-        block = loop.run(leader_speed, leader_accel, self.episodes.v2v_at(ticks))
+        block = loop.run(leader_speed, leader_accel, loop.degradation.v2v_up(ticks))
         physics, chart = block.physics, block.chart
         if self.trace is not None:
             self.trace.add(TraceArrays((ticks[:, 0] + 1) * cfg.platoon.dt, block.tau_mean[:, 0], chart.center[:, 0]))
@@ -170,6 +171,12 @@ class PlatoonTask:
             "collision": platoon.collided.any(axis=1),  # (n_envs,)
             "skipped_measurements": monitor.skipped.copy(),  # since reset [-]
         }
+
+    def ground_truth(self) -> dict[str, np.ndarray]:
+        """Each follower's degradation now, its true parameters and the smallest string-stable setting for them,
+        arrays (n_envs, n_followers) (:meth:`~timegap_env.sim.degradation.DegradationTable.truth`): for
+        oracles and evaluation, never in the observation."""
+        return self.loop.degradation.truth(self.loop.ticks, self.loop.platoon.v2v, self.config.sensors.spacing_noise_std)
 
     def episode_summary(self) -> dict[str, np.ndarray]:
         """Episode statistics so far, each (n_envs,)."""

@@ -27,9 +27,10 @@ class TimeGapMonitorVectorEnv(VectorEnv):
     When a sub-env's episode ends, it is reset in the same step: the returned
     observation is the new episode's, the last one is in ``infos["final_obs"]``
     and its summary in ``infos["episode_summary"]`` (masks ``_final_obs`` and
-    ``_episode_summary``). ``step_diagnostics=False`` leaves the per-step
-    diagnostics (estimates, limits, reward terms, ...) out of ``step``'s infos,
-    for learners that never read them.
+    ``_episode_summary``). ``infos["degradation"]`` is the ground truth of the
+    returned observations (after the autoresets). ``step_diagnostics=False`` leaves
+    the per-step diagnostics (estimates, limits, reward terms, ground truth, ...) out
+    of ``step``'s infos, for learners that never read them.
     """
 
     metadata = {"autoreset_mode": AutoresetMode.SAME_STEP, "render_modes": []}
@@ -89,6 +90,8 @@ class TimeGapMonitorVectorEnv(VectorEnv):
             infos["_episode_summary"] = done
             self.task.reset(done, self._rngs, None)
             self._steps[done] = 0
+        if self.step_diagnostics:
+            infos["degradation"] = self.task.ground_truth()
         return self._observations(), result.reward, result.terminated, truncated, infos
 
     def _observations(self) -> np.ndarray:
@@ -97,6 +100,7 @@ class TimeGapMonitorVectorEnv(VectorEnv):
     def _infos(self) -> dict[str, Any]:
         infos: dict[str, Any] = self.task.info()
         infos["scenario"] = self.task.scenario.copy()
+        infos["degradation"] = self.task.ground_truth()
         return infos
 
 

@@ -4,7 +4,8 @@ This is the loop of the paper and of the environment, for ``n_envs`` platoons at
 once, a tick (:meth:`MonitoredPlatoon.tick`) or a block of ticks
 (:meth:`MonitoredPlatoon.run`, what an env step uses) at a time, with the same
 result. Changing a follower's time gap setting ramps it in the simulator and
-re-centres that follower's prior and chart on the new setting.
+re-centres that follower's prior and chart on the new setting. :meth:`MonitoredPlatoon.degrade`
+degrades followers (:mod:`timegap_env.sim.degradation`) in the physics and the radar alike.
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ from timegap_env.config import ChartConfig, MonitorConfig, PlatoonConfig, Sensor
 from timegap_env.monitoring.charts import ChartState, make_chart
 from timegap_env.monitoring.monitor import TimeGapMonitor
 from timegap_env.monitoring.sensors import Readings, Sensors
+from timegap_env.sim.degradation import Degradation, DegradationTable
 from timegap_env.sim.platoon import Platoon, PlatoonTicks, per_env
 
 SAME_SETTING = 1e-6  # settings closer than this are the same setting [s]
@@ -37,7 +39,9 @@ class MonitoredPlatoon:
     Attributes: ``platoon`` (:class:`~timegap_env.sim.platoon.Platoon`), ``sensors``
     (:class:`~timegap_env.monitoring.sensors.Sensors`), ``monitor``
     (:class:`~timegap_env.monitoring.monitor.TimeGapMonitor`), ``chart`` (a chart from
-    :func:`~timegap_env.monitoring.charts.make_chart`); ``ticks`` (n_envs,) since each env's reset.
+    :func:`~timegap_env.monitoring.charts.make_chart`), ``degradation``
+    (:class:`~timegap_env.sim.degradation.DegradationTable`, none until :meth:`degrade`);
+    ``ticks`` (n_envs,) since each env's reset.
     """
 
     def __init__(
@@ -56,7 +60,19 @@ class MonitoredPlatoon:
         self.sensors = Sensors(sensors, n_envs, seed, platoon.n_followers)
         self.monitor = TimeGapMonitor(n_envs, platoon.n_followers, platoon.initial_setting, monitor)
         self.chart = make_chart(n_envs, platoon.n_followers, platoon.initial_setting, chart)
-        self.ticks = np.zeros(n_envs, dtype=np.int64)
+        self.degradation = DegradationTable(platoon, n_envs)
+
+    ticks = property(lambda self: self.platoon.ticks, doc="Ticks since each env's reset (n_envs,) [-].")
+
+    def degrade(self, env: int, degradations: tuple[Degradation, ...], key: int) -> None:
+        """Env ``env``'s followers take ``degradations`` (none: nominal) from the next tick on, in the physics
+        and the radar; ``key`` (uint64) seeds the packet losses."""
+        table, faults = self.degradation, self.sensors.faults
+        table.set(env, degradations)
+        table.write_faults(self.platoon, env, key)
+        faults.start[env], faults.end[env], faults.spacing_bias[env] = table.start[env], table.end[env], table.radar_bias[env]
+        faults.spacing_noise_std[env] = np.where(np.isnan(table.radar_noise[env]), self.sensors.config.spacing_noise_std,
+                                                 table.radar_noise[env])
 
     def reset(
         self,
@@ -75,7 +91,6 @@ class MonitoredPlatoon:
         """
         env_mask = np.ones(self.platoon.n_envs, dtype=bool) if mask is None else np.asarray(mask, dtype=bool)
         self.platoon.reset(leader_speed, leader_accel, mask=env_mask, setting=setting)
-        self.ticks[env_mask] = 0
         if noise_key is not None:
             self.sensors.keys[env_mask] = np.asarray(noise_key, dtype=np.uint64)[env_mask]
         if dropout_probability is not None:
@@ -124,9 +139,9 @@ class MonitoredPlatoon:
         :meth:`~timegap_env.sim.platoon.Platoon.advance`). Each stage takes the whole block at once,
         with the same result as tick by tick. The chart's limits follow the applied (ramping) setting.
         """
+        ticks_before = self.ticks.copy()
         physics = self.platoon.advance(leader_speed, leader_accel, v2v)
-        readings = self.sensors.measure(Readings(physics.spacing, physics.speed), self.ticks)
-        self.ticks += len(physics.spacing)
+        readings = self.sensors.measure(Readings(physics.spacing, physics.speed), ticks_before)
         tau_mean = self.monitor.update_block(readings.speed, readings.spacing).tau_mean
         chart = self.chart.update_block(tau_mean, physics.applied_setting)
         return MonitoredTicks(physics, readings, tau_mean, chart)

@@ -55,7 +55,7 @@ class SensorFaults(NamedTuple):
         """No degradation: empty windows, no bias, the config's noise."""
         shape = (n_envs, n_followers)
         return cls(np.zeros(shape, dtype=np.int64), np.zeros(shape, dtype=np.int64), np.zeros(shape),
-                   np.full(shape, spacing_noise_std))
+                   np.full(shape, float(spacing_noise_std)))
 
 
 class Sensors:

@@ -9,6 +9,7 @@ import numpy as np
 from timegap_env.config import PlatoonConfig
 from timegap_env.leaders.profile import LeaderProfile
 from timegap_env.leaders.scenarios import make_leader
+from timegap_env.sim.degradation import Degradation, DegradationTable, parse_degradations
 from timegap_env.sim.platoon import Platoon, actual_time_gap
 
 # Below this speed the time gap (s - s0) / v is not meaningful and is reported as NaN [m/s].
@@ -39,6 +40,7 @@ class Trajectory:
     config: PlatoonConfig
     leader_name: str
     collision: Collision | None  # the run stops at the first collision
+    degradations: tuple[Degradation, ...] = ()  # what degraded the followers (timegap_env.sim.degradation)
 
     @property
     def spacing(self) -> np.ndarray:
@@ -77,6 +79,7 @@ def simulate(
     seed: int | None = 0,
     setting: float | np.ndarray | None = None,
     v2v: bool | np.ndarray | None = None,
+    degradation: object = None,
 ) -> Trajectory:
     """Simulate one platoon behind a leader and return its trajectory.
 
@@ -87,6 +90,10 @@ def simulate(
     ``setting`` (the time gap setting tau* [s]) and ``v2v`` may be a scalar, one value per
     follower, or an (n_ticks, n_followers) schedule, so that a setting can
     change (it is ramped) and V2V can drop out during the run.
+    ``degradation``: what goes wrong with the followers, as the env's ``reset(options={"degradation": ...})``
+    takes it (a dict, a list of dicts or :class:`~timegap_env.sim.degradation.Degradation`; a V2V outage or
+    a commercial ACC also drops ``v2v``; a noisy radar changes nothing here, there is no monitor);
+    its packet losses are drawn from ``seed``.
     The run stops at the first collision, which ``Trajectory.collision`` reports.
     """
     config = config or PlatoonConfig()
@@ -103,9 +110,14 @@ def simulate(
     settings = _schedule("setting", config.initial_setting if setting is None else setting, n_ticks, n_followers, float)
     if not np.all(np.isfinite(settings)) or np.any(settings <= 0):
         raise ValueError(f"setting = {setting!r}: every value must be finite and > 0 [s]")
+    degradations = parse_degradations(degradation, n_followers)
+    table = DegradationTable(config, n_envs=1)
+    table.set(0, degradations)
     v2v_schedule = _schedule("v2v", config.v2v if v2v is None else v2v, n_ticks, n_followers, bool)
+    v2v_schedule = v2v_schedule & table.v2v_up(np.arange(n_ticks)[:, None])[:, 0]
 
     platoon = Platoon(config)
+    table.write_faults(platoon, 0, key=np.random.default_rng(seed).integers(0, 2**63, dtype=np.uint64))
     platoon.reset(leader.speed[0], leader.accel[0], setting=settings[0])
     shape = (n_ticks, n_followers + 1)
     record = {name: np.empty(shape) for name in ("x", "v", "a", "u")}
@@ -136,4 +148,5 @@ def simulate(
         config=config,
         leader_name=leader.name,
         collision=collision,
+        degradations=degradations,
     )

@@ -1,0 +1,323 @@
+"""What goes wrong with a follower: a description, its draw per episode, its physics and its ground truth.
+
+A :class:`Degradation` names a kind, a size, the followers it hits (1 = right behind the leader),
+when it starts and whether it ends. Only a V2V outage shows in the car's V2V flag; the rest is
+hidden, and spotting it from spacing and speed is what the monitor is for.
+
+| kind | ``size`` | while it acts |
+|---|---|---|
+| ``lag`` | factor on the lag T [-] | the GLVD lag grows (brake fade, load) |
+| ``gain`` | the gain K [-] | the car realises less of the command (grade, weight) |
+| ``v2v_latency`` | added delay [s] | V2V messages arrive later; the flag stays up |
+| ``packet_loss`` | chance per tick [-] | V2V messages are lost, the feed-forward holds the last one received; the flag stays up |
+| ``v2v_outage`` | none | the link is down and the flag shows it: ACC |
+| ``radar_bias`` | bias [m] | the radar reads the spacing off by it, for the controller and the monitor alike: with a positive bias the car keeps less than its setting, by bias / v |
+| ``radar_noise`` | std [m] | the radar's spacing reading is this noisy (the monitor's view; the controller filters) |
+| ``commercial_acc`` | none (``car``) | the follower is a commercial ACC car calibrated to OpenACC (:mod:`timegap_env.sim.presets`): its lag, gains and highest command, and no V2V |
+
+A commercial ACC keeps the platoon's s0, so its actual time gap and the monitor's prior mean the
+same thing as for the others. :class:`DegradationTable` holds every follower's degradation of
+``n_envs`` platoons as arrays: it writes the physics' :class:`~timegap_env.sim.platoon.FollowerFaults`,
+says when the V2V flag is down, and gives the ground truth of each tick: the active degradation,
+the true parameters and the smallest string-stable setting for them (:func:`smallest_stable_setting`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import math
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+
+from timegap_env.config import DEGRADATION_KINDS, DegradationConfig, PlatoonConfig
+from timegap_env.sim.platoon import Platoon, ZOHCoefficients
+from timegap_env.sim.stability import string_stability
+
+KINDS = ("none", *DEGRADATION_KINDS)  # kind codes: the index in this tuple
+SIZED = {"lag": "factor on the lag T [-]", "gain": "gain K [-]", "v2v_latency": "added V2V delay [s]",
+         "packet_loss": "chance per tick [-]", "radar_bias": "spacing bias [m]", "radar_noise": "spacing noise std [m]"}
+DESCRIPTION_KEYS = ("kind", "size", "followers", "onset", "end", "car")  # what a degradation dict may hold
+NEVER = np.iinfo(np.int64).max // 4  # the end tick of a degradation that does not end
+SETTING_SEARCH = (0.05, 6.0)  # smallest_stable_setting searches tau* in this range [s]
+
+
+@dataclasses.dataclass(frozen=True)
+class Degradation:
+    """One degradation of some followers; see the module docstring for the kinds and their sizes."""
+
+    kind: str
+    followers: tuple[int, ...]  # which followers, 1 = right behind the leader
+    size: float | None = None  # the kind's size, None for v2v_outage and commercial_acc
+    onset: float = 0.0  # when it starts, since reset [s]
+    end: float | None = None  # when it stops [s]; None: never
+    car: str | None = None  # commercial_acc only: the car model (default the median car, COMMERCIAL_ACC)
+
+    def __post_init__(self) -> None:
+        if self.kind not in DEGRADATION_KINDS:
+            self._fail("kind", self.kind, f"must be one of {DEGRADATION_KINDS}")
+        followers = self.followers
+        if (not isinstance(followers, tuple) or not followers
+                or any(isinstance(f, bool) or not isinstance(f, (int, np.integer)) or f < 1 for f in followers)
+                or len(set(followers)) != len(followers)):
+            self._fail("followers", followers, "must be distinct follower numbers >= 1 (1 = right behind the leader)")
+        if self.kind in SIZED:
+            if isinstance(self.size, bool) or not isinstance(self.size, (int, float)) or not math.isfinite(self.size):
+                self._fail("size", self.size, f"a {self.kind} degradation needs a finite size: {SIZED[self.kind]}")
+            low_ok = {"lag": self.size > 0, "gain": self.size > 0, "v2v_latency": self.size >= 0,
+                      "packet_loss": 0 <= self.size < 1, "radar_bias": True, "radar_noise": self.size >= 0}[self.kind]
+            if not low_ok:
+                self._fail("size", self.size, f"out of range for {self.kind}: {SIZED[self.kind]}")
+        elif self.size is not None:
+            self._fail("size", self.size, f"a {self.kind} degradation has no size")
+        if self.car is not None and self.kind != "commercial_acc":
+            self._fail("car", self.car, "only a commercial_acc degradation names a car")
+        if isinstance(self.onset, bool) or not isinstance(self.onset, (int, float)) or not 0 <= self.onset < math.inf:
+            self._fail("onset", self.onset, "must be a finite time >= 0 [s]")
+        if self.end is not None and (isinstance(self.end, bool) or not isinstance(self.end, (int, float))
+                                     or not self.onset < self.end < math.inf):
+            self._fail("end", self.end, f"must be None (never) or a finite time after onset = {self.onset} [s]")
+
+    def _fail(self, field: str, value: Any, rule: str) -> None:
+        raise ValueError(f"degradation {field} = {value!r}: {rule}")
+
+    @classmethod
+    def from_dict(cls, description: Mapping[str, Any], n_followers: int) -> Degradation:
+        """A degradation from a dict of DESCRIPTION_KEYS; ``followers`` defaults to all ``n_followers``."""
+        if not isinstance(description, Mapping):
+            raise ValueError(f"degradation = {description!r}: must be a dict with keys {list(DESCRIPTION_KEYS)}")
+        unknown = sorted(set(description) - set(DESCRIPTION_KEYS))
+        if unknown:
+            raise ValueError(f"degradation keys {unknown} unknown; known: {list(DESCRIPTION_KEYS)}")
+        if "kind" not in description:
+            raise ValueError(f"degradation {dict(description)!r}: needs a 'kind', one of {DEGRADATION_KINDS}")
+        fields = dict(description)
+        followers = fields.get("followers", range(1, n_followers + 1))
+        fields["followers"] = tuple(followers) if isinstance(followers, (list, tuple, range)) else followers
+        size = fields.get("size")
+        if isinstance(size, (np.floating, np.integer)):
+            fields["size"] = float(size)
+        return cls(**fields)
+
+
+def parse_degradations(value: Any, n_followers: int) -> tuple[Degradation, ...]:
+    """``value`` (None, a :class:`Degradation` or its dict, or a list of them) as degradations of followers
+    1..``n_followers``, each follower hit by at most one; ``ValueError`` naming what is wrong."""
+    if value is None:
+        return ()
+    items = list(value) if isinstance(value, (list, tuple)) else [value]
+    degradations = tuple(item if isinstance(item, Degradation) else Degradation.from_dict(item, n_followers)
+                         for item in items)
+    seen: set[int] = set()
+    for degradation in degradations:
+        beyond = [f for f in degradation.followers if f > n_followers]
+        if beyond:
+            raise ValueError(f"degradation followers = {degradation.followers}: the platoon has {n_followers} followers")
+        twice = seen & set(degradation.followers)
+        if twice:
+            raise ValueError(f"degradation followers {sorted(twice)}: hit by more than one degradation")
+        seen |= set(degradation.followers)
+    return degradations
+
+
+def draw_degradation(rng: np.random.Generator, config: DegradationConfig, n_followers: int,
+                     duration: float, dt: float) -> tuple[Degradation, ...]:
+    """The degradations of one episode of ``duration`` [s] at tick ``dt`` [s], drawn from ``rng`` (see
+    :class:`~timegap_env.config.DegradationConfig`); () when it draws none."""
+    kinds = list(config.kind_weights)
+    weights = np.array([config.kind_weights[k] for k in kinds], dtype=float)
+    kind = kinds[rng.choice(len(kinds), p=weights / weights.sum())]
+    hit = rng.random(n_followers) < config.follower_probability
+    hit[rng.integers(n_followers)] = True  # at least one follower
+    followers = tuple(int(f) + 1 for f in np.flatnonzero(hit))
+    midway, recovers = rng.random() < config.midway_onset_probability, rng.random() < config.recovery_probability
+    onset = _on_tick(rng.uniform(0.25, 0.75) * duration, dt) if midway else 0.0
+    end = _on_tick(onset + rng.uniform(0.2, 0.5) * duration, dt) if recovers else None
+    end = end if end is not None and end < duration else None
+    if kind == "none":
+        return ()
+    if kind == "v2v_outage":
+        length = _on_tick(rng.uniform(*config.v2v_outage_duration_range), dt)
+        onset = _on_tick(rng.uniform(0.0, max(duration - length, 0.0)), dt)
+        return (Degradation(kind, followers, onset=onset, end=onset + length),)
+    if kind == "commercial_acc":
+        from timegap_env.sim.presets import COMMERCIAL_ACC, acc_presets  # scipy-backed: imported when used
+
+        cars = sorted(car for car in acc_presets() if car != COMMERCIAL_ACC)
+        return tuple(Degradation(kind, (f,), car=cars[rng.integers(len(cars))]) for f in followers)
+    low, high = {"lag": config.lag_factor_range, "gain": config.gain_range, "v2v_latency": config.v2v_latency_range,
+                 "packet_loss": config.packet_loss_range, "radar_bias": config.radar_bias_range,
+                 "radar_noise": config.radar_noise_range}[kind]
+    size = float(rng.uniform(low, high))
+    if kind == "v2v_latency":
+        size = _on_tick(size, dt)
+    if kind == "radar_bias" and rng.random() < 0.5:
+        size = -size
+    return (Degradation(kind, followers, size=size, onset=onset, end=end),)
+
+
+def _on_tick(time: float, dt: float) -> float:
+    """``time`` [s] rounded to a whole number of ticks of ``dt`` [s]."""
+    return round(time / dt) * dt
+
+
+@functools.lru_cache(maxsize=4096)
+def smallest_stable_setting(lag: float, gain: float, k_s: float, k_v: float, k_a: float, k_f: float,
+                            delay: float) -> float:
+    """The smallest tau* [s] at which a follower of these parameters is string and locally stable (to 0.01 s,
+    searched over SETTING_SEARCH; inf if none there). ``k_f = 0`` is ACC; ``delay`` is the V2V delay [s]."""
+
+    def stable(setting: float) -> bool:
+        report = string_stability(k_s=k_s, k_v=k_v, k_a=k_a, k_f=k_f, setting=setting, lag=lag, gain=gain, delay=delay)
+        return report.string_stable and report.locally_stable
+
+    low, high = SETTING_SEARCH
+    if stable(low):
+        return low
+    if not stable(high):
+        return math.inf
+    while high - low > 0.001:  # stability grows with tau*: bisect the boundary
+        middle = 0.5 * (low + high)
+        low, high = (low, middle) if stable(middle) else (middle, high)
+    candidate = math.ceil(low * 100) / 100  # the first hundredth above the last unstable setting found
+    return candidate if stable(candidate) else round(candidate + 0.01, 2)
+
+
+class DegradationTable:
+    """Every follower's degradation in ``n_envs`` platoons of ``config``, arrays (n_envs, n_followers).
+
+    Per follower: ``kind`` (int8 code, an index of KINDS), ``size`` (NaN without one), ``start`` and
+    ``end`` (ticks since reset, [start, end); start == end: none; NEVER: no end), and the parameters
+    while it acts, nominal otherwise: ``lag`` [s], ``gain`` [-], ``k_s`` [1/s^2], ``k_v`` [1/s],
+    ``accel_max`` [m/s^2], ``extra_delay`` (int, ticks), ``packet_loss`` [-], ``radar_bias`` [m],
+    ``radar_noise`` [m, NaN: the sensors' own], ``v2v_down`` [bool].
+    """
+
+    def __init__(self, config: PlatoonConfig, n_envs: int) -> None:
+        self.config = config
+        shape = (n_envs, config.n_followers)
+        self.kind = np.zeros(shape, dtype=np.int8)
+        self.size = np.full(shape, np.nan)
+        self.start = np.zeros(shape, dtype=np.int64)
+        self.end = np.zeros(shape, dtype=np.int64)
+        self.lag = np.zeros(shape)
+        self.gain = np.zeros(shape)
+        self.k_s = np.zeros(shape)
+        self.k_v = np.zeros(shape)
+        self.accel_max = np.zeros(shape)
+        self.extra_delay = np.zeros(shape, dtype=np.int64)
+        self.packet_loss = np.zeros(shape)
+        self.radar_bias = np.zeros(shape)
+        self.radar_noise = np.full(shape, np.nan)
+        self.v2v_down = np.zeros(shape, dtype=bool)
+        # the smallest string-stable setting [s], nominal / degraded parameters, V2V up / down
+        self.stable = {(degraded, up): np.zeros(shape) for degraded in (False, True) for up in (False, True)}
+        self.descriptions: list[tuple[Degradation, ...]] = [() for _ in range(n_envs)]
+        for env in range(n_envs):
+            self.set(env, ())
+
+    def set(self, env: int, degradations: Sequence[Degradation]) -> None:
+        """Env ``env``'s followers take ``degradations`` (from :func:`parse_degradations`); the others are nominal."""
+        cfg = self.config
+        nominal_lag, nominal_gain = cfg.per_follower("actuation_lag"), cfg.per_follower("actuation_gain")
+        self.kind[env], self.size[env], self.start[env], self.end[env] = 0, np.nan, 0, 0
+        self.lag[env], self.gain[env], self.k_s[env], self.k_v[env] = nominal_lag, nominal_gain, cfg.k_s, cfg.k_v
+        self.accel_max[env], self.extra_delay[env], self.packet_loss[env] = cfg.accel_max, 0, 0.0
+        self.radar_bias[env], self.radar_noise[env], self.v2v_down[env] = 0.0, np.nan, False
+        for degradation in degradations:
+            for follower in degradation.followers:
+                self._set_follower(env, follower - 1, degradation)
+        self.descriptions[env] = tuple(degradations)
+        for f in range(cfg.n_followers):
+            for (degraded, up), table in self.stable.items():
+                lag, gain = (self.lag[env, f], self.gain[env, f]) if degraded else (nominal_lag[f], nominal_gain[f])
+                k_s, k_v = (self.k_s[env, f], self.k_v[env, f]) if degraded else (cfg.k_s, cfg.k_v)
+                delay = cfg.v2v_delay
+                if degraded:
+                    loss = self.packet_loss[env, f]  # a lost message is held: on average loss / (1 - loss) ticks older
+                    delay += self.extra_delay[env, f] * cfg.dt + cfg.dt * loss / (1.0 - loss)
+                table[env, f] = smallest_stable_setting(float(lag), float(gain), float(k_s), float(k_v), cfg.k_a,
+                                                        cfg.k_f if up else 0.0, round(float(delay), 9))
+
+    def _set_follower(self, env: int, f: int, degradation: Degradation) -> None:
+        cfg, kind, size = self.config, degradation.kind, degradation.size
+        if kind == "v2v_latency" and (size > cfg.max_v2v_latency + 1e-9 or abs(size / cfg.dt - round(size / cfg.dt)) > 1e-9):
+            raise ValueError(f"degradation size = {size!r}: a v2v_latency must be a multiple of dt = {cfg.dt} s "
+                             f"up to max_v2v_latency = {cfg.max_v2v_latency} s")
+        self.kind[env, f] = KINDS.index(kind)
+        self.size[env, f] = np.nan if size is None else size
+        self.start[env, f] = round(degradation.onset / cfg.dt)
+        self.end[env, f] = NEVER if degradation.end is None else round(degradation.end / cfg.dt)
+        if kind == "lag":
+            self.lag[env, f] *= size
+        elif kind == "gain":
+            self.gain[env, f] = size
+        elif kind == "v2v_latency":
+            self.extra_delay[env, f] = round(size / cfg.dt)
+        elif kind == "packet_loss":
+            self.packet_loss[env, f] = size
+        elif kind == "radar_bias":
+            self.radar_bias[env, f] = size
+        elif kind == "radar_noise":
+            self.radar_noise[env, f] = size
+        elif kind == "v2v_outage":
+            self.v2v_down[env, f] = True
+        else:  # commercial_acc
+            from timegap_env.sim.presets import COMMERCIAL_ACC, acc_presets
+
+            presets, car = acc_presets(), degradation.car or COMMERCIAL_ACC
+            if car not in presets:
+                raise ValueError(f"degradation car = {car!r}: no calibrated preset; known: {sorted(presets)}")
+            model = presets[car].model
+            self.lag[env, f], self.gain[env, f], self.k_s[env, f], self.k_v[env, f] = model.lag, 1.0, model.k_s, model.k_v
+            self.accel_max[env, f], self.v2v_down[env, f] = model.accel_max, True
+
+    def write_faults(self, platoon: Platoon, env: int, key: int) -> None:
+        """Write env ``env``'s degradations into ``platoon.faults``; ``key`` (uint64) seeds its packet losses."""
+        faults = platoon.faults
+        faults.start[env], faults.end[env] = self.start[env], self.end[env]
+        degraded = ZOHCoefficients.for_glvd(self.lag[env], self.gain[env], self.config.dt)
+        for target, values in zip(faults.dynamics[:-1], degraded[:-1]):
+            target[env] = values
+        faults.k_s[env], faults.k_v[env], faults.accel_max[env] = self.k_s[env], self.k_v[env], self.accel_max[env]
+        faults.extra_delay[env], faults.packet_loss[env] = self.extra_delay[env], self.packet_loss[env]
+        faults.spacing_bias[env], faults.keys[env] = self.radar_bias[env], np.uint64(key)
+
+    def active(self, ticks: np.ndarray) -> np.ndarray:
+        """Which degradations act during tick ``ticks`` since reset, (..., n_envs) -> (..., n_envs, n_followers)."""
+        ticks = np.asarray(ticks)[..., None]
+        return (self.start <= ticks) & (ticks < self.end)
+
+    def v2v_up(self, ticks: np.ndarray) -> np.ndarray:
+        """The V2V flag during tick ``ticks``, (..., n_envs) -> (..., n_envs, n_followers): down while a V2V
+        outage or a commercial ACC acts."""
+        return ~(self.active(ticks) & self.v2v_down)
+
+    def truth(self, ticks: np.ndarray, v2v: np.ndarray, spacing_noise_std: float) -> dict[str, np.ndarray]:
+        """The ground truth at ``ticks`` (n_envs,) since reset with the V2V flag ``v2v`` (n_envs, n_followers) and
+        the sensors' nominal ``spacing_noise_std`` [m], arrays (n_envs, n_followers) without NaN (so that equal
+        episodes give equal infos): never in the observation."""
+        cfg, active = self.config, self.active(ticks)
+        nominal_lag, nominal_gain = cfg.per_follower("actuation_lag"), cfg.per_follower("actuation_gain")
+        hit, dt = self.kind > 0, cfg.dt
+        stable = np.where(active, np.where(v2v, self.stable[True, True], self.stable[True, False]),
+                          np.where(v2v, self.stable[False, True], self.stable[False, False]))
+        return {
+            "kind": np.array(KINDS, dtype=object)[self.kind],  # the follower's degradation, "none" if not hit
+            "size": np.nan_to_num(self.size),  # its size (see the module docstring), 0 without one
+            "onset": np.where(hit, self.start * dt, np.inf),  # [s], inf: not hit
+            "end": np.where(hit & (self.end < NEVER), self.end * dt, np.inf),  # [s], inf: never
+            "active": active,  # the degradation acts now
+            "lag": np.where(active, self.lag, nominal_lag),  # true GLVD lag T [s]
+            "gain": np.where(active, self.gain, nominal_gain),  # true GLVD gain K [-]
+            "k_s": np.where(active, self.k_s, cfg.k_s),  # true controller gain on the spacing error [1/s^2]
+            "k_v": np.where(active, self.k_v, cfg.k_v),  # true controller gain on the speed difference [1/s]
+            "v2v_delay": cfg.v2v_delay + np.where(active, self.extra_delay, 0) * dt,  # true V2V delay [s]
+            "packet_loss": np.where(active, self.packet_loss, 0.0),  # [-]
+            "radar_bias": np.where(active, self.radar_bias, 0.0),  # [m]
+            "radar_noise": np.where(active & ~np.isnan(self.radar_noise), self.radar_noise, spacing_noise_std),  # std [m]
+            "v2v": v2v.copy(),  # the V2V link is up (what the flag shows)
+            "smallest_stable_setting": stable,  # for the true parameters and link [s]
+        }
