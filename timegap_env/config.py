@@ -351,7 +351,7 @@ class RewardWeights(ConfigMixin):
     """
 
     tracking: float = 1.0  # [-]
-    alarms: float = 1.0  # [-]
+    string_stability: float = 1.0  # [-]
     safety: float = 2.0  # [-]
     collision: float = 1000.0  # [-], outweighs any whole episode of the other terms
     comfort: float = 0.05  # [-]
@@ -445,6 +445,8 @@ class EnvConfig(ConfigMixin):
     dropout_probability_range: tuple[float, float] = (0.0, 0.05)  # per-episode sensor dropout rate drawn from [-]
     ttc_threshold: float = 4.0  # time-to-collision below which safety is penalised [s]
     jerk_reference: float = 2.0  # jerk that costs one comfort unit [m/s^3]
+    tracking_cap: float = 0.5  # a tick's |actual time gap - setting| counts up to this in the tracking term [s]
+    spacing_error_reference: float = 5.0  # growth of the spacing error down the platoon costing one unit [m]
 
     def __post_init__(self) -> None:
         nested = {"platoon": PlatoonConfig, "leader": LeaderConfig, "sensors": SensorConfig, "monitor": MonitorConfig,
@@ -452,7 +454,8 @@ class EnvConfig(ConfigMixin):
         for field, kind in nested.items():
             if not isinstance(getattr(self, field), kind):
                 self._fail(field, getattr(self, field), f"must be a {kind.__name__} (or a dict of its fields)")
-        self._positive("decision_interval", "episode_duration", "preferred_setting", "ttc_threshold", "jerk_reference")
+        self._positive("decision_interval", "episode_duration", "preferred_setting", "ttc_threshold", "jerk_reference",
+                       "tracking_cap", "spacing_error_reference")
         dt = self.platoon.dt
         for field in ("decision_interval", "episode_duration"):
             ticks = getattr(self, field) / dt

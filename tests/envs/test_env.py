@@ -77,7 +77,7 @@ def test_observations_stay_in_bounds_and_info_is_complete():
     step_keys = {"actual_time_gap", "estimate", "estimate_std", "setting", "lcl", "ucl", "alarm", "ttc", "jerk", "v2v",
                  "collision", "rewards", "scenario", "skipped_measurements"}
     assert step_keys <= set(infos[1])
-    assert set(infos[1]["rewards"]) == {"tracking", "alarms", "safety", "collision", "comfort", "efficiency",
+    assert set(infos[1]["rewards"]) == {"tracking", "string_stability", "safety", "collision", "comfort", "efficiency",
                                         "preference", "switching"}
     summary = infos[-1]["episode_summary"]
     assert {"time_out_of_control", "exceedances", "max_deviation", "min_ttc", "rms_jerk", "switches",

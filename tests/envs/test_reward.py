@@ -36,6 +36,7 @@ def random_step(seed: int, n_followers: int = 5):
     shape = (N_TICKS, N_ENVS, n_followers)
     leader_speed = rng.uniform(10.0, 35.0, (N_TICKS, N_ENVS))
     speed = leader_speed[..., None] + rng.normal(0.0, 2.0, shape)
+    speed = np.where(rng.random(shape) < 0.1, rng.uniform(0.0, 1.0, shape), speed)  # some below 1 m/s: not tracked
     env, follower = NEVER_CLOSING
     speed[:, env, follower] = speed[:, env, follower - 1] - rng.uniform(0.1, 1.0, N_TICKS)
     collisions = np.zeros(shape, dtype=bool)
@@ -43,6 +44,7 @@ def random_step(seed: int, n_followers: int = 5):
     step = StepTicks(
         tau_mean=rng.normal(1.6, 0.3, shape),
         center=rng.uniform(LEVELS[0], LEVELS[-1], shape),
+        applied_setting=rng.uniform(LEVELS[0], LEVELS[-1], shape),
         alarm=rng.random(shape) < 0.3,
         exceedance=rng.random(shape) < 0.1,
         collisions=collisions,
@@ -57,7 +59,11 @@ def random_step(seed: int, n_followers: int = 5):
     return step, previous_accel, setting, changed
 
 
-def reference_readouts(step: StepTicks, previous_accel: np.ndarray, dt: float) -> StepReadouts:
+def reference_readouts(step: StepTicks, previous_accel: np.ndarray, dt: float, c: RewardConstants = CONSTANTS) -> StepReadouts:
+    with np.errstate(divide="ignore", invalid="ignore"):
+        gap = (step.spacing - c.standstill_spacing) / step.speed
+    gap_deviation = np.where(step.speed >= 1.0, np.minimum(np.abs(gap - step.applied_setting), c.tracking_cap), 0.0)
+    spacing_error = step.spacing - c.standstill_spacing - step.applied_setting * step.speed
     predecessor_speed = np.concatenate([step.leader_speed[..., None], step.speed[..., :-1]], axis=-1)
     closing = step.speed - predecessor_speed
     with np.errstate(divide="ignore"):
@@ -68,6 +74,8 @@ def reference_readouts(step: StepTicks, previous_accel: np.ndarray, dt: float) -
         min_ttc=ttc.min(axis=0),
         jerk_squared=(jerk**2).sum(axis=0),
         final_speed=step.speed[-1],
+        peak_spacing_error=np.abs(spacing_error).max(axis=0),
+        gap_deviation_sum=gap_deviation.sum(axis=(0, 2)),
         deviation_sum=deviation.sum(axis=(0, 2)),
         max_deviation=deviation.max(axis=(0, 2)),
         alarm_ticks=step.alarm.sum(axis=(0, 2)).astype(float),
@@ -80,9 +88,10 @@ def reference_terms(readouts: StepReadouts, setting, changed, c: RewardConstants
     n_followers = setting.shape[1]
     v = readouts.final_speed
     capacity_ratio = (v * c.smallest_level + c.gap_per_vehicle) / (v * setting + c.gap_per_vehicle)
+    growth = np.maximum(0.0, np.diff(readouts.peak_spacing_error, axis=1)).sum(axis=1)
     return {
-        "tracking": -readouts.deviation_sum / (c.ticks_per_step * n_followers) / c.half_width,
-        "alarms": -readouts.alarm_ticks / (c.ticks_per_step * n_followers),
+        "tracking": -readouts.gap_deviation_sum / (c.ticks_per_step * n_followers) / c.half_width,
+        "string_stability": -np.minimum(1.0, growth / c.spacing_error_reference),
         "safety": -np.mean(np.maximum(0.0, 1.0 - readouts.min_ttc / c.ttc_threshold), axis=1),
         "collision": -readouts.collided.astype(float),
         "comfort": -np.mean(readouts.jerk_squared / c.ticks_per_step, axis=1) / c.jerk_reference**2,
@@ -102,6 +111,7 @@ def test_step_readouts_match_the_numpy_reference(seed, n_followers):
     np.testing.assert_array_equal(readouts.collided, np.arange(N_ENVS) == COLLIDING_ENV)
     assert readouts.min_ttc[NEVER_CLOSING] == np.inf
     assert np.any(readouts.min_ttc < CONSTANTS.ttc_threshold)  # the safety term has something to score
+    assert np.all(readouts.gap_deviation_sum > 0) and np.any(readouts.gap_deviation_sum < 10 * N_TICKS * n_followers * 0.5)
 
 
 def test_the_first_tick_jerk_is_taken_against_the_previous_acceleration():

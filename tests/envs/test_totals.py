@@ -15,7 +15,7 @@ LEVELS = np.array(CONFIG.setting_levels)
 N_TICKS, N_ENVS, N_FOLLOWERS = 10, 4, CONFIG.platoon.n_followers
 COLLIDING_ENV = 2  # collides in the first step only
 NEVER_CLOSING_ENV = 1  # no follower ever closes in: min TTC stays inf
-ADDITIVE = ("steps", "alarm_ticks", "exceedances", "jerk_squared", "switches", "setting", "capacity")
+ADDITIVE = ("steps", "gap_deviation", "alarm_ticks", "exceedances", "jerk_squared", "switches", "setting", "capacity")
 
 
 def random_step(rng: np.random.Generator, collide: bool):
@@ -28,6 +28,8 @@ def random_step(rng: np.random.Generator, collide: bool):
         min_ttc=min_ttc,
         jerk_squared=rng.uniform(0.0, 500.0, per_follower),
         final_speed=rng.uniform(0.0, 35.0, per_follower),
+        peak_spacing_error=rng.uniform(0.0, 10.0, per_follower),
+        gap_deviation_sum=rng.uniform(0.0, 10.0, N_ENVS),
         deviation_sum=rng.uniform(0.0, 20.0, N_ENVS),
         max_deviation=rng.uniform(0.0, 1.0, N_ENVS),
         alarm_ticks=rng.integers(0, N_TICKS * N_FOLLOWERS, N_ENVS).astype(float),
@@ -44,6 +46,7 @@ def reference_step(readouts: StepReadouts, setting, changed, gap: float) -> dict
     v = readouts.final_speed
     return {
         "steps": np.ones(N_ENVS),
+        "gap_deviation": readouts.gap_deviation_sum,
         "alarm_ticks": readouts.alarm_ticks,
         "exceedances": readouts.exceedances,
         "max_deviation": readouts.max_deviation,
@@ -104,10 +107,11 @@ def test_restart_zeroes_only_the_masked_envs():
 def test_summary_keys_and_formulas(seed):
     totals, expected = two_steps(seed)
     summary = totals.summary(CONFIG)
-    assert set(summary) == {"time_out_of_control", "exceedances", "max_deviation", "min_ttc", "rms_jerk", "switches",
+    assert set(summary) == {"mean_gap_deviation", "time_out_of_control", "exceedances", "max_deviation", "min_ttc", "rms_jerk", "switches",
                             "mean_setting", "mean_capacity", "collision", "duration"}
     dt, n_followers = CONFIG.platoon.dt, CONFIG.platoon.n_followers
     formulas = {
+        "mean_gap_deviation": expected["gap_deviation"] / (2 * CONFIG.ticks_per_decision * n_followers),
         "time_out_of_control": expected["alarm_ticks"] * dt / n_followers,
         "exceedances": expected["exceedances"],
         "max_deviation": expected["max_deviation"],
@@ -127,7 +131,7 @@ def test_summary_keys_and_formulas(seed):
 
 def test_summary_of_no_step_divides_by_one_step_not_zero():
     summary = EpisodeTotals.zeros(N_ENVS).summary(CONFIG)
-    for name in ("time_out_of_control", "rms_jerk", "mean_setting", "mean_capacity", "duration"):
+    for name in ("mean_gap_deviation", "time_out_of_control", "rms_jerk", "mean_setting", "mean_capacity", "duration"):
         np.testing.assert_array_equal(summary[name], 0.0, err_msg=name)
     assert np.all(summary["min_ttc"] == np.inf) and not summary["collision"].any()
 

@@ -1,11 +1,17 @@
-"""The reward of ``TimeGapMonitor-v0``: named terms, each <= 0 and about -1 at its worst, weighted and summed.
+"""The reward of ``TimeGapMonitor-v0``: named terms, each <= 0, weighted and summed.
+
+The reward judges what happened to the cars, the true state of the simulator, never the monitor:
+the monitor is the agent's view, not its judge (a term on the monitor's estimate could be gamed by
+a policy that keeps the estimate quiet while the cars drift).
 
 A step is scored in three steps, each a compiled function over named structures:
 
 1. :func:`step_readouts`: what the step's ticks come down to: per follower the smallest
-   time-to-collision, the summed squared jerk and the final speed; per env the deviations of the
-   estimate from the centre line, the alarm ticks, the excursion starts and whether a gap reached 0
-   (the episode totals of :mod:`~timegap_env.envs.totals` are made of the same read-outs);
+   time-to-collision, the summed squared jerk, the final speed and the peak spacing error; per env
+   the summed deviation of the actual time gap from the applied setting, whether a gap reached 0,
+   and the monitor's diagnostics (its deviation from the chart's centre line, alarm ticks,
+   excursion starts), which the episode totals of :mod:`~timegap_env.envs.totals` report and the
+   reward does not use;
 2. :func:`reward_terms`: the terms below, per env, from the read-outs;
 3. :func:`weighted_sum`: the reward, the terms weighted by :class:`~timegap_env.config.RewardWeights`
    and added in the order of its fields.
@@ -13,12 +19,12 @@ A step is scored in three steps, each a compiled function over named structures:
 :func:`score_step` runs the three in one compiled call, the env's hot path.
 
 The terms, means over followers (their weights are :class:`~timegap_env.config.RewardWeights`'s); the
-centre line is the chart's, the applied setting, which ramps after a change of setting:
+applied setting is the tau* the controller uses (it ramps after a change of setting), s0 the platoon's:
 
 | term | value | why |
 |---|---|---|
-| ``tracking`` | -mean over ticks of abs(estimate - centre line) / (L sigma_desired) | keep the actual gap at its setting |
-| ``alarms`` | -share of follower-ticks in alarm | the monitor's view matters |
+| ``tracking`` | -mean over follower-ticks of min(abs((s - s0)/v - applied setting), tracking_cap) / (L sigma_desired), at v >= 1 m/s | keep the actual gap at the setting; capped at 0.5 s (-2) because at low speed (s - s0)/v explodes |
+| ``string_stability`` | -min(1, sum over consecutive followers of max(0, peak error of the follower - peak error of its predecessor) / spacing_error_reference), peak error the step's largest abs(s - s0 - applied setting v) | disturbances must not grow down the platoon |
 | ``safety`` | -max(0, 1 - TTC / ttc_threshold), TTC the step's smallest (below -1 once a gap is gone) | keep a margin to the predecessor |
 | ``collision`` | -1 on the step a collision ends the episode | outweighs any whole episode of the rest |
 | ``comfort`` | -mean over ticks of (jerk / jerk_reference)^2 | no chattering |
@@ -26,13 +32,12 @@ centre line is the chart's, the applied setting, which ramps after a change of s
 | ``preference`` | -abs(tau* - preferred_setting) / span of the levels | the driver chose 1.6 s |
 | ``switching`` | -share of followers whose setting changed | no chattering |
 
-Each term is at most about -1 per step over 250 steps, so with the default weights a collision
-(1000) costs more than four whole episodes of everything else: no efficiency gain pays for one,
-and ending an episode early never pays. Efficiency and preference pull in opposite directions, so
-neither the smallest nor the largest setting wins; switching and comfort keep the policy from
-chattering. Measured on 30 episodes of the default mix (``tests/envs/test_env.py``): always 0.6 s
-and always 2.2 s both score below a policy that keeps 1.0 s while V2V is up and 1.6 s (string
-stable in ACC) without it.
+Each term is at most a few units per step over 250 steps, so with the default weights a collision
+(1000) costs more than any whole episode of everything else: no efficiency gain pays for one, and
+ending an episode early never pays. Efficiency and preference pull in opposite directions, so
+neither the smallest nor the largest setting wins; tracking and string stability penalise a
+setting too small for the cars' true condition (a degraded car keeps its setting badly and
+amplifies disturbances); switching and comfort keep the policy from chattering.
 """
 
 from __future__ import annotations
@@ -45,6 +50,7 @@ import numba
 import numpy as np
 
 from timegap_env.config import EnvConfig, RewardWeights
+from timegap_env.sim.trajectory import TIME_GAP_MIN_SPEED
 
 RewardTerms = collections.namedtuple("RewardTerms", [field.name for field in dataclasses.fields(RewardWeights)])
 RewardTerms.__doc__ = """The reward terms, one field per field of RewardWeights: (n_envs,) arrays, or the weights themselves."""
@@ -55,7 +61,8 @@ class StepTicks(NamedTuple):
     """A step's ticks, arrays (n_ticks, n_envs, n_followers) unless noted."""
 
     tau_mean: np.ndarray  # posterior mean of tau [s]
-    center: np.ndarray  # the chart's centre line, the applied setting [s]
+    center: np.ndarray  # the chart's centre line [s]
+    applied_setting: np.ndarray  # the tau* the controller applied during the tick [s]
     alarm: np.ndarray  # the chart is in alarm [bool]
     exceedance: np.ndarray  # an excursion started [bool]
     collisions: np.ndarray  # the gap reached 0 [bool]
@@ -71,6 +78,8 @@ class StepReadouts(NamedTuple):
     min_ttc: np.ndarray  # per follower: smallest time-to-collision, inf if never closing in [s]
     jerk_squared: np.ndarray  # per follower: sum over the ticks of jerk^2 [m^2/s^6]
     final_speed: np.ndarray  # per follower: speed at the step's last tick [m/s]
+    peak_spacing_error: np.ndarray  # per follower: largest abs(s - s0 - applied setting v) [m]
+    gap_deviation_sum: np.ndarray  # per env: sum over follower-ticks of the tracking term's capped deviation [s]
     deviation_sum: np.ndarray  # per env: sum over follower-ticks of abs(estimate - centre line) [s]
     max_deviation: np.ndarray  # per env: largest abs(estimate - centre line) [s]
     alarm_ticks: np.ndarray  # per env: follower-ticks in alarm [-]
@@ -80,7 +89,7 @@ class StepReadouts(NamedTuple):
     @classmethod
     def empty(cls, n_envs: int, n_followers: int) -> StepReadouts:
         """Uninitialised read-outs of ``n_envs`` envs of ``n_followers`` followers."""
-        per_follower, per_env = np.empty((3, n_envs, n_followers)), np.empty((4, n_envs))  # in field order
+        per_follower, per_env = np.empty((4, n_envs, n_followers)), np.empty((5, n_envs))  # in field order
         return cls(*per_follower, *per_env, np.empty(n_envs, dtype=bool))  # collided last
 
 
@@ -96,6 +105,10 @@ class RewardConstants(NamedTuple):
     level_span: float  # largest level - smallest level [s]
     preferred_setting: float  # [s]
     gap_per_vehicle: float  # standstill spacing + vehicle length [m]
+    standstill_spacing: float  # s0 [m]
+    min_speed: float  # below it the actual time gap is not tracked [m/s]
+    tracking_cap: float  # [s]
+    spacing_error_reference: float  # [m]
 
     @classmethod
     def from_config(cls, config: EnvConfig) -> RewardConstants:
@@ -109,6 +122,10 @@ class RewardConstants(NamedTuple):
             level_span=config.setting_span,
             preferred_setting=float(config.preferred_setting),
             gap_per_vehicle=float(config.platoon.standstill_spacing + config.platoon.vehicle_length),
+            standstill_spacing=float(config.platoon.standstill_spacing),
+            min_speed=TIME_GAP_MIN_SPEED,
+            tracking_cap=float(config.tracking_cap),
+            spacing_error_reference=float(config.spacing_error_reference),
         )
 
 
@@ -183,10 +200,10 @@ def _score(step, previous_accel, setting, changed, constants, weights, readouts,
 def _step_readouts(step, previous_accel, constants, out):  # noqa: ANN001, ANN202
     n_ticks, n_envs, n_followers = step.speed.shape
     for e in range(n_envs):
-        deviation_sum = max_deviation = alarm_ticks = exceedances = 0.0
+        deviation_sum = max_deviation = alarm_ticks = exceedances = gap_deviation_sum = 0.0
         collided = False
         for k in range(n_ticks):
-            tick_deviation = 0.0
+            tick_deviation = tick_gap_deviation = 0.0
             for f in range(n_followers):
                 deviation = abs(step.tau_mean[k, e, f] - step.center[k, e, f])
                 tick_deviation += deviation
@@ -194,12 +211,20 @@ def _step_readouts(step, previous_accel, constants, out):  # noqa: ANN001, ANN20
                 alarm_ticks += step.alarm[k, e, f]
                 exceedances += step.exceedance[k, e, f]
                 collided = collided or step.collisions[k, e, f]
+                speed = step.speed[k, e, f]
+                if speed >= constants.min_speed:
+                    gap = (step.spacing[k, e, f] - constants.standstill_spacing) / speed
+                    tick_gap_deviation += min(abs(gap - step.applied_setting[k, e, f]), constants.tracking_cap)
             deviation_sum += tick_deviation
+            gap_deviation_sum += tick_gap_deviation
         out.deviation_sum[e], out.max_deviation[e], out.collided[e] = deviation_sum, max_deviation, collided
-        out.alarm_ticks[e], out.exceedances[e] = alarm_ticks, exceedances
+        out.alarm_ticks[e], out.exceedances[e], out.gap_deviation_sum[e] = alarm_ticks, exceedances, gap_deviation_sum
         for f in range(n_followers):
-            out.min_ttc[e, f], out.jerk_squared[e, f] = np.inf, 0.0
+            out.min_ttc[e, f], out.jerk_squared[e, f], out.peak_spacing_error[e, f] = np.inf, 0.0, 0.0
             for k in range(n_ticks):
+                error = (step.spacing[k, e, f] - constants.standstill_spacing
+                         - step.applied_setting[k, e, f] * step.speed[k, e, f])
+                out.peak_spacing_error[e, f] = max(out.peak_spacing_error[e, f], abs(error))
                 predecessor_speed = step.leader_speed[k, e] if f == 0 else step.speed[k, e, f - 1]
                 closing = step.speed[k, e, f] - predecessor_speed  # [m/s], > 0 when the gap shrinks
                 if closing > 0:
@@ -215,8 +240,10 @@ def _reward_terms(readouts, setting, changed, constants, out):  # noqa: ANN001, 
     n_ticks = constants.ticks_per_step
     follower_ticks = n_ticks * n_followers
     for e in range(n_envs):
-        safety = comfort = efficiency = preference = switching = 0.0
+        safety = comfort = efficiency = preference = switching = growth = 0.0
         for f in range(n_followers):
+            if f > 0:
+                growth += max(0.0, readouts.peak_spacing_error[e, f] - readouts.peak_spacing_error[e, f - 1])
             v = readouts.final_speed[e, f]  # [m/s]
             safety += max(0.0, 1.0 - readouts.min_ttc[e, f] / constants.ttc_threshold)
             comfort += readouts.jerk_squared[e, f] / n_ticks
@@ -225,8 +252,8 @@ def _reward_terms(readouts, setting, changed, constants, out):  # noqa: ANN001, 
             )
             preference += abs(setting[e, f] - constants.preferred_setting)
             switching += changed[e, f]
-        out.tracking[e] = -readouts.deviation_sum[e] / follower_ticks / constants.half_width
-        out.alarms[e] = -readouts.alarm_ticks[e] / follower_ticks
+        out.tracking[e] = -readouts.gap_deviation_sum[e] / follower_ticks / constants.half_width
+        out.string_stability[e] = -min(1.0, growth / constants.spacing_error_reference)
         out.safety[e] = -(safety / n_followers)
         out.collision[e] = -1.0 if readouts.collided[e] else -0.0
         out.comfort[e] = -(comfort / n_followers) / constants.jerk_reference**2

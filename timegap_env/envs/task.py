@@ -125,7 +125,8 @@ class PlatoonTask:
             self.trace.add(TraceArrays((ticks[:, 0] + 1) * cfg.platoon.dt, block.tau_mean[:, 0], chart.center[:, 0]))
 
         step = StepTicks(
-            tau_mean=block.tau_mean, center=chart.center, alarm=chart.alarm, exceedance=chart.exceedance,
+            tau_mean=block.tau_mean, center=chart.center, applied_setting=physics.applied_setting, alarm=chart.alarm,
+            exceedance=chart.exceedance,
             collisions=physics.collisions, leader_speed=leader_speed, speed=physics.speed, spacing=physics.spacing,
             accel=physics.accel,
         )

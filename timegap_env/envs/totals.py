@@ -15,6 +15,7 @@ class EpisodeTotals(NamedTuple):
     """Sums (and extremes) over the steps of each env's episode so far, arrays (n_envs,)."""
 
     steps: np.ndarray  # [-]
+    gap_deviation: np.ndarray  # follower-ticks' capped abs(actual time gap - applied setting), the tracking term's [s]
     alarm_ticks: np.ndarray  # follower-ticks in alarm [-]
     exceedances: np.ndarray  # excursion starts, all followers [-]
     max_deviation: np.ndarray  # largest abs(estimate - the chart's centre line) [s]
@@ -47,7 +48,9 @@ class EpisodeTotals(NamedTuple):
     def summary(self, config: EnvConfig) -> dict[str, np.ndarray]:
         """Episode statistics so far under ``config``, each (n_envs,)."""
         steps = np.maximum(self.steps, 1)
+        follower_ticks = steps * config.ticks_per_decision * config.platoon.n_followers
         return {
+            "mean_gap_deviation": self.gap_deviation / follower_ticks,  # true |actual gap - setting|, capped [s]
             "time_out_of_control": self.alarm_ticks * config.platoon.dt / config.platoon.n_followers,  # per follower [s]
             "exceedances": self.exceedances.copy(),  # all followers [-]
             "max_deviation": self.max_deviation.copy(),  # largest |estimate - centre line| [s]
@@ -79,6 +82,7 @@ def _add_step(totals, readouts, setting, changed, gap_per_vehicle):  # noqa: ANN
             capacity += 3600.0 * v / (v * setting[e, f] + gap_per_vehicle)  # [veh/h] at the current speed
             min_ttc = min(min_ttc, readouts.min_ttc[e, f])
         totals.steps[e] += 1
+        totals.gap_deviation[e] += readouts.gap_deviation_sum[e]
         totals.alarm_ticks[e] += readouts.alarm_ticks[e]
         totals.exceedances[e] += readouts.exceedances[e]
         totals.max_deviation[e] = max(totals.max_deviation[e], readouts.max_deviation[e])
