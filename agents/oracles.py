@@ -1,0 +1,122 @@
+"""Oracles: policies that read the ground truth, ``info["degradation"]``. An upper reference, not deployable.
+
+No car knows its own degradation; these policies do, so they say how much knowing is worth: what
+a policy reading the monitor could at best recover. Each takes the ground truth of the envs'
+current observations (``info["degradation"]`` of the native vector env, arrays (n_envs,
+n_followers); of a single env, (n_followers,)) and returns ladder indices shaped like the env's
+action: (n_envs,) or () for ``action_mode="platoon"`` (one setting for the platoon: the largest
+any follower needs), (n_envs, N) or (N,) for ``"per_vehicle"``.
+
+- :class:`StabilityOracle`: the smallest setting on the ladder at least ``margin`` above the
+  smallest string-stable setting for the true parameters and link;
+- :class:`LookupOracle`: the setting that scored best under the reward, on training seeds, for
+  the true condition (the active degradation's kind and size bin), from a table measured by
+  ``train/value_of_information.py``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+
+from agents.policies import as_config
+from timegap_env.config import DegradationConfig, EnvConfig
+
+NOMINAL = "none"  # the condition of a follower no degradation acts on
+SIZE_BINS = 3  # a sized degradation's range is cut into this many equal bins (per sign for radar_bias)
+
+
+def condition_keys(truth: Mapping[str, np.ndarray], config: DegradationConfig) -> np.ndarray:
+    """Each follower's true condition as a string key, shaped like ``truth["kind"]``: "none" when nothing
+    acts, "<kind>:<bin>" for a sized kind (bin 0 .. SIZE_BINS - 1 of its drawn range, "-" before the bin
+    of a negative radar bias), else the kind (a commercial ACC: whichever car)."""
+    kinds, sizes, active = np.asarray(truth["kind"]), np.asarray(truth["size"]), np.asarray(truth["active"])
+    keys = np.full(kinds.shape, NOMINAL, dtype=object)
+    for index in np.ndindex(kinds.shape):
+        kind = kinds[index]
+        if not active[index] or kind == NOMINAL:
+            continue
+        if kind in SIZE_RANGES:
+            keys[index] = f"{kind}:{size_bin(kind, float(sizes[index]), config)}"
+        else:
+            keys[index] = kind
+    return keys
+
+
+SIZE_RANGES = {  # the DegradationConfig field holding each sized kind's range
+    "lag": "lag_factor_range", "gain": "gain_range", "v2v_latency": "v2v_latency_range",
+    "packet_loss": "packet_loss_range", "radar_bias": "radar_bias_range", "radar_noise": "radar_noise_range",
+}
+
+
+def size_bin(kind: str, size: float, config: DegradationConfig) -> str:
+    """The bin of ``size`` in ``kind``'s drawn range (clipped to it): "0" .. "2", with a "-" for a negative bias."""
+    low, high = getattr(config, SIZE_RANGES[kind])
+    magnitude = abs(size) if kind == "radar_bias" else size
+    index = int(np.clip(np.floor((magnitude - low) / (high - low) * SIZE_BINS), 0, SIZE_BINS - 1))
+    return ("-" if kind == "radar_bias" and size < 0 else "") + str(index)
+
+
+def bin_centres(kind: str, config: DegradationConfig) -> dict[str, float]:
+    """Each bin of ``kind`` and the size at its centre (signed for radar_bias)."""
+    low, high = getattr(config, SIZE_RANGES[kind])
+    centres = {str(i): low + (i + 0.5) * (high - low) / SIZE_BINS for i in range(SIZE_BINS)}
+    if kind == "radar_bias":
+        centres |= {f"-{key}": -value for key, value in centres.items()}
+    return centres
+
+
+class TruthPolicy:
+    """Base of the oracles: per-follower ladder levels from the truth, combined for the env's action mode."""
+
+    name = "oracle"
+
+    def __init__(self, config: EnvConfig | Mapping[str, Any] | None = None) -> None:
+        self.config = as_config(config)
+        self.action_mode = self.config.action_mode
+        self.levels = np.asarray(self.config.setting_levels)
+
+    def act(self, truth: Mapping[str, np.ndarray]) -> np.ndarray:
+        """Ladder indices for the ground truth of one env (n_followers,) or several (n_envs, n_followers)."""
+        single = np.ndim(truth["kind"]) == 1
+        batch = {name: np.atleast_2d(value) for name, value in truth.items()}
+        settings = self._settings(batch)  # (n_envs, n_followers) [s]
+        if self.action_mode == "platoon":
+            settings = settings.max(axis=1)
+        indices = np.minimum(np.searchsorted(self.levels, settings - 1e-9), len(self.levels) - 1).astype(np.int64)
+        return indices[0] if single else indices
+
+    def _settings(self, truth: Mapping[str, np.ndarray]) -> np.ndarray:
+        raise NotImplementedError
+
+
+class StabilityOracle(TruthPolicy):
+    """The smallest level at least ``margin`` [s] above the smallest string-stable setting of each follower's true
+    parameters and link (the largest level where none is stable)."""
+
+    def __init__(self, config: EnvConfig | Mapping[str, Any] | None = None, margin: float = 0.1) -> None:
+        super().__init__(config)
+        self.margin = margin
+        self.name = f"oracle_stability+{margin:g}"
+
+    def _settings(self, truth: Mapping[str, np.ndarray]) -> np.ndarray:
+        return np.minimum(truth["smallest_stable_setting"] + self.margin, self.levels[-1])
+
+
+class LookupOracle(TruthPolicy):
+    """Each follower's setting [s] from ``table`` (condition key, see :func:`condition_keys` -> setting); a
+    condition missing from the table takes the nominal one's."""
+
+    name = "oracle_lookup"
+
+    def __init__(self, table: Mapping[str, float], config: EnvConfig | Mapping[str, Any] | None = None) -> None:
+        super().__init__(config)
+        if NOMINAL not in table:
+            raise ValueError(f"table keys {sorted(table)}: must hold the nominal condition {NOMINAL!r}")
+        self.table = dict(table)
+
+    def _settings(self, truth: Mapping[str, np.ndarray]) -> np.ndarray:
+        keys = condition_keys(truth, self.config.degradation)
+        return np.vectorize(lambda key: self.table.get(key, self.table[NOMINAL]), otypes=[float])(keys)
