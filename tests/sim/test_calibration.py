@@ -6,8 +6,7 @@ import pytest
 import timegap_env
 from timegap_env.config import AggressiveCyclesConfig, LeaderConfig, PlatoonConfig, SensorConfig
 from timegap_env.sim.calibration import (
-    FollowerModel, Segment, fit_constant_time_gap, fit_follower, record_segments, simulate_constant_time_gap,
-    simulate_follower,
+    FollowerModel, Segment, fit_follower, record_segments, simulate_follower,
 )
 
 TRUE = FollowerModel(lag=0.8, k_s=0.12, k_v=0.45, standstill_spacing=3.0, accel_min=-3.0, accel_max=1.5)

@@ -329,7 +329,6 @@ class Platoon:
         accel = per_env("leader_accel", leader_accel, self.n_envs)[mask]
         if np.any(speed < 0):
             raise ValueError(f"leader_speed = {speed}: must be >= 0")
-        n_reset = int(mask.sum())
         self.request_setting(cfg.initial_setting if setting is None else setting, mask=mask[:, None])
         state.applied_setting[mask] = state.setting[mask]
         gaps = cfg.standstill_spacing + state.applied_setting[mask] * speed[:, None]  # (n_reset, n_followers)
