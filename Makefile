@@ -4,7 +4,7 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: install demo test train bench calibrate clean
+.PHONY: install demo test train bench calibrate degradation clean
 
 install: $(STAMP)
 
@@ -19,6 +19,8 @@ demo: $(STAMP)
 	MPLBACKEND=Agg $(PY) -m train.reproduce_paper
 	MPLBACKEND=Agg $(PY) -m train.evaluate
 	MPLBACKEND=Agg $(PY) -m train.field_validation
+	MPLBACKEND=Agg $(PY) -m train.value_of_information
+	MPLBACKEND=Agg $(PY) -m train.detection_benchmark
 
 test: $(STAMP)
 	MPLBACKEND=Agg $(PY) -m pytest -q
@@ -31,6 +33,11 @@ bench: $(STAMP)
 
 calibrate: $(STAMP)
 	MPLBACKEND=Agg $(PY) -m train.calibrate_openacc
+
+degradation: $(STAMP)
+	MPLBACKEND=Agg $(PY) -m train.choose_degradation_mix
+	MPLBACKEND=Agg $(PY) -m train.value_of_information
+	MPLBACKEND=Agg $(PY) -m train.detection_benchmark
 
 clean:
 	rm -rf $(VENV) build *.egg-info .pytest_cache

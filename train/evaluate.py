@@ -11,7 +11,7 @@ Held out from training:
   family mix of training, on the held-out seeds). Episodes are split evenly across groups.
 
 Every policy runs the same (group, seed) episodes in the native vector env, one batch per
-group; after each reset the script fingerprints every episode (leader speed, V2V outage,
+group; after each reset the script fingerprints every episode (leader speed, degradation,
 dropout rate, sensor-noise key) and refuses to report if any policy saw a different one,
 so platoon-wide and per-vehicle action modes are checked to draw identical scenarios.
 
@@ -420,8 +420,8 @@ def main(argv: Sequence[str] | None = None) -> None:
         f"(training uses seeds < {EVAL_SEED_START}). {data_note}",
         "Groups: `ngsim_in_band` = NGSIM I-80 drivers' acceleration integrated within 20–80 mph; `idm` = highway-env "
         "IDM driver behind scripted braking; `training_mix` = the training families on held-out seeds. Default env "
-        "config otherwise (V2V outages and sensor dropouts drawn from the seed).",
-        "Every policy ran the same episodes: the leader, V2V outage, dropout rate and sensor-noise key of each "
+        "config otherwise (degradations of the followers, from the default mix, and sensor dropouts drawn from the seed).",
+        "Every policy ran the same episodes: the leader, degradation, dropout rate and sensor-noise key of each "
         "episode were fingerprinted after reset and compared across policies and action modes.",
         f"Cells: mean [95 % percentile bootstrap interval, {BOOTSTRAP_RESAMPLES} resamples of the episodes]; "
         "collisions: count/episodes [95 % Wilson interval of the rate]; "
