@@ -177,7 +177,7 @@ class PlatoonTask:
         """Each follower's degradation now, its true parameters and the smallest string-stable setting for them,
         arrays (n_envs, n_followers) (:meth:`~timegap_env.sim.degradation.DegradationTable.truth`): for
         oracles and evaluation, never in the observation."""
-        return self.loop.degradation.truth(self.loop.ticks, self.loop.platoon.v2v, self.config.sensors.spacing_noise_std)
+        return self.loop.degradation.truth(self.loop.ticks, self.loop.platoon.v2v)
 
     def episode_summary(self) -> dict[str, np.ndarray]:
         """Episode statistics so far, each (n_envs,)."""

@@ -60,7 +60,7 @@ class MonitoredPlatoon:
         self.sensors = Sensors(sensors, n_envs, seed, platoon.n_followers)
         self.monitor = TimeGapMonitor(n_envs, platoon.n_followers, platoon.initial_setting, monitor)
         self.chart = make_chart(n_envs, platoon.n_followers, platoon.initial_setting, chart)
-        self.degradation = DegradationTable(platoon, n_envs)
+        self.degradation = DegradationTable(platoon, n_envs, sensors.spacing_noise_std)
 
     ticks = property(lambda self: self.platoon.ticks, doc="Ticks since each env's reset (n_envs,) [-].")
 

@@ -32,7 +32,7 @@ from typing import Any
 
 import numpy as np
 
-from timegap_env.config import DEGRADATION_KINDS, DegradationConfig, PlatoonConfig
+from timegap_env.config import DEGRADATION_KINDS, DegradationConfig, PlatoonConfig, SensorConfig
 from timegap_env.sim.platoon import Platoon, ZOHCoefficients
 from timegap_env.sim.stability import string_stability
 
@@ -42,6 +42,16 @@ SIZED = {"lag": "factor on the lag T [-]", "gain": "gain K [-]", "v2v_latency": 
 DESCRIPTION_KEYS = ("kind", "size", "followers", "onset", "end", "car")  # what a degradation dict may hold
 NEVER = np.iinfo(np.int64).max // 4  # the end tick of a degradation that does not end
 SETTING_SEARCH = (0.05, 6.0)  # smallest_stable_setting searches tau* in this range [s]
+TRUE_PARAMETERS = (  # the true parameters the ground truth reports, nominal while no degradation acts
+    "lag",  # GLVD lag T [s]
+    "gain",  # GLVD gain K [-]
+    "k_s",  # controller gain on the spacing error [1/s^2]
+    "k_v",  # controller gain on the speed difference [1/s]
+    "v2v_delay",  # V2V delay theta [s]
+    "packet_loss",  # chance per tick that a V2V message is lost [-]
+    "radar_bias",  # added to the radar's spacing [m]
+    "radar_noise",  # std of the radar's spacing noise [m]
+)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -192,11 +202,14 @@ class DegradationTable:
     ``end`` (ticks since reset, [start, end); start == end: none; NEVER: no end), and the parameters
     while it acts, nominal otherwise: ``lag`` [s], ``gain`` [-], ``k_s`` [1/s^2], ``k_v`` [1/s],
     ``accel_max`` [m/s^2], ``extra_delay`` (int, ticks), ``packet_loss`` [-], ``radar_bias`` [m],
-    ``radar_noise`` [m, NaN: the sensors' own], ``v2v_down`` [bool].
+    ``radar_noise`` [m, NaN: the sensors' own, ``spacing_noise_std``], ``v2v_down`` [bool].
     """
 
-    def __init__(self, config: PlatoonConfig, n_envs: int) -> None:
+    def __init__(self, config: PlatoonConfig, n_envs: int,
+                 spacing_noise_std: float = SensorConfig.spacing_noise_std) -> None:
         self.config = config
+        self.spacing_noise_std = float(spacing_noise_std)
+        self._nominal_lag, self._nominal_gain = config.per_follower("actuation_lag"), config.per_follower("actuation_gain")
         shape = (n_envs, config.n_followers)
         self.kind = np.zeros(shape, dtype=np.int8)
         self.size = np.full(shape, np.nan)
@@ -212,8 +225,13 @@ class DegradationTable:
         self.radar_bias = np.zeros(shape)
         self.radar_noise = np.full(shape, np.nan)
         self.v2v_down = np.zeros(shape, dtype=bool)
-        # the smallest string-stable setting [s], nominal / degraded parameters, V2V up / down
+        # the smallest string-stable setting [s], nominal / degraded parameters, V2V up / down (found when truth() asks)
         self.stable = {(degraded, up): np.zeros(shape) for degraded in (False, True) for up in (False, True)}
+        # what truth() reports: fixed per episode, and the true parameters while it acts / otherwise
+        self._reported = {name: np.zeros(shape) for name in ("size", "onset", "end")}
+        self._kind_names = np.full(shape, KINDS[0], dtype=object)
+        self._stale = np.ones(n_envs, dtype=bool)  # envs whose ``stable`` entries are not found yet
+        self._while_active, self._otherwise = np.zeros((2, len(TRUE_PARAMETERS), *shape))
         self.descriptions: list[tuple[Degradation, ...]] = [() for _ in range(n_envs)]
         for env in range(n_envs):
             self.set(env, ())
@@ -221,7 +239,7 @@ class DegradationTable:
     def set(self, env: int, degradations: Sequence[Degradation]) -> None:
         """Env ``env``'s followers take ``degradations`` (from :func:`parse_degradations`); the others are nominal."""
         cfg = self.config
-        nominal_lag, nominal_gain = cfg.per_follower("actuation_lag"), cfg.per_follower("actuation_gain")
+        nominal_lag, nominal_gain = self._nominal_lag, self._nominal_gain
         self.kind[env], self.size[env], self.start[env], self.end[env] = 0, np.nan, 0, 0
         self.lag[env], self.gain[env], self.k_s[env], self.k_v[env] = nominal_lag, nominal_gain, cfg.k_s, cfg.k_v
         self.accel_max[env], self.extra_delay[env], self.packet_loss[env] = cfg.accel_max, 0, 0.0
@@ -230,16 +248,35 @@ class DegradationTable:
             for follower in degradation.followers:
                 self._set_follower(env, follower - 1, degradation)
         self.descriptions[env] = tuple(degradations)
+        self._stale[env] = True  # its smallest stable settings are found when the ground truth is first asked for
+        hit = self.kind[env] > 0
+        self._kind_names[env] = np.array(KINDS, dtype=object)[self.kind[env]]
+        self._reported["size"][env] = np.nan_to_num(self.size[env])
+        self._reported["onset"][env] = np.where(hit, self.start[env] * cfg.dt, np.inf)
+        self._reported["end"][env] = np.where(hit & (self.end[env] < NEVER), self.end[env] * cfg.dt, np.inf)
+        noise = np.where(np.isnan(self.radar_noise[env]), self.spacing_noise_std, self.radar_noise[env])
+        while_active = (self.lag[env], self.gain[env], self.k_s[env], self.k_v[env],
+                        cfg.v2v_delay + self.extra_delay[env] * cfg.dt, self.packet_loss[env], self.radar_bias[env], noise)
+        otherwise = (nominal_lag, nominal_gain, cfg.k_s, cfg.k_v, cfg.v2v_delay, 0.0, 0.0, self.spacing_noise_std)
+        for i, (active_value, other_value) in enumerate(zip(while_active, otherwise)):  # in TRUE_PARAMETERS order
+            self._while_active[i, env], self._otherwise[i, env] = active_value, other_value
+
+    def _find_stable_settings(self, env: int) -> None:
+        """Env ``env``'s smallest string-stable settings (``stable``) for its nominal and degraded parameters, with
+        the link up and down; a packet loss counts as the mean extra age of the message held, loss / (1 - loss)
+        ticks."""
+        cfg = self.config
         for f in range(cfg.n_followers):
             for (degraded, up), table in self.stable.items():
-                lag, gain = (self.lag[env, f], self.gain[env, f]) if degraded else (nominal_lag[f], nominal_gain[f])
+                lag, gain = (self.lag[env, f], self.gain[env, f]) if degraded else (self._nominal_lag[f], self._nominal_gain[f])
                 k_s, k_v = (self.k_s[env, f], self.k_v[env, f]) if degraded else (cfg.k_s, cfg.k_v)
                 delay = cfg.v2v_delay
                 if degraded:
-                    loss = self.packet_loss[env, f]  # a lost message is held: on average loss / (1 - loss) ticks older
+                    loss = self.packet_loss[env, f]
                     delay += self.extra_delay[env, f] * cfg.dt + cfg.dt * loss / (1.0 - loss)
                 table[env, f] = smallest_stable_setting(float(lag), float(gain), float(k_s), float(k_v), cfg.k_a,
                                                         cfg.k_f if up else 0.0, round(float(delay), 9))
+        self._stale[env] = False
 
     def _set_follower(self, env: int, f: int, degradation: Degradation) -> None:
         cfg, kind, size = self.config, degradation.kind, degradation.size
@@ -295,29 +332,21 @@ class DegradationTable:
         outage or a commercial ACC acts."""
         return ~(self.active(ticks) & self.v2v_down)
 
-    def truth(self, ticks: np.ndarray, v2v: np.ndarray, spacing_noise_std: float) -> dict[str, np.ndarray]:
-        """The ground truth at ``ticks`` (n_envs,) since reset with the V2V flag ``v2v`` (n_envs, n_followers) and
-        the sensors' nominal ``spacing_noise_std`` [m], arrays (n_envs, n_followers) without NaN (so that equal
-        episodes give equal infos): never in the observation."""
-        cfg, active = self.config, self.active(ticks)
-        nominal_lag, nominal_gain = cfg.per_follower("actuation_lag"), cfg.per_follower("actuation_gain")
-        hit, dt = self.kind > 0, cfg.dt
+    def truth(self, ticks: np.ndarray, v2v: np.ndarray) -> dict[str, np.ndarray]:
+        """The ground truth at ``ticks`` (n_envs,) since reset with the V2V flag ``v2v`` (n_envs, n_followers), arrays
+        (n_envs, n_followers) without NaN (so that equal episodes give equal infos): never in the observation.
+
+        ``kind`` (the follower's degradation, "none" if not hit), ``size`` (0 without one), ``onset`` and ``end``
+        [s] (inf: not hit / never), ``active`` (it acts now), ``v2v`` (the link is up, what the flag shows),
+        ``smallest_stable_setting`` [s] for the true parameters and link, and the true parameters of
+        TRUE_PARAMETERS.
+        """
+        for env in np.flatnonzero(self._stale):
+            self._find_stable_settings(env)
+        active = self.active(ticks)
+        parameters = np.where(active, self._while_active, self._otherwise)
         stable = np.where(active, np.where(v2v, self.stable[True, True], self.stable[True, False]),
                           np.where(v2v, self.stable[False, True], self.stable[False, False]))
-        return {
-            "kind": np.array(KINDS, dtype=object)[self.kind],  # the follower's degradation, "none" if not hit
-            "size": np.nan_to_num(self.size),  # its size (see the module docstring), 0 without one
-            "onset": np.where(hit, self.start * dt, np.inf),  # [s], inf: not hit
-            "end": np.where(hit & (self.end < NEVER), self.end * dt, np.inf),  # [s], inf: never
-            "active": active,  # the degradation acts now
-            "lag": np.where(active, self.lag, nominal_lag),  # true GLVD lag T [s]
-            "gain": np.where(active, self.gain, nominal_gain),  # true GLVD gain K [-]
-            "k_s": np.where(active, self.k_s, cfg.k_s),  # true controller gain on the spacing error [1/s^2]
-            "k_v": np.where(active, self.k_v, cfg.k_v),  # true controller gain on the speed difference [1/s]
-            "v2v_delay": cfg.v2v_delay + np.where(active, self.extra_delay, 0) * dt,  # true V2V delay [s]
-            "packet_loss": np.where(active, self.packet_loss, 0.0),  # [-]
-            "radar_bias": np.where(active, self.radar_bias, 0.0),  # [m]
-            "radar_noise": np.where(active & ~np.isnan(self.radar_noise), self.radar_noise, spacing_noise_std),  # std [m]
-            "v2v": v2v.copy(),  # the V2V link is up (what the flag shows)
-            "smallest_stable_setting": stable,  # for the true parameters and link [s]
-        }
+        return {"kind": self._kind_names.copy(), **{name: value.copy() for name, value in self._reported.items()},
+                "active": active, **dict(zip(TRUE_PARAMETERS, parameters)), "v2v": v2v.copy(),
+                "smallest_stable_setting": stable}
