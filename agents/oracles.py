@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 
 from agents.policies import as_config
-from timegap_env.config import DegradationConfig, EnvConfig
+from timegap_env.config import SIZE_RANGE_FIELDS, DegradationConfig, EnvConfig
 
 NOMINAL = "none"  # the condition of a follower no degradation acts on
 SIZE_BINS = 3  # a sized degradation's range is cut into this many equal bins (per sign for radar_bias)
@@ -38,22 +38,16 @@ def condition_keys(truth: Mapping[str, np.ndarray], config: DegradationConfig) -
         kind = kinds[index]
         if not active[index] or kind == NOMINAL:
             continue
-        if kind in SIZE_RANGES:
+        if kind in SIZE_RANGE_FIELDS:
             keys[index] = f"{kind}:{size_bin(kind, float(sizes[index]), config)}"
         else:
             keys[index] = kind
     return keys
 
 
-SIZE_RANGES = {  # the DegradationConfig field holding each sized kind's range
-    "lag": "lag_factor_range", "gain": "gain_range", "v2v_latency": "v2v_latency_range",
-    "packet_loss": "packet_loss_range", "radar_bias": "radar_bias_range", "radar_noise": "radar_noise_range",
-}
-
-
 def size_bin(kind: str, size: float, config: DegradationConfig) -> str:
     """The bin of ``size`` in ``kind``'s drawn range (clipped to it): "0" .. "2", with a "-" for a negative bias."""
-    low, high = getattr(config, SIZE_RANGES[kind])
+    low, high = config.size_range(kind)
     magnitude = abs(size) if kind == "radar_bias" else size
     index = int(np.clip(np.floor((magnitude - low) / (high - low) * SIZE_BINS), 0, SIZE_BINS - 1))
     return ("-" if kind == "radar_bias" and size < 0 else "") + str(index)
@@ -61,7 +55,7 @@ def size_bin(kind: str, size: float, config: DegradationConfig) -> str:
 
 def bin_centres(kind: str, config: DegradationConfig) -> dict[str, float]:
     """Each bin of ``kind`` and the size at its centre (signed for radar_bias)."""
-    low, high = getattr(config, SIZE_RANGES[kind])
+    low, high = config.size_range(kind)
     centres = {str(i): low + (i + 0.5) * (high - low) / SIZE_BINS for i in range(SIZE_BINS)}
     if kind == "radar_bias":
         centres |= {f"-{key}": -value for key, value in centres.items()}

@@ -365,6 +365,12 @@ class RewardWeights(ConfigMixin):
                 self._fail(field.name, getattr(self, field.name), "must be >= 0")
 
 
+SIZE_RANGE_FIELDS = {  # each sized degradation kind and the DegradationConfig field holding its range
+    "lag": "lag_factor_range", "gain": "gain_range", "v2v_latency": "v2v_latency_range",
+    "packet_loss": "packet_loss_range", "radar_bias": "radar_bias_range", "radar_noise": "radar_noise_range",
+}
+
+
 def _default_degradation_weights() -> dict[str, float]:
     """Chosen by measurement (``python -m train.choose_degradation_mix``, ``results/degradation/mix.md``): of the mixes
     keeping every kind at weight 1, 2 or 4, the one where knowing the hidden degradations is worth most."""
@@ -402,8 +408,9 @@ class DegradationConfig(ConfigMixin):
         if unknown:
             self._fail("kind_weights", self.kind_weights, f"unknown kinds {unknown}; known: {list(known)}")
         weights = list(self.kind_weights.values())
-        if not all(isinstance(w, (int, float)) and math.isfinite(w) and w >= 0 for w in weights) or sum(weights) <= 0:
-            self._fail("kind_weights", self.kind_weights, "weights must be finite, >= 0, not all 0")
+        if (not all(isinstance(w, (int, float)) and not isinstance(w, bool) and math.isfinite(w) and w >= 0 for w in weights)
+                or sum(weights) <= 0):
+            self._fail("kind_weights", self.kind_weights, "weights must be finite numbers >= 0, not all 0")
         for field in ("lag_factor_range", "gain_range", "v2v_latency_range", "packet_loss_range",
                       "v2v_outage_duration_range", "radar_bias_range", "radar_noise_range"):
             self._band(field)
@@ -416,6 +423,10 @@ class DegradationConfig(ConfigMixin):
         for field in ("follower_probability", "midway_onset_probability", "recovery_probability"):
             if not 0 <= self._finite(field) <= 1:
                 self._fail(field, getattr(self, field), "must be in [0, 1]")
+
+    def size_range(self, kind: str) -> tuple[float, float]:
+        """The range a sized ``kind``'s size is drawn from (for radar_bias, its magnitude); ``KeyError`` otherwise."""
+        return getattr(self, SIZE_RANGE_FIELDS[kind])
 
 
 def _default_scenario_weights() -> dict[str, float]:
@@ -447,8 +458,10 @@ class EnvConfig(ConfigMixin):
     dropout_probability_range: tuple[float, float] = (0.0, 0.05)  # per-episode sensor dropout rate drawn from [-]
     ttc_threshold: float = 4.0  # time-to-collision below which safety is penalised [s]
     jerk_reference: float = 2.0  # jerk that costs one comfort unit [m/s^3]
+    tracking_reference: float = 0.25  # a tick's |actual time gap - setting| costing one tracking unit [s]
     tracking_cap: float = 0.5  # a tick's |actual time gap - setting| counts up to this in the tracking term [s]
-    spacing_error_reference: float = 5.0  # growth of the spacing error down the platoon costing one unit [m]
+    accel_growth_reference: float = 1.0  # growth of the peak acceleration down the platoon costing one unit [m/s^2]
+    accel_envelope_time: float = 5.0  # time constant of the decaying peak acceleration the growth compares [s]
 
     def __post_init__(self) -> None:
         nested = {"platoon": PlatoonConfig, "leader": LeaderConfig, "sensors": SensorConfig, "monitor": MonitorConfig,
@@ -457,7 +470,7 @@ class EnvConfig(ConfigMixin):
             if not isinstance(getattr(self, field), kind):
                 self._fail(field, getattr(self, field), f"must be a {kind.__name__} (or a dict of its fields)")
         self._positive("decision_interval", "episode_duration", "preferred_setting", "ttc_threshold", "jerk_reference",
-                       "tracking_cap", "spacing_error_reference")
+                       "tracking_reference", "tracking_cap", "accel_growth_reference", "accel_envelope_time")
         dt = self.platoon.dt
         for field in ("decision_interval", "episode_duration"):
             ticks = getattr(self, field) / dt

@@ -32,13 +32,11 @@ from agents.policies import seconds
 from agents.protocol import EVAL_SEED_START
 from timegap_env.config import DEGRADATION_KINDS, EnvConfig
 from train.value_of_information import (
-    DEFAULT_OUT, DEFAULT_TRAIN_EPISODES, MARGINS, TARGET_SHARE, constants, measure_lookup, run,
+    DEFAULT_OUT, DEFAULT_TRAIN_EPISODES, MARGINS, SELECTION_SEED_START, TARGET_SHARE, constants, measure_lookup, run,
 )
 
 WEIGHT_GRID = (1, 2, 4)  # the weights tried for each kind: every kind stays in the mix [-]
 
-SELECTION_SEED_START = 5_000  # selection seeds: after the lookup's training seeds, before EVAL_SEED_START [-]
-VISIBLE = ("v2v_outage", "commercial_acc")  # the kinds the V2V flag shows
 DEFAULT_EPISODES = 24  # per kind
 
 

@@ -49,6 +49,7 @@ def random_step(seed: int, n_followers: int = 5):
         exceedance=rng.random(shape) < 0.1,
         collisions=collisions,
         leader_speed=leader_speed,
+        leader_accel=rng.normal(0.0, 1.0, (N_TICKS, N_ENVS)),
         speed=speed,
         spacing=rng.uniform(1.0, 40.0, shape),
         accel=rng.normal(0.0, 1.5, shape),
@@ -59,11 +60,19 @@ def random_step(seed: int, n_followers: int = 5):
     return step, previous_accel, setting, changed
 
 
+def envelope_before(n_followers: int = 5) -> np.ndarray:
+    """Acceleration envelopes before a step, the leader first (fresh each call: the kernels update them in place)."""
+    return np.random.default_rng(99).uniform(0.0, 2.0, (N_ENVS, n_followers + 1))
+
+
 def reference_readouts(step: StepTicks, previous_accel: np.ndarray, dt: float, c: RewardConstants = CONSTANTS) -> StepReadouts:
+    envelope = envelope_before(step.speed.shape[2])
+    accel = np.concatenate([step.leader_accel[..., None], step.accel], axis=-1)
+    for k in range(len(accel)):
+        envelope = np.maximum(np.abs(accel[k]), envelope * c.envelope_decay)
     with np.errstate(divide="ignore", invalid="ignore"):
         gap = (step.spacing - c.standstill_spacing) / step.speed
     gap_deviation = np.where(step.speed >= 1.0, np.minimum(np.abs(gap - step.applied_setting), c.tracking_cap), 0.0)
-    spacing_error = step.spacing - c.standstill_spacing - step.applied_setting * step.speed
     predecessor_speed = np.concatenate([step.leader_speed[..., None], step.speed[..., :-1]], axis=-1)
     closing = step.speed - predecessor_speed
     with np.errstate(divide="ignore"):
@@ -74,7 +83,7 @@ def reference_readouts(step: StepTicks, previous_accel: np.ndarray, dt: float, c
         min_ttc=ttc.min(axis=0),
         jerk_squared=(jerk**2).sum(axis=0),
         final_speed=step.speed[-1],
-        peak_spacing_error=np.abs(spacing_error).max(axis=0),
+        accel_growth=np.maximum(0.0, np.diff(envelope, axis=1)).sum(axis=1),
         gap_deviation_sum=gap_deviation.sum(axis=(0, 2)),
         deviation_sum=deviation.sum(axis=(0, 2)),
         max_deviation=deviation.max(axis=(0, 2)),
@@ -88,10 +97,9 @@ def reference_terms(readouts: StepReadouts, setting, changed, c: RewardConstants
     n_followers = setting.shape[1]
     v = readouts.final_speed
     capacity_ratio = (v * c.smallest_level + c.gap_per_vehicle) / (v * setting + c.gap_per_vehicle)
-    growth = np.maximum(0.0, np.diff(readouts.peak_spacing_error, axis=1)).sum(axis=1)
     return {
-        "tracking": -readouts.gap_deviation_sum / (c.ticks_per_step * n_followers) / c.half_width,
-        "string_stability": -np.minimum(1.0, growth / c.spacing_error_reference),
+        "tracking": -readouts.gap_deviation_sum / (c.ticks_per_step * n_followers) / c.tracking_reference,
+        "string_stability": -np.minimum(1.0, readouts.accel_growth / c.accel_growth_reference),
         "safety": -np.mean(np.maximum(0.0, 1.0 - readouts.min_ttc / c.ttc_threshold), axis=1),
         "collision": -readouts.collided.astype(float),
         "comfort": -np.mean(readouts.jerk_squared / c.ticks_per_step, axis=1) / c.jerk_reference**2,
@@ -104,20 +112,20 @@ def reference_terms(readouts: StepReadouts, setting, changed, c: RewardConstants
 @pytest.mark.parametrize(("seed", "n_followers"), [(0, 5), (1, 3), (2, 5)])
 def test_step_readouts_match_the_numpy_reference(seed, n_followers):
     step, previous_accel, _, _ = random_step(seed, n_followers)
-    readouts = step_readouts(step, previous_accel, CONSTANTS)
+    readouts = step_readouts(step, previous_accel, envelope_before(), CONSTANTS)
     expected = reference_readouts(step, previous_accel, DT)
     for name, got, want in zip(StepReadouts._fields, readouts, expected):
         np.testing.assert_allclose(got, want, rtol=1e-12, err_msg=name)
     np.testing.assert_array_equal(readouts.collided, np.arange(N_ENVS) == COLLIDING_ENV)
     assert readouts.min_ttc[NEVER_CLOSING] == np.inf
     assert np.any(readouts.min_ttc < CONSTANTS.ttc_threshold)  # the safety term has something to score
-    assert np.all(readouts.gap_deviation_sum > 0) and np.any(readouts.gap_deviation_sum < 10 * N_TICKS * n_followers * 0.5)
+    assert np.all(readouts.gap_deviation_sum > 0) and np.all(readouts.accel_growth > 0)
 
 
 def test_the_first_tick_jerk_is_taken_against_the_previous_acceleration():
     step, previous_accel, _, _ = random_step(3)
     accel = np.ones_like(step.accel)
-    readouts = step_readouts(step._replace(accel=accel), np.zeros_like(previous_accel), CONSTANTS)
+    readouts = step_readouts(step._replace(accel=accel), np.zeros_like(previous_accel), envelope_before(), CONSTANTS)
     np.testing.assert_allclose(readouts.jerk_squared, (1.0 / DT) ** 2, rtol=1e-12)  # only the first tick jerks
 
 
@@ -136,7 +144,7 @@ def test_reward_terms_match_the_numpy_reference(seed, n_followers):
 @pytest.mark.parametrize("seed", range(5))
 def test_reward_terms_are_never_positive(seed):
     step, previous_accel, setting, changed = random_step(seed)
-    terms = reward_terms(step_readouts(step, previous_accel, CONSTANTS), setting, changed, CONSTANTS)
+    terms = reward_terms(step_readouts(step, previous_accel, envelope_before(), CONSTANTS), setting, changed, CONSTANTS)
     for name in REWARD_TERMS:
         assert np.all(getattr(terms, name) <= 0.0), name
 
@@ -156,7 +164,7 @@ def test_reward_constants_come_from_the_config():
     config = EnvConfig.from_dict({"chart": {"limit_width": 3.0}, "setting_levels": [0.8, 1.2, 2.0], "ttc_threshold": 5.0,
                                   "platoon": {"standstill_spacing": 2.0, "initial_setting": 1.2}})
     constants = RewardConstants.from_config(config)
-    assert constants.half_width == pytest.approx(3.0 * config.chart.baseline_std, rel=1e-15)
+    assert constants.tracking_reference == config.tracking_reference  # the reward's own, not the chart's
     assert (constants.smallest_level, constants.level_span) == (0.8, pytest.approx(1.2, rel=1e-15))
     assert (constants.ttc_threshold, constants.gap_per_vehicle) == (5.0, 2.0 + config.platoon.vehicle_length)
     assert (constants.jerk_reference, constants.preferred_setting) == (config.jerk_reference, config.preferred_setting)
@@ -165,7 +173,7 @@ def test_reward_constants_come_from_the_config():
 @pytest.mark.parametrize("name", REWARD_TERMS)
 def test_weighted_sum_with_a_one_hot_weight_picks_that_term(name):
     step, previous_accel, setting, changed = random_step(4)
-    terms = reward_terms(step_readouts(step, previous_accel, CONSTANTS), setting, changed, CONSTANTS)
+    terms = reward_terms(step_readouts(step, previous_accel, envelope_before(), CONSTANTS), setting, changed, CONSTANTS)
     one_hot = RewardTerms(*(float(term == name) for term in REWARD_TERMS))
     np.testing.assert_array_equal(weighted_sum(terms, one_hot), getattr(terms, name))
 
@@ -173,7 +181,7 @@ def test_weighted_sum_with_a_one_hot_weight_picks_that_term(name):
 @pytest.mark.parametrize("seed", range(3))
 def test_weighted_sum_is_the_terms_times_their_weights(seed):
     step, previous_accel, setting, changed = random_step(seed)
-    terms = reward_terms(step_readouts(step, previous_accel, CONSTANTS), setting, changed, CONSTANTS)
+    terms = reward_terms(step_readouts(step, previous_accel, envelope_before(), CONSTANTS), setting, changed, CONSTANTS)
     weights = weights_of(CONFIG)
     expected = np.sum(np.array(weights)[:, None] * np.array(terms), axis=0)
     np.testing.assert_allclose(weighted_sum(terms, weights), expected, rtol=1e-12)
@@ -185,8 +193,8 @@ def test_an_env_scores_the_same_alone_as_in_a_batch(env):
     step, previous_accel, setting, changed = random_step(5)
     alone = StepTicks(*(ticks[:, [env]] for ticks in step))
     weights = weights_of(CONFIG)
-    batch_readouts = step_readouts(step, previous_accel, CONSTANTS)
-    alone_readouts = step_readouts(alone, previous_accel[[env]], CONSTANTS)
+    batch_readouts = step_readouts(step, previous_accel, envelope_before(), CONSTANTS)
+    alone_readouts = step_readouts(alone, previous_accel[[env]], envelope_before()[[env]], CONSTANTS)
     for batch_field, alone_field in zip(batch_readouts, alone_readouts):
         np.testing.assert_array_equal(alone_field, batch_field[[env]])
     batch_terms = reward_terms(batch_readouts, setting, changed, CONSTANTS)
@@ -201,11 +209,20 @@ def test_score_step_is_the_three_steps_in_one_call(seed):
     step, previous_accel, setting, changed = random_step(seed)
     weights = weights_of(CONFIG)
     readouts = StepReadouts.empty(N_ENVS, 5)
-    score = score_step(step, previous_accel, setting, changed, CONSTANTS, weights, readouts)
-    expected_readouts = step_readouts(step, previous_accel, CONSTANTS)
+    score = score_step(step, previous_accel, envelope_before(), setting, changed, CONSTANTS, weights, readouts)
+    expected_readouts = step_readouts(step, previous_accel, envelope_before(), CONSTANTS)
     expected_terms = reward_terms(expected_readouts, setting, changed, CONSTANTS)
     for got, want in zip(readouts, expected_readouts):
         np.testing.assert_array_equal(got, want)
     for got, want in zip(score.terms, expected_terms):
         np.testing.assert_array_equal(got, want)
     np.testing.assert_array_equal(score.reward, weighted_sum(expected_terms, weights))
+
+
+def test_a_static_offset_of_the_gaps_costs_no_string_stability():
+    """Followers at different constant gaps (a biased radar keeps one closer) with no acceleration: no growth."""
+    step, previous_accel, setting, changed = random_step(7)
+    still = step._replace(accel=np.zeros_like(step.accel), leader_accel=np.zeros_like(step.leader_accel),
+                          spacing=np.linspace(10.0, 40.0, 5) * np.ones_like(step.spacing))
+    readouts = step_readouts(still, np.zeros_like(previous_accel), np.zeros((N_ENVS, 6)), CONSTANTS)
+    assert np.all(reward_terms(readouts, setting, changed, CONSTANTS).string_stability == 0.0)

@@ -28,7 +28,7 @@ def random_step(rng: np.random.Generator, collide: bool):
         min_ttc=min_ttc,
         jerk_squared=rng.uniform(0.0, 500.0, per_follower),
         final_speed=rng.uniform(0.0, 35.0, per_follower),
-        peak_spacing_error=rng.uniform(0.0, 10.0, per_follower),
+        accel_growth=rng.uniform(0.0, 2.0, N_ENVS),
         gap_deviation_sum=rng.uniform(0.0, 10.0, N_ENVS),
         deviation_sum=rng.uniform(0.0, 20.0, N_ENVS),
         max_deviation=rng.uniform(0.0, 1.0, N_ENVS),

@@ -167,3 +167,38 @@ def test_drawn_commercial_acc_followers_are_calibrated_cars():
 
 def test_a_degradation_kind_alone_is_a_valid_description():
     assert parse_degradations(Degradation("v2v_outage", (1,), onset=1.0, end=2.0), 3)[0].followers == (1,)
+
+
+@pytest.mark.parametrize("degradation", [{"kind": "gain", "size": 0.7}, {"kind": "lag", "size": 2.5},
+                                         {"kind": "packet_loss", "size": 0.9}])
+def test_the_ground_truths_stable_setting_splits_growing_from_shrinking_platoons(degradation):
+    """Behind a slow braking pulse, 8 degraded followers: the peak acceleration grows down the platoon 0.2 s below
+    the smallest stable setting of the ground truth and does not grow by 2 % 0.2 s above it (the analytic check is
+    continuous in time; the simulator holds each command over a tick, so the split is checked with a margin)."""
+    config = PlatoonConfig(n_followers=8)
+    table = DegradationTable(config, n_envs=1)
+    table.set(0, parse_degradations(degradation, 8))
+    boundary = table.truth(np.array([0]), np.ones((1, 8), dtype=bool))["smallest_stable_setting"][0, 0]
+    pulse = np.r_[np.zeros(50), np.full(100, -1.0), np.full(100, 1.0), np.zeros(700)]
+    leader = timegap_env.LeaderProfile.from_acceleration(pulse)
+    peaks = {}
+    for setting in (boundary - 0.2, boundary + 0.2):
+        trajectory = timegap_env.simulate(leader, config, setting=setting, degradation=degradation)
+        peaks[setting] = np.abs(trajectory.a[:, 1:]).max(axis=0)
+    assert peaks[boundary - 0.2][-1] > 1.02 * peaks[boundary - 0.2][0], peaks
+    assert peaks[boundary + 0.2][-1] < 1.02 * peaks[boundary + 0.2][0], peaks
+
+
+def test_a_degradation_that_ends_returns_the_follower_to_nominal():
+    """After the end, the follower's parameters are nominal again: its ground truth, and its physics (an ended lag
+    degradation leaves the car as it would be nominally, from the state it was in)."""
+    table = DegradationTable(PlatoonConfig(), n_envs=1)
+    table.set(0, parse_degradations({"kind": "gain", "size": 0.6, "onset": 1.0, "end": 2.0}, 5))
+    up = np.ones((1, 5), dtype=bool)
+    during, after = table.truth(np.array([15]), up), table.truth(np.array([25]), up)
+    assert during["active"].all() and during["gain"].tolist() == [[0.6] * 5]
+    assert not after["active"].any() and after["gain"].tolist() == [[1.0] * 5]
+    ended = run(degradation={"kind": "gain", "size": 0.6, "onset": 30.0, "end": 40.0})
+    nominal = run()
+    gap = np.abs(ended.spacing - nominal.spacing)
+    assert gap[ended.t > 30.5].max() > 0.5 and gap[-1].max() < 0.1 * gap[ended.t > 30.5].max()  # back to nominal

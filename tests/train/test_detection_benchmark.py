@@ -29,3 +29,18 @@ def test_the_benchmark_writes_its_report(tmp_path):
     report = (tmp_path / "detection.md").read_text()
     assert "## Setting 1 s" in report and "bayes_cusum" in report and "nan" not in report.lower()
     assert (tmp_path / "detection.png").stat().st_size > 0 and (tmp_path / "detection.csv").stat().st_size > 0
+
+
+def test_calibration_selection_training_and_held_out_seeds_are_apart():
+    from agents.protocol import EVAL_SEED_START
+    from train import value_of_information
+
+    calibration = range(bench.CALIBRATION_SEED_START, bench.CALIBRATION_SEED_START + 96)
+    selection = range(value_of_information.SELECTION_SEED_START,
+                      value_of_information.SELECTION_SEED_START + value_of_information.SELECTION_EPISODES)
+    lookup_training = range(value_of_information.DEFAULT_TRAIN_EPISODES)
+    held_out = range(EVAL_SEED_START, EVAL_SEED_START + 1000)
+    ranges = [set(calibration), set(selection), set(lookup_training), set(held_out)]
+    for i, first in enumerate(ranges):
+        for second in ranges[i + 1:]:
+            assert not first & second

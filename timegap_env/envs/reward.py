@@ -7,8 +7,9 @@ a policy that keeps the estimate quiet while the cars drift).
 A step is scored in three steps, each a compiled function over named structures:
 
 1. :func:`step_readouts`: what the step's ticks come down to: per follower the smallest
-   time-to-collision, the summed squared jerk, the final speed and the peak spacing error; per env
-   the summed deviation of the actual time gap from the applied setting, whether a gap reached 0,
+   time-to-collision, the summed squared jerk and the final speed; per env the growth of the
+   acceleration envelopes down the platoon (the envelopes are carried from step to step), the
+   summed deviation of the actual time gap from the applied setting, whether a gap reached 0,
    and the monitor's diagnostics (its deviation from the chart's centre line, alarm ticks,
    excursion starts), which the episode totals of :mod:`~timegap_env.envs.totals` report and the
    reward does not use;
@@ -23,8 +24,8 @@ applied setting is the tau* the controller uses (it ramps after a change of sett
 
 | term | value | why |
 |---|---|---|
-| ``tracking`` | -mean over follower-ticks of min(abs((s - s0)/v - applied setting), tracking_cap) / (L sigma_desired), at v >= 1 m/s | keep the actual gap at the setting; capped at 0.5 s (-2) because at low speed (s - s0)/v explodes |
-| ``string_stability`` | -min(1, sum over consecutive followers of max(0, peak error of the follower - peak error of its predecessor) / spacing_error_reference), peak error the step's largest abs(s - s0 - applied setting v) | disturbances must not grow down the platoon |
+| ``tracking`` | -mean over follower-ticks of min(abs((s - s0)/v - applied setting), tracking_cap) / tracking_reference, at v >= 1 m/s | keep the actual gap at the setting; capped at 0.5 s (-2) because at low speed (s - s0)/v explodes |
+| ``string_stability`` | -min(1, sum over vehicles of max(0, envelope of the vehicle - envelope of its predecessor) / accel_growth_reference) at the step's end, a vehicle's envelope its peak abs(acceleration) decaying with time constant accel_envelope_time, the leader first | disturbances must not grow down the platoon (string stability is about accelerations; a static offset of the gap does not count) |
 | ``safety`` | -max(0, 1 - TTC / ttc_threshold), TTC the step's smallest (below -1 once a gap is gone) | keep a margin to the predecessor |
 | ``collision`` | -1 on the step a collision ends the episode | outweighs any whole episode of the rest |
 | ``comfort`` | -mean over ticks of (jerk / jerk_reference)^2 | no chattering |
@@ -44,6 +45,7 @@ from __future__ import annotations
 
 import collections
 import dataclasses
+import math
 from typing import NamedTuple
 
 import numba
@@ -67,6 +69,7 @@ class StepTicks(NamedTuple):
     exceedance: np.ndarray  # an excursion started [bool]
     collisions: np.ndarray  # the gap reached 0 [bool]
     leader_speed: np.ndarray  # (n_ticks, n_envs) [m/s]
+    leader_accel: np.ndarray  # (n_ticks, n_envs) [m/s^2]
     speed: np.ndarray  # [m/s]
     spacing: np.ndarray  # bumper-to-bumper gap to the predecessor [m]
     accel: np.ndarray  # [m/s^2]
@@ -78,7 +81,7 @@ class StepReadouts(NamedTuple):
     min_ttc: np.ndarray  # per follower: smallest time-to-collision, inf if never closing in [s]
     jerk_squared: np.ndarray  # per follower: sum over the ticks of jerk^2 [m^2/s^6]
     final_speed: np.ndarray  # per follower: speed at the step's last tick [m/s]
-    peak_spacing_error: np.ndarray  # per follower: largest abs(s - s0 - applied setting v) [m]
+    accel_growth: np.ndarray  # per env: sum over vehicles of the envelope's rise over its predecessor's [m/s^2]
     gap_deviation_sum: np.ndarray  # per env: sum over follower-ticks of the tracking term's capped deviation [s]
     deviation_sum: np.ndarray  # per env: sum over follower-ticks of abs(estimate - centre line) [s]
     max_deviation: np.ndarray  # per env: largest abs(estimate - centre line) [s]
@@ -89,7 +92,7 @@ class StepReadouts(NamedTuple):
     @classmethod
     def empty(cls, n_envs: int, n_followers: int) -> StepReadouts:
         """Uninitialised read-outs of ``n_envs`` envs of ``n_followers`` followers."""
-        per_follower, per_env = np.empty((4, n_envs, n_followers)), np.empty((5, n_envs))  # in field order
+        per_follower, per_env = np.empty((3, n_envs, n_followers)), np.empty((6, n_envs))  # in field order
         return cls(*per_follower, *per_env, np.empty(n_envs, dtype=bool))  # collided last
 
 
@@ -98,7 +101,7 @@ class RewardConstants(NamedTuple):
 
     dt: float  # tick [s]
     ticks_per_step: int  # ticks in a step [-]
-    half_width: float  # L sigma_desired [s]
+    tracking_reference: float  # [s]
     ttc_threshold: float  # [s]
     jerk_reference: float  # [m/s^3]
     smallest_level: float  # [s]
@@ -108,14 +111,15 @@ class RewardConstants(NamedTuple):
     standstill_spacing: float  # s0 [m]
     min_speed: float  # below it the actual time gap is not tracked [m/s]
     tracking_cap: float  # [s]
-    spacing_error_reference: float  # [m]
+    accel_growth_reference: float  # [m/s^2]
+    envelope_decay: float  # an acceleration envelope's decay per tick, exp(-dt / accel_envelope_time) [-]
 
     @classmethod
     def from_config(cls, config: EnvConfig) -> RewardConstants:
         return cls(
             dt=float(config.platoon.dt),
             ticks_per_step=config.ticks_per_decision,
-            half_width=float(config.chart.half_width),
+            tracking_reference=float(config.tracking_reference),
             ttc_threshold=float(config.ttc_threshold),
             jerk_reference=float(config.jerk_reference),
             smallest_level=float(config.setting_levels[0]),
@@ -125,7 +129,8 @@ class RewardConstants(NamedTuple):
             standstill_spacing=float(config.platoon.standstill_spacing),
             min_speed=TIME_GAP_MIN_SPEED,
             tracking_cap=float(config.tracking_cap),
-            spacing_error_reference=float(config.spacing_error_reference),
+            accel_growth_reference=float(config.accel_growth_reference),
+            envelope_decay=math.exp(-config.platoon.dt / config.accel_envelope_time),
         )
 
 
@@ -141,11 +146,13 @@ def weights_of(config: EnvConfig) -> RewardTerms:
     return RewardTerms(*(float(weight) for weight in dataclasses.astuple(config.reward_weights)))
 
 
-def step_readouts(step: StepTicks, previous_accel: np.ndarray, constants: RewardConstants) -> StepReadouts:
+def step_readouts(step: StepTicks, previous_accel: np.ndarray, envelope: np.ndarray,
+                  constants: RewardConstants) -> StepReadouts:
     """The read-outs of ``step``; ``previous_accel`` (n_envs, n_followers) [m/s^2] is the acceleration before
-    its first tick."""
+    its first tick, ``envelope`` (n_envs, 1 + n_followers) [m/s^2] each vehicle's acceleration envelope before
+    it, the leader first, updated in place."""
     readouts = StepReadouts.empty(*previous_accel.shape)
-    _step_readouts(step, previous_accel, constants, readouts)
+    _step_readouts(step, previous_accel, envelope, constants, readouts)
     return readouts
 
 
@@ -169,6 +176,7 @@ def weighted_sum(terms: RewardTerms, weights: RewardTerms) -> np.ndarray:
 def score_step(
     step: StepTicks,
     previous_accel: np.ndarray,
+    envelope: np.ndarray,
     setting: np.ndarray,
     changed: np.ndarray,
     constants: RewardConstants,
@@ -180,26 +188,34 @@ def score_step(
     n_envs = setting.shape[0]
     terms = np.empty((len(REWARD_TERMS), n_envs))  # one row a term, in REWARD_TERMS order
     score = StepScore(RewardTerms(*terms), np.empty(n_envs))
-    _score(tuple(step), previous_accel, setting, changed, tuple(constants), np.array(weights), tuple(readouts),
-           tuple(score.terms), terms, score.reward)
+    _score(tuple(step), previous_accel, envelope, setting, changed, tuple(constants), np.array(weights),
+           tuple(readouts), tuple(score.terms), terms, score.reward)
     return score
 
 
 @numba.njit(cache=True)
-def _score(step, previous_accel, setting, changed, constants, weights, readouts, terms, term_rows, reward):  # noqa: ANN001, ANN202, PLR0913
+def _score(step, previous_accel, envelope, setting, changed, constants, weights, readouts, terms, term_rows, reward):  # noqa: ANN001, ANN202, PLR0913
     """:func:`score_step`; the structures come as plain tuples (see :mod:`timegap_env.sim.platoon`); ``terms``
     are the rows of ``term_rows`` (n_terms, n_envs), written by name and summed by row against ``weights``
     (n_terms,), in REWARD_TERMS order (a tuple indexed by a variable is slow in numba)."""
     step, constants, readouts = StepTicks(*step), RewardConstants(*constants), StepReadouts(*readouts)
-    _step_readouts(step, previous_accel, constants, readouts)
+    _step_readouts(step, previous_accel, envelope, constants, readouts)
     _reward_terms(readouts, setting, changed, constants, RewardTerms(*terms))
     _weighted_sum(term_rows, weights, reward)
 
 
 @numba.njit(cache=True)
-def _step_readouts(step, previous_accel, constants, out):  # noqa: ANN001, ANN202
+def _step_readouts(step, previous_accel, envelope, constants, out):  # noqa: ANN001, ANN202
     n_ticks, n_envs, n_followers = step.speed.shape
     for e in range(n_envs):
+        for k in range(n_ticks):  # the acceleration envelopes, the leader's in column 0
+            envelope[e, 0] = max(abs(step.leader_accel[k, e]), envelope[e, 0] * constants.envelope_decay)
+            for f in range(n_followers):
+                envelope[e, f + 1] = max(abs(step.accel[k, e, f]), envelope[e, f + 1] * constants.envelope_decay)
+        growth = 0.0
+        for i in range(1, n_followers + 1):
+            growth += max(0.0, envelope[e, i] - envelope[e, i - 1])
+        out.accel_growth[e] = growth
         deviation_sum = max_deviation = alarm_ticks = exceedances = gap_deviation_sum = 0.0
         collided = False
         for k in range(n_ticks):
@@ -220,11 +236,8 @@ def _step_readouts(step, previous_accel, constants, out):  # noqa: ANN001, ANN20
         out.deviation_sum[e], out.max_deviation[e], out.collided[e] = deviation_sum, max_deviation, collided
         out.alarm_ticks[e], out.exceedances[e], out.gap_deviation_sum[e] = alarm_ticks, exceedances, gap_deviation_sum
         for f in range(n_followers):
-            out.min_ttc[e, f], out.jerk_squared[e, f], out.peak_spacing_error[e, f] = np.inf, 0.0, 0.0
+            out.min_ttc[e, f], out.jerk_squared[e, f] = np.inf, 0.0
             for k in range(n_ticks):
-                error = (step.spacing[k, e, f] - constants.standstill_spacing
-                         - step.applied_setting[k, e, f] * step.speed[k, e, f])
-                out.peak_spacing_error[e, f] = max(out.peak_spacing_error[e, f], abs(error))
                 predecessor_speed = step.leader_speed[k, e] if f == 0 else step.speed[k, e, f - 1]
                 closing = step.speed[k, e, f] - predecessor_speed  # [m/s], > 0 when the gap shrinks
                 if closing > 0:
@@ -240,10 +253,8 @@ def _reward_terms(readouts, setting, changed, constants, out):  # noqa: ANN001, 
     n_ticks = constants.ticks_per_step
     follower_ticks = n_ticks * n_followers
     for e in range(n_envs):
-        safety = comfort = efficiency = preference = switching = growth = 0.0
+        safety = comfort = efficiency = preference = switching = 0.0
         for f in range(n_followers):
-            if f > 0:
-                growth += max(0.0, readouts.peak_spacing_error[e, f] - readouts.peak_spacing_error[e, f - 1])
             v = readouts.final_speed[e, f]  # [m/s]
             safety += max(0.0, 1.0 - readouts.min_ttc[e, f] / constants.ttc_threshold)
             comfort += readouts.jerk_squared[e, f] / n_ticks
@@ -252,8 +263,8 @@ def _reward_terms(readouts, setting, changed, constants, out):  # noqa: ANN001, 
             )
             preference += abs(setting[e, f] - constants.preferred_setting)
             switching += changed[e, f]
-        out.tracking[e] = -readouts.gap_deviation_sum[e] / follower_ticks / constants.half_width
-        out.string_stability[e] = -min(1.0, growth / constants.spacing_error_reference)
+        out.tracking[e] = -readouts.gap_deviation_sum[e] / follower_ticks / constants.tracking_reference
+        out.string_stability[e] = -min(1.0, readouts.accel_growth[e] / constants.accel_growth_reference)
         out.safety[e] = -(safety / n_followers)
         out.collision[e] = -1.0 if readouts.collided[e] else -0.0
         out.comfort[e] = -(comfort / n_followers) / constants.jerk_reference**2

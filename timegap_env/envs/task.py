@@ -82,6 +82,7 @@ class PlatoonTask:
         self.loop = MonitoredPlatoon(config.platoon, config.monitor, config.chart, config.sensors, n_envs)
         self.totals = EpisodeTotals.zeros(n_envs)
         self._previous_accel = np.zeros((n_envs, self.n_followers))  # before the next step's first tick [m/s^2]
+        self._accel_envelope = np.zeros((n_envs, self.n_followers + 1))  # decaying peak |acceleration|, leader first [m/s^2]
         self._readouts = StepReadouts.empty(n_envs, self.n_followers)  # of the last step, refilled by every step
         self._readouts.min_ttc[:], self._readouts.jerk_squared[:] = np.inf, 0.0
         self._scales = ObservationScales.from_config(config)
@@ -103,6 +104,7 @@ class PlatoonTask:
                    dropout_probability=episodes.dropout_probability)
         loop.platoon.set_v2v(loop.degradation.v2v_up(loop.ticks), mask=mask)  # the others keep their last tick's
         self._previous_accel[mask] = loop.platoon.a[mask, 1:]
+        self._accel_envelope[mask] = np.abs(loop.platoon.a[mask])
         self._readouts.min_ttc[mask] = np.inf
         self._readouts.jerk_squared[mask] = 0.0
         self.totals.restart(mask)
@@ -126,12 +128,11 @@ class PlatoonTask:
 
         step = StepTicks(
             tau_mean=block.tau_mean, center=chart.center, applied_setting=physics.applied_setting, alarm=chart.alarm,
-            exceedance=chart.exceedance,
-            collisions=physics.collisions, leader_speed=leader_speed, speed=physics.speed, spacing=physics.spacing,
-            accel=physics.accel,
+            exceedance=chart.exceedance, collisions=physics.collisions, leader_speed=leader_speed,
+            leader_accel=leader_accel, speed=physics.speed, spacing=physics.spacing, accel=physics.accel,
         )
-        score = score_step(step, self._previous_accel, platoon.setting, changed, self._reward_constants, self._weights,
-                           self._readouts)
+        score = score_step(step, self._previous_accel, self._accel_envelope, platoon.setting, changed,
+                           self._reward_constants, self._weights, self._readouts)
         self.totals.add_step(self._readouts, platoon.setting, changed, self._reward_constants.gap_per_vehicle)
         self._previous_accel = physics.accel[-1].copy()
         terminated = platoon.collided.any(axis=1)
@@ -177,7 +178,8 @@ class PlatoonTask:
         """Each follower's degradation now, its true parameters and the smallest string-stable setting for them,
         arrays (n_envs, n_followers) (:meth:`~timegap_env.sim.degradation.DegradationTable.truth`): for
         oracles and evaluation, never in the observation."""
-        return self.loop.degradation.truth(self.loop.ticks, self.loop.platoon.v2v)
+        loop = self.loop
+        return loop.degradation.truth(loop.ticks, loop.degradation.v2v_up(loop.ticks) & self.config.platoon.v2v)
 
     def episode_summary(self) -> dict[str, np.ndarray]:
         """Episode statistics so far, each (n_envs,)."""

@@ -143,44 +143,44 @@ def draw_degradation(rng: np.random.Generator, config: DegradationConfig, n_foll
     hit[rng.integers(n_followers)] = True  # at least one follower
     followers = tuple(int(f) + 1 for f in np.flatnonzero(hit))
     midway, recovers = rng.random() < config.midway_onset_probability, rng.random() < config.recovery_probability
-    onset = _on_tick(rng.uniform(0.25, 0.75) * duration, dt) if midway else 0.0
-    end = _on_tick(onset + rng.uniform(0.2, 0.5) * duration, dt) if recovers else None
+    onset = round_to_tick(rng.uniform(0.25, 0.75) * duration, dt) if midway else 0.0
+    end = round_to_tick(onset + rng.uniform(0.2, 0.5) * duration, dt) if recovers else None
     end = end if end is not None and end < duration else None
     if kind == "none":
         return ()
     if kind == "v2v_outage":
-        length = _on_tick(rng.uniform(*config.v2v_outage_duration_range), dt)
-        onset = _on_tick(rng.uniform(0.0, max(duration - length, 0.0)), dt)
+        length = round_to_tick(rng.uniform(*config.v2v_outage_duration_range), dt)
+        onset = round_to_tick(rng.uniform(0.0, max(duration - length, 0.0)), dt)
         return (Degradation(kind, followers, onset=onset, end=onset + length),)
     if kind == "commercial_acc":
         from timegap_env.sim.presets import COMMERCIAL_ACC, acc_presets  # scipy-backed: imported when used
 
         cars = sorted(car for car in acc_presets() if car != COMMERCIAL_ACC)
         return tuple(Degradation(kind, (f,), car=cars[rng.integers(len(cars))]) for f in followers)
-    low, high = {"lag": config.lag_factor_range, "gain": config.gain_range, "v2v_latency": config.v2v_latency_range,
-                 "packet_loss": config.packet_loss_range, "radar_bias": config.radar_bias_range,
-                 "radar_noise": config.radar_noise_range}[kind]
-    size = float(rng.uniform(low, high))
+    size = float(rng.uniform(*config.size_range(kind)))
     if kind == "v2v_latency":
-        size = _on_tick(size, dt)
+        size = round_to_tick(size, dt)
     if kind == "radar_bias" and rng.random() < 0.5:
         size = -size
     return (Degradation(kind, followers, size=size, onset=onset, end=end),)
 
 
-def _on_tick(time: float, dt: float) -> float:
+def round_to_tick(time: float, dt: float) -> float:
     """``time`` [s] rounded to a whole number of ticks of ``dt`` [s]."""
     return round(time / dt) * dt
 
 
 @functools.lru_cache(maxsize=4096)
 def smallest_stable_setting(lag: float, gain: float, k_s: float, k_v: float, k_a: float, k_f: float,
-                            delay: float) -> float:
-    """The smallest tau* [s] at which a follower of these parameters is string and locally stable (to 0.01 s,
-    searched over SETTING_SEARCH; inf if none there). ``k_f = 0`` is ACC; ``delay`` is the V2V delay [s]."""
+                            delay: float, packet_loss: float = 0.0, dt: float = PlatoonConfig.dt) -> float:
+    """The smallest tau* [s] at which a follower of these parameters is string and locally stable by
+    :func:`~timegap_env.sim.stability.string_stability` (to 0.01 s, searched over SETTING_SEARCH; inf if none
+    there). ``k_f = 0`` is ACC; ``delay`` is the V2V delay [s], ``packet_loss`` the chance [-] that a V2V message
+    (one every ``dt`` [s]) is lost."""
 
     def stable(setting: float) -> bool:
-        report = string_stability(k_s=k_s, k_v=k_v, k_a=k_a, k_f=k_f, setting=setting, lag=lag, gain=gain, delay=delay)
+        report = string_stability(k_s=k_s, k_v=k_v, k_a=k_a, k_f=k_f, setting=setting, lag=lag, gain=gain, delay=delay,
+                                  packet_loss=packet_loss, dt=dt)
         return report.string_stable and report.locally_stable
 
     low, high = SETTING_SEARCH
@@ -263,19 +263,16 @@ class DegradationTable:
 
     def _find_stable_settings(self, env: int) -> None:
         """Env ``env``'s smallest string-stable settings (``stable``) for its nominal and degraded parameters, with
-        the link up and down; a packet loss counts as the mean extra age of the message held, loss / (1 - loss)
-        ticks."""
+        the link up and down."""
         cfg = self.config
         for f in range(cfg.n_followers):
             for (degraded, up), table in self.stable.items():
                 lag, gain = (self.lag[env, f], self.gain[env, f]) if degraded else (self._nominal_lag[f], self._nominal_gain[f])
                 k_s, k_v = (self.k_s[env, f], self.k_v[env, f]) if degraded else (cfg.k_s, cfg.k_v)
-                delay = cfg.v2v_delay
-                if degraded:
-                    loss = self.packet_loss[env, f]
-                    delay += self.extra_delay[env, f] * cfg.dt + cfg.dt * loss / (1.0 - loss)
+                delay = cfg.v2v_delay + (self.extra_delay[env, f] * cfg.dt if degraded else 0.0)
+                loss = float(self.packet_loss[env, f]) if degraded else 0.0
                 table[env, f] = smallest_stable_setting(float(lag), float(gain), float(k_s), float(k_v), cfg.k_a,
-                                                        cfg.k_f if up else 0.0, round(float(delay), 9))
+                                                        cfg.k_f if up else 0.0, round(float(delay), 9), loss, cfg.dt)
         self._stale[env] = False
 
     def _set_follower(self, env: int, f: int, degradation: Degradation) -> None:
@@ -333,11 +330,14 @@ class DegradationTable:
         return ~(self.active(ticks) & self.v2v_down)
 
     def truth(self, ticks: np.ndarray, v2v: np.ndarray) -> dict[str, np.ndarray]:
-        """The ground truth at ``ticks`` (n_envs,) since reset with the V2V flag ``v2v`` (n_envs, n_followers), arrays
-        (n_envs, n_followers) without NaN (so that equal episodes give equal infos): never in the observation.
+        """The ground truth for the next tick, ``ticks`` (n_envs,) since reset, with the V2V flag ``v2v`` (n_envs,
+        n_followers) it will have, arrays (n_envs, n_followers) without NaN (so that equal episodes give equal
+        infos): never in the observation.
 
         ``kind`` (the follower's degradation, "none" if not hit), ``size`` (0 without one), ``onset`` and ``end``
-        [s] (inf: not hit / never), ``active`` (it acts now), ``v2v`` (the link is up, what the flag shows),
+        [s] (inf: not hit / never): the episode's schedule, what has not started included (an oracle that reads
+        it sees the future; ours read ``active`` and the true parameters only); ``active`` (it acts in the next
+        tick), ``v2v`` (the link is up, what the flag shows),
         ``smallest_stable_setting`` [s] for the true parameters and link, and the true parameters of
         TRUE_PARAMETERS.
         """

@@ -280,7 +280,6 @@ class Platoon:
     collided = property(lambda self: self._state.collided, doc="Gap <= 0 was reached (n_envs, n_followers) [bool].")
     ticks = property(lambda self: self._state.ticks, doc="Ticks since each env's reset (n_envs,) [-].")
     faults = property(lambda self: self._faults, doc="Each follower's :class:`FollowerFaults` (arrays change in place).")
-    nominal_dynamics = property(lambda self: self._zoh, doc="The nominal GLVD :class:`ZOHCoefficients` per follower.")
 
     @property
     def spacing(self) -> np.ndarray:

@@ -2,8 +2,12 @@
 
 The transfer function from the predecessor's acceleration to the follower's is
 
-    G(s) = K (k_f s^2 e^{-theta s} + k_v s + k_s)
-           / (T s^3 + (1 - K k_a) s^2 + K (k_v + k_s tau*) s + K k_s).
+    G(s) = K (k_f s^2 e^{-theta s} H(s) + k_v s + k_s)
+           / (T s^3 + (1 - K k_a) s^2 + K (k_v + k_s tau*) s + K k_s),
+
+H(s) = (1 - p) / (1 - p e^{-s dt}) the mean effect of losing each V2V message with chance p and
+holding the last one received (a geometric extra delay of whole ticks; H = 1 without loss).
+The model is continuous in time: it ignores the simulator's hold of the command over each tick.
 
 A platoon is string stable iff max_w |G(jw)| <= 1 (disturbances do not grow
 down the platoon), and locally stable iff the denominator is Hurwitz:
@@ -45,10 +49,14 @@ def transfer_gain(
     lag: float,
     gain: float,
     delay: float,
+    packet_loss: float = 0.0,
+    dt: float = PlatoonConfig.dt,
 ) -> np.ndarray:
-    """|G(jw)| at each ``frequency`` w [rad/s]; ``setting`` tau* [s], ``lag`` T [s], ``gain`` K, ``delay`` theta [s]."""
+    """|G(jw)| at each ``frequency`` w [rad/s]; ``setting`` tau* [s], ``lag`` T [s], ``gain`` K, ``delay`` theta [s],
+    ``packet_loss`` p [-] of the V2V messages sent every ``dt`` [s]."""
     s = 1j * np.asarray(frequency, dtype=float)
-    numerator = gain * (k_f * s**2 * np.exp(-delay * s) + k_v * s + k_s)
+    held = (1.0 - packet_loss) / (1.0 - packet_loss * np.exp(-dt * s))
+    numerator = gain * (k_f * s**2 * np.exp(-delay * s) * held + k_v * s + k_s)
     denominator = lag * s**3 + (1 - gain * k_a) * s**2 + gain * (k_v + k_s * setting) * s + gain * k_s
     return np.abs(numerator / denominator)
 
@@ -63,6 +71,8 @@ def string_stability(
     lag: float,
     gain: float,
     delay: float,
+    packet_loss: float = 0.0,
+    dt: float = PlatoonConfig.dt,
 ) -> StabilityReport:
     """Peak gain of G and the string and local stability verdicts for one follower.
 
@@ -73,9 +83,10 @@ def string_stability(
             raise ValueError(f"{name} = {value!r}: must be finite and > 0")
     if not np.isfinite(delay) or delay < 0:
         raise ValueError(f"delay = {delay!r}: must be finite and >= 0")
-    gains = transfer_gain(
-        FREQUENCY_GRID, k_s=k_s, k_v=k_v, k_a=k_a, k_f=k_f, setting=setting, lag=lag, gain=gain, delay=delay
-    )
+    if not 0 <= packet_loss < 1:
+        raise ValueError(f"packet_loss = {packet_loss!r}: must be in [0, 1)")
+    gains = transfer_gain(FREQUENCY_GRID, k_s=k_s, k_v=k_v, k_a=k_a, k_f=k_f, setting=setting, lag=lag, gain=gain,
+                          delay=delay, packet_loss=packet_loss, dt=dt)
     peak = int(np.argmax(gains))
     damping = 1 - gain * k_a
     velocity_term = gain * (k_v + k_s * setting)
