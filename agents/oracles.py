@@ -11,7 +11,9 @@ any follower needs), (n_envs, N) or (N,) for ``"per_vehicle"``.
   smallest string-stable setting for the true parameters and link;
 - :class:`LookupOracle`: the setting that scored best under the reward, on training seeds, for
   the true condition (the active degradation's kind and size bin), from a table measured by
-  ``train/value_of_information.py``.
+  ``train/value_of_information.py``; with ``whole_episode=True`` it reads the episode's schedule
+  instead (it sees the future) and holds the setting for the episode's condition from reset on,
+  so that the platoon is ready before the onset.
 """
 
 from __future__ import annotations
@@ -28,15 +30,16 @@ NOMINAL = "none"  # the condition of a follower no degradation acts on
 SIZE_BINS = 3  # a sized degradation's range is cut into this many equal bins (per sign for radar_bias)
 
 
-def condition_keys(truth: Mapping[str, np.ndarray], config: DegradationConfig) -> np.ndarray:
+def condition_keys(truth: Mapping[str, np.ndarray], config: DegradationConfig, whole_episode: bool = False) -> np.ndarray:
     """Each follower's true condition as a string key, shaped like ``truth["kind"]``: "none" when nothing
     acts, "<kind>:<bin>" for a sized kind (bin 0 .. SIZE_BINS - 1 of its drawn range, "-" before the bin
-    of a negative radar bias), else the kind (a commercial ACC: whichever car)."""
+    of a negative radar bias), else the kind (a commercial ACC: whichever car). With ``whole_episode`` the
+    follower's degradation counts whether it acts now or not (before its onset, after its end)."""
     kinds, sizes, active = np.asarray(truth["kind"]), np.asarray(truth["size"]), np.asarray(truth["active"])
     keys = np.full(kinds.shape, NOMINAL, dtype=object)
     for index in np.ndindex(kinds.shape):
         kind = kinds[index]
-        if not active[index] or kind == NOMINAL:
+        if not (whole_episode or active[index]) or kind == NOMINAL:
             continue
         if kind in SIZE_RANGE_FIELDS:
             keys[index] = f"{kind}:{size_bin(kind, float(sizes[index]), config)}"
@@ -101,16 +104,18 @@ class StabilityOracle(TruthPolicy):
 
 class LookupOracle(TruthPolicy):
     """Each follower's setting [s] from ``table`` (condition key, see :func:`condition_keys` -> setting); a
-    condition missing from the table takes the nominal one's."""
+    condition missing from the table takes the nominal one's. ``whole_episode``: the key of the episode's
+    degradation from reset on, not of the one acting now."""
 
-    name = "oracle_lookup"
-
-    def __init__(self, table: Mapping[str, float], config: EnvConfig | Mapping[str, Any] | None = None) -> None:
+    def __init__(self, table: Mapping[str, float], config: EnvConfig | Mapping[str, Any] | None = None,
+                 whole_episode: bool = False) -> None:
         super().__init__(config)
         if NOMINAL not in table:
             raise ValueError(f"table keys {sorted(table)}: must hold the nominal condition {NOMINAL!r}")
         self.table = dict(table)
+        self.whole_episode = whole_episode
+        self.name = "oracle_lookup_episode" if whole_episode else "oracle_lookup"
 
     def _settings(self, truth: Mapping[str, np.ndarray]) -> np.ndarray:
-        keys = condition_keys(truth, self.config.degradation)
+        keys = condition_keys(truth, self.config.degradation, self.whole_episode)
         return np.vectorize(lambda key: self.table.get(key, self.table[NOMINAL]), otypes=[float])(keys)

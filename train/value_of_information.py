@@ -1,6 +1,7 @@
 """How much is knowing worth? Blind constants, the hindsight-best constant and the oracles, on the same episodes.
 
     python -m train.value_of_information [--episodes 120] [--train-episodes 16] [--out results/degradation]
+                                         [--config '{"preferred_setting": 1.0}']
 
 On a fixed set of held-out episodes of the default env (seeds ``EVAL_SEED_START`` on, the default
 leader and degradation mix), every ladder setting is held for whole episodes:
@@ -12,7 +13,8 @@ leader and degradation mix), every ladder setting is held for whole episodes:
   (smallest level ``margin`` above the smallest string-stable setting of the true parameters, for
   each margin of ``MARGINS``) and the lookup oracle (per true condition, the constant that scored
   best on training seeds < ``EVAL_SEED_START``, measured here: each condition pinned from the start
-  on ``--train-episodes`` episodes, every constant tried). The best by mean return on
+  on ``--train-episodes`` episodes, every constant tried), once for the condition acting now and once
+  for the episode's whole schedule from reset on (it sees the future). The best by mean return on
   ``SELECTION_EPISODES`` selection episodes (seeds from ``SELECTION_SEED_START``) is *the* oracle.
 
 Also, per degradation kind: the best constant (no constant wins everywhere), and what the
@@ -27,6 +29,7 @@ from __future__ import annotations
 import argparse
 import csv
 import dataclasses
+import json
 import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -157,9 +160,11 @@ def main(argv: Sequence[str] | None = None) -> None:
     parser.add_argument("--train-episodes", type=int, default=DEFAULT_TRAIN_EPISODES,
                         help="training episodes per condition for the lookup oracle (default %(default)s)")
     parser.add_argument("--out", type=Path, default=DEFAULT_OUT, help="output directory (default %(default)s)")
+    parser.add_argument("--config", type=json.loads, default={},
+                        help="EnvConfig overrides as JSON, e.g. '{\"preferred_setting\": 1.0}' (default: none)")
     args = parser.parse_args(argv)
     started = time.perf_counter()
-    config = EnvConfig()
+    config = EnvConfig.from_dict(args.config)
     levels = np.asarray(config.setting_levels)
     seeds = list(range(EVAL_SEED_START, EVAL_SEED_START + args.episodes))
 
@@ -170,7 +175,8 @@ def main(argv: Sequence[str] | None = None) -> None:
     blind = int(np.argmax(fixed["return"].mean(axis=0)))
     flag_aware = np.unravel_index(int(np.argmax(pairs["return"].mean(axis=0))), pairs["return"].shape[1:])
     hindsight = fixed["return"].max(axis=1)
-    oracles = [StabilityOracle(config, margin) for margin in MARGINS] + [LookupOracle(table, config)]
+    oracles = [*(StabilityOracle(config, margin) for margin in MARGINS),
+               LookupOracle(table, config), LookupOracle(table, config, whole_episode=True)]
     selection = list(range(SELECTION_SEED_START, SELECTION_SEED_START + SELECTION_EPISODES))
     assert selection[-1] < EVAL_SEED_START
     on_selection = {o.name: run(config, selection, lambda obs, infos, o=o: o.act(infos["degradation"]))["return"].mean()
@@ -209,7 +215,8 @@ def write_report(path: Path, args: argparse.Namespace, config: EnvConfig, kinds:
     weights = config.degradation.kind_weights
     lines = [
         "# How much is knowing worth? (`python -m train.value_of_information`)", "",
-        f"{args.episodes} held-out episodes of the default env (seeds {EVAL_SEED_START}-{EVAL_SEED_START + args.episodes - 1}; "
+        f"{args.episodes} held-out episodes of the "
+        f"{'default env' if not args.config else f'env with overrides `{json.dumps(args.config)}`'} (seeds {EVAL_SEED_START}-{EVAL_SEED_START + args.episodes - 1}; "
         f"leader families {sorted(config.scenario_weights)}; degradation mix `kind_weights` = {dict(weights)}), each run "
         f"with every constant setting and with each oracle. Lookup oracle: per condition, the constant with the best mean "
         f"return on {args.train_episodes} training episodes (seeds 0-{args.train_episodes - 1}) with that condition pinned "

@@ -44,6 +44,7 @@ def test_condition_keys_bin_the_active_degradations_size():
     assert size_bin("radar_bias", -3.9, config) == "-2" and size_bin("lag", 9.0, config) == "2"  # clipped to the range
     before = truth_after({"degradation": {"kind": "gain", "size": 0.62, "onset": 10.0}})
     assert set(condition_keys(before, config)) == {"none"}  # not acting yet
+    assert set(condition_keys(before, config, whole_episode=True)) == {"gain:0"}  # the schedule, read ahead
     after = truth_after({"degradation": {"kind": "gain", "size": 0.62, "onset": 1.0}})
     assert set(condition_keys(after, config)) == {"gain:0"}
 
@@ -55,3 +56,11 @@ def test_the_lookup_oracle_reads_its_table_and_needs_the_nominal_entry():
     assert LEVELS[LookupOracle(table, CONFIG).act(truth_after({"degradation": {"kind": "lag", "size": 2.0}}))] == 1.0
     with pytest.raises(ValueError, match="must hold the nominal condition 'none'"):
         LookupOracle({"gain:0": 1.8}, CONFIG)
+
+
+def test_the_whole_episode_lookup_oracle_prepares_before_the_onset():
+    table = {"none": 1.0, "gain:0": 1.8}
+    before = truth_after({"degradation": {"kind": "gain", "size": 0.62, "followers": [2], "onset": 10.0}})
+    assert LEVELS[LookupOracle(table, CONFIG).act(before)] == 1.0
+    episode = LookupOracle(table, CONFIG, whole_episode=True)
+    assert LEVELS[episode.act(before)] == 1.8 and episode.name == "oracle_lookup_episode"

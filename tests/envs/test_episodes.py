@@ -26,9 +26,11 @@ def test_every_draw_is_in_its_configured_range():
     ranges = {"lag": CONFIG.degradation.lag_factor_range, "gain": CONFIG.degradation.gain_range,
               "v2v_latency": CONFIG.degradation.v2v_latency_range, "packet_loss": CONFIG.degradation.packet_loss_range,
               "radar_noise": CONFIG.degradation.radar_noise_range}
+    uniform = CONFIG.with_overrides({"degradation": CONFIG.degradation.with_overrides(
+        {"kind_weights": {kind: 1.0 for kind in CONFIG.degradation.kind_weights}})})
     kinds = set()
     for seed in range(60):
-        episodes = draw(CONFIG, 1, 0, seed)
+        episodes = draw(uniform, 1, 0, seed)
         duration = episodes.episode_ticks[0] * 0.1
         for degradation in episodes.degradations[0]:
             kinds.add(degradation.kind)
@@ -43,7 +45,7 @@ def test_every_draw_is_in_its_configured_range():
                 assert 20.0 - 1e-9 <= degradation.end - degradation.onset <= 80.0 + 1e-9
         assert 0.0 <= episodes.dropout_probability[0] <= 0.05
         assert episodes.scenario[0] in CONFIG.scenario_weights
-    assert kinds == set(CONFIG.degradation.kind_weights) - {"none"}  # every kind is drawn in 60 episodes
+    assert kinds == set(CONFIG.degradation.kind_weights) - {"none"}  # every kind is drawn in 60 episodes of a uniform mix
 
 
 def test_a_pinned_degradation_leaves_the_other_draws_as_they_were():
