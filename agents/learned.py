@@ -13,6 +13,7 @@ observations go to the model unchanged.
 from __future__ import annotations
 
 import dataclasses
+import json
 import pickle
 from pathlib import Path
 from typing import Any
@@ -23,7 +24,7 @@ from stable_baselines3 import PPO
 from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.vec_env import VecNormalize
 
-from agents.protocol import MODEL_FILE, VECNORMALIZE_FILE
+from agents.protocol import ENV_FILE, MODEL_FILE, VECNORMALIZE_FILE
 
 
 @dataclasses.dataclass(frozen=True)
@@ -62,17 +63,18 @@ class ObservationNormalizer:
 class LearnedPolicy:
     """An SB3 model behind the same ``predict`` as the hand-written policies.
 
-    ``action_mode`` follows the model's action space: ``Discrete`` -> "platoon",
-    ``MultiDiscrete`` -> "per_vehicle".
+    ``action_mode``: as given (a run's ``ENV_FILE`` gives it), else from the model's action space:
+    ``Discrete`` -> "platoon", ``MultiDiscrete`` -> "per_vehicle".
     """
 
-    def __init__(self, model: BaseAlgorithm, normalizer: ObservationNormalizer | None = None, name: str = "PPO") -> None:
-        if isinstance(model.action_space, spaces.Discrete):
-            self.action_mode = "platoon"
-        elif isinstance(model.action_space, spaces.MultiDiscrete):
-            self.action_mode = "per_vehicle"
-        else:
-            raise ValueError(f"model.action_space = {model.action_space}: must be Discrete or MultiDiscrete")
+    def __init__(self, model: BaseAlgorithm, normalizer: ObservationNormalizer | None = None, name: str = "PPO",
+                 action_mode: str | None = None) -> None:
+        expected = {"platoon": spaces.Discrete, "relative": spaces.Discrete, "per_vehicle": spaces.MultiDiscrete}
+        if action_mode is None:
+            action_mode = "per_vehicle" if isinstance(model.action_space, spaces.MultiDiscrete) else "platoon"
+        if action_mode not in expected or not isinstance(model.action_space, expected[action_mode]):
+            raise ValueError(f"action_mode = {action_mode!r}: does not fit model.action_space = {model.action_space}")
+        self.action_mode = action_mode
         self.model = model
         self.normalizer = normalizer
         self.name = name
@@ -89,6 +91,7 @@ class LearnedPolicy:
 
         ``vecnormalize``: the ``VecNormalize`` pickle; by default ``vecnormalize.pkl`` beside the
         model if it exists, else no normalisation. An explicit path that does not exist is an error.
+        The action mode comes from ``env.json`` beside the model if it exists.
         """
         path = Path(path)
         model_path = path / MODEL_FILE if path.is_dir() else path
@@ -101,7 +104,14 @@ class LearnedPolicy:
             if not Path(vecnormalize).is_file():
                 raise FileNotFoundError(f"vecnormalize = {str(vecnormalize)!r}: no such file")
             normalizer = ObservationNormalizer.from_vecnormalize(vecnormalize)
-        return cls(algorithm.load(model_path, device="cpu"), normalizer, name)
+        env_path = model_path.parent / ENV_FILE
+        action_mode = None
+        if env_path.is_file():
+            try:
+                action_mode = json.loads(env_path.read_text()).get("config", {}).get("action_mode", "platoon")
+            except (json.JSONDecodeError, AttributeError) as error:
+                raise ValueError(f"{env_path}: not a JSON object of gym.make keyword arguments ({error})") from error
+        return cls(algorithm.load(model_path, device="cpu"), normalizer, name, action_mode)
 
     @property
     def observation_shape(self) -> tuple[int, ...]:

@@ -16,7 +16,8 @@ from typing import Any, Self
 import numpy as np
 
 MPH = 0.44704  # [m/s per mph]
-ACTION_MODES = ("platoon", "per_vehicle")  # one setting for all followers, or one each
+ACTION_MODES = ("platoon", "per_vehicle", "relative")  # one setting for all followers, one each, or one step
+# of the platoon's setting down the ladder, none, or up
 CHART_KINDS = ("shewhart", "ewma", "cusum")  # the charts of timegap_env.monitoring.charts.CHARTS
 # What can go wrong with a follower (timegap_env.sim.degradation); only v2v_outage shows (the V2V flag drops).
 DEGRADATION_KINDS = (
@@ -451,7 +452,7 @@ class EnvConfig(ConfigMixin):
     reward_weights: RewardWeights = RewardWeights()
     decision_interval: float = 1.0  # time between two actions, a multiple of platoon.dt [s]
     episode_duration: float = 250.0  # [s]
-    action_mode: str = "platoon"  # one of ACTION_MODES: one setting for all followers, or one each
+    action_mode: str = "platoon"  # one of ACTION_MODES: one setting for all followers, one each, or a relative step
     setting_levels: tuple[float, ...] = (0.6, 0.8, 1.0, 1.2, 1.4, 1.6, 1.8, 2.0, 2.2)  # settings to choose from [s]
     preferred_setting: float = 1.6  # the setting the driver chose [s]
     scenario_weights: dict[str, float] = dataclasses.field(default_factory=_default_scenario_weights)  # family -> weight

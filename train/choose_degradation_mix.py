@@ -28,12 +28,13 @@ from typing import NamedTuple
 
 import numpy as np
 
-from agents.oracles import NOMINAL, LookupOracle, StabilityOracle
+from agents.oracles import NOMINAL
 from agents.policies import seconds
 from agents.protocol import EVAL_SEED_START
 from timegap_env.config import DEGRADATION_KINDS, EnvConfig
 from train.value_of_information import (
-    DEFAULT_OUT, DEFAULT_TRAIN_EPISODES, MARGINS, SELECTION_SEED_START, TARGET_SHARE, constants, measure_lookup, run,
+    DEFAULT_OUT, DEFAULT_TRAIN_EPISODES, SELECTION_SEED_START, TARGET_SHARE, all_oracles, constants, measure_lookup,
+    run,
 )
 
 WEIGHT_GRID = (1, 2, 4)  # the weights tried for each kind: every kind stays in the mix [-]
@@ -50,8 +51,7 @@ def per_kind(config: EnvConfig, episodes: int, table: dict[str, float]) -> dict[
     for kind in (NOMINAL, *DEGRADATION_KINDS):
         alone = config.with_overrides({"degradation": config.degradation.with_overrides({"kind_weights": {kind: 1.0}})})
         pairs = constants(alone, seeds, flag_aware=True)
-        oracles = [*(StabilityOracle(alone, margin) for margin in MARGINS),
-                   LookupOracle(table, alone), LookupOracle(table, alone, whole_episode=True)]
+        oracles = all_oracles(alone, table)
         results[kind] = {"return": pairs["return"], "collision": pairs["collision"],
                          **{f"oracle:{o.name}": run(alone, seeds, lambda obs, infos, o=o: o.act(infos["degradation"]))["return"]
                             for o in oracles}}

@@ -14,26 +14,38 @@ normalisation statistics. The run directory ``--out`` holds exactly:
 - ``model.zip``: the PPO model, also the checkpoint (replaced every ``--checkpoint-freq``
   steps and at the end; it stores the timestep count, so ``--resume`` continues from it);
 - ``vecnormalize.pkl``: ``VecNormalize``'s running statistics, when ``normalize`` is on;
+- ``env.json``: the ``gym.make`` keyword arguments of the env as evaluated (its action mode among them);
+- ``curve.csv`` and ``curve.png``: the learning curve, every ``--curve-freq`` steps (0: only at the
+  end) and at the end: the deterministic policy's mean return on the check episodes, and the share
+  of the oracle gap it captures there, (policy - best blind constant) / (oracle - best blind
+  constant), the constant and the oracle (``train.value_of_information``'s) measured once on the
+  same episodes; a resumed run continues the curve;
 - ``training.md``: command, timesteps, wall time, throughput and returns, written at the end.
 
 Sub-env i of phase k's env is seeded ``--seed + k * n_envs + i``; all training seeds stay below
-``agents.protocol.EVAL_SEED_START`` (10 000), where the evaluation's seeds begin. The final check runs the
-deterministic policy and the best constant setting on ``EVAL_EPISODES`` episodes seeded
-``EVAL_SEED + i``, also below 10 000. TensorBoard logs go to ``--tensorboard-log``.
+``agents.protocol.EVAL_SEED_START`` (10 000), where the evaluation's seeds begin. The check episodes of
+the learning curve are ``EVAL_EPISODES`` episodes seeded ``EVAL_SEED + i``, also below 10 000. TensorBoard logs go to ``--tensorboard-log``.
 """
 
 from __future__ import annotations
 
 import argparse
+import csv
+import dataclasses
 import inspect
+import json
+import math
 import os
 import shlex
 import sys
 import time
-from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt
 import numpy as np
 import torch
 import yaml
@@ -41,14 +53,17 @@ from stable_baselines3 import PPO
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.vec_env import VecEnv, VecNormalize
 
-from agents.protocol import EVAL_SEED_START, MODEL_FILE, VECNORMALIZE_FILE
+from agents.policies import seconds
+from agents.protocol import ENV_FILE, EVAL_SEED_START, MODEL_FILE, VECNORMALIZE_FILE
 from timegap_env import ENV_ID
+from timegap_env.config import EnvConfig
 from timegap_env.envs.sb3 import TimeGapVecEnv
+from train.value_of_information import DEFAULT_TRAIN_EPISODES, all_oracles, choose_oracle, constants, measure_lookup, run
 
 REPORT_FILE = "training.md"
+CURVE_FILE, CURVE_FIGURE = "curve.csv", "curve.png"
 EVAL_SEED = 9_000  # first seed of the end-of-training check, below EVAL_SEED_START [-]
 EVAL_EPISODES = 32  # episodes of the end-of-training check [-]
-REFERENCE_SETTING = 1.0  # the best constant setting on the default mix, the check's reference [s]
 RUN_KEYS = {"n_envs", "n_timesteps", "policy", "normalize", "env_kwargs", "warmup"}  # the rest of the yml is PPO's
 SUMMARY_KEYS = {"collision", "mean_setting", "switches", "time_out_of_control"}  # logged per episode
 STRING_KWARGS = ("policy_kwargs", "normalize")  # may be Python expressions as in rl-zoo3: "dict(net_arch=[64])"
@@ -70,6 +85,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                         help="continue from <out>/model.zip (and its VecNormalize stats) up to --timesteps in all")
     parser.add_argument("--checkpoint-freq", type=int, default=100_000,
                         help="replace <out>/model.zip and vecnormalize.pkl every so many steps (default: %(default)s)")
+    parser.add_argument("--curve-freq", type=int, default=100_000,
+                        help="a point of the learning curve every so many steps, 0: none (default: %(default)s)")
     parser.add_argument("--tensorboard-log", type=Path, default=Path("runs"),
                         help="TensorBoard log directory (default: %(default)s)")
     parser.add_argument("--progress-bar", action=argparse.BooleanOptionalAction, default=True,
@@ -120,7 +137,7 @@ class Checkpoint(BaseCallback):
         self.last = self.num_timesteps
 
     def _on_step(self) -> bool:
-        if self.num_timesteps - self.last >= self.every:
+        if self.every and self.num_timesteps - self.last >= self.every:
             save_run(self.model, self.out)
             self.last = self.num_timesteps
         return True
@@ -136,18 +153,90 @@ class EpisodeSummaries(BaseCallback):
         return True
 
 
-def mean_return(act: Callable[[np.ndarray], np.ndarray], env_kwargs: dict[str, Any]) -> float:
-    """Mean return of one episode in each of ``EVAL_EPISODES`` platoons seeded ``EVAL_SEED + i``."""
-    env = TimeGapVecEnv(EVAL_EPISODES, **env_kwargs)
-    env.seed(EVAL_SEED)
-    obs = env.reset()
-    returns = np.full(EVAL_EPISODES, np.nan)
-    while np.isnan(returns).any():
-        obs, _, dones, infos = env.step(act(obs))
-        for i in np.flatnonzero(dones & np.isnan(returns)):
-            returns[i] = infos[i]["episode"]["r"]
-    env.close()
-    return float(returns.mean())
+@dataclasses.dataclass(frozen=True)
+class CurveReference:
+    """What the learning curve compares with, on the check episodes (seeds ``seeds``)."""
+
+    seeds: list[int]
+    blind_setting: float  # the best constant setting there [s]
+    blind_return: float  # its mean return
+    oracle: str  # the oracle's name (chosen on the selection seeds of train.value_of_information)
+    oracle_return: float  # its mean return
+
+    @classmethod
+    def measure(cls, config: EnvConfig) -> CurveReference:
+        """Every constant and the oracle on EVAL_EPISODES check episodes seeded EVAL_SEED on, in ``config``'s env
+        (one setting for the platoon)."""
+        platoon = config.with_overrides({"action_mode": "platoon"})
+        seeds = list(range(EVAL_SEED, EVAL_SEED + EVAL_EPISODES))
+        fixed = constants(platoon, seeds)["return"].mean(axis=0)
+        table, _ = measure_lookup(platoon, DEFAULT_TRAIN_EPISODES)
+        oracle = choose_oracle(platoon, all_oracles(platoon, table))
+        oracle_return = run(platoon, seeds, lambda obs, infos: oracle.act(infos["degradation"]))["return"].mean()
+        best = int(np.argmax(fixed))
+        return cls(seeds, float(platoon.setting_levels[best]), float(fixed[best]), oracle.name, float(oracle_return))
+
+    def share(self, policy_return: float) -> float:
+        """The share of the oracle gap captured: (policy - blind) / (oracle - blind) [-]; NaN when the oracle does
+        not beat the best blind constant (there is no gap to capture)."""
+        gap = self.oracle_return - self.blind_return
+        return (policy_return - self.blind_return) / gap if gap > 0 else math.nan
+
+
+class LearningCurve(BaseCallback):
+    """Every ``every`` steps (and at the end), the deterministic policy's mean return on the reference's episodes in
+    ``config``'s env; written to ``out``'s curve.csv and curve.png each time."""
+
+    def __init__(self, every: int, config: EnvConfig, reference: CurveReference, out: Path,
+                 points: list[tuple[int, float]]) -> None:  # every = 0: only when add_point is called
+        super().__init__()
+        self.every, self.config, self.reference, self.out = every, config, reference, out
+        self.points = points  # (timesteps, mean return), shared across the phases of a run
+        self.last = 0
+
+    def _on_training_start(self) -> None:
+        self.last = self.num_timesteps
+
+    def _on_step(self) -> bool:
+        if self.every and self.num_timesteps - self.last >= self.every:
+            self.add_point()
+            self.last = self.num_timesteps
+        return True
+
+    def add_point(self) -> None:
+        """Measure the policy now and rewrite the curve's files."""
+        env = self.model.get_env()
+        normalize = env.normalize_obs if isinstance(env, VecNormalize) else (lambda obs: obs)
+        result = run(self.config, self.reference.seeds,
+                     lambda obs, infos: self.model.predict(normalize(obs), deterministic=True)[0])
+        self.points.append((self.model.num_timesteps, float(result["return"].mean())))
+        write_curve(self.points, self.reference, self.out)
+
+
+def write_curve(points: list[tuple[int, float]], reference: CurveReference, out: Path) -> None:
+    """curve.csv (timesteps, mean return, share of the oracle gap) and curve.png."""
+    with open(out / CURVE_FILE, "w", newline="") as file:
+        writer = csv.writer(file)
+        writer.writerow(["timesteps", "mean_return", "share_of_oracle_gap"])
+        writer.writerows([(steps, f"{value:.4f}", f"{reference.share(value):.4f}") for steps, value in points])
+    steps, values = np.array([p[0] for p in points]), np.array([p[1] for p in points])
+    fig, (top, bottom) = plt.subplots(2, 1, figsize=(7, 6), sharex=True)
+    top.plot(steps, values, "o-", ms=3, label="PPO, deterministic")
+    top.axhline(reference.blind_return, color="C1", ls="--", label=f"best blind constant ({seconds(reference.blind_setting)} s)")
+    top.axhline(reference.oracle_return, color="C2", ls=":", label=f"oracle ({reference.oracle})")
+    top.set_ylabel(f"mean return, {len(reference.seeds)} episodes")
+    top.legend(fontsize=8)
+    bottom.plot(steps, [reference.share(v) for v in values], "o-", ms=3)
+    bottom.axhline(0.0, color="C1", ls="--")
+    bottom.axhline(1.0, color="C2", ls=":")
+    bottom.set_ylabel("share of the oracle gap")
+    bottom.set_xlabel("timesteps")
+    for ax in (top, bottom):
+        ax.grid(alpha=0.3)
+    fig.suptitle(f"Learning curve on the check episodes (seeds {reference.seeds[0]}-{reference.seeds[-1]})", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(out / CURVE_FIGURE, dpi=110)
+    plt.close(fig)
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -172,6 +261,8 @@ def main(argv: list[str] | None = None) -> None:
         raise ValueError(f"n_envs = {n_envs}: must be >= 1")
     if total_timesteps < 1:
         raise ValueError(f"timesteps = {total_timesteps}: must be >= 1")
+    if args.curve_freq < 0:
+        raise ValueError(f"curve_freq = {args.curve_freq}: must be >= 0 (0: no learning curve)")
     if args.checkpoint_freq < 1:
         raise ValueError(f"checkpoint_freq = {args.checkpoint_freq}: must be >= 1")
     if not 0 <= args.seed <= EVAL_SEED_START - len(phases) * n_envs:
@@ -183,6 +274,13 @@ def main(argv: list[str] | None = None) -> None:
     # One thread: the network is tiny, the 2 cores are better left to the env (two threads measured 7x slower).
     torch.set_num_threads(1)
     args.out.mkdir(parents=True, exist_ok=True)
+    (args.out / ENV_FILE).write_text(json.dumps(env_kwargs, indent=1, sort_keys=True) + "\n")
+    evaluated = EnvConfig.from_dict(env_kwargs.get("config"))
+    reference = CurveReference.measure(evaluated)
+    curve: list[tuple[int, float]] = []
+    if args.resume and (args.out / CURVE_FILE).is_file():
+        with open(args.out / CURVE_FILE) as file:
+            curve = [(int(row["timesteps"]), float(row["mean_return"])) for row in csv.DictReader(file)]
 
     # ---------------------------------------------------------------- model
     model_path, stats_path = args.out / MODEL_FILE, args.out / VECNORMALIZE_FILE
@@ -202,6 +300,8 @@ def main(argv: list[str] | None = None) -> None:
     else:
         (args.out / REPORT_FILE).unlink(missing_ok=True)  # rewritten when this run ends
         stats_path.unlink(missing_ok=True)  # a stale one would mislead the evaluation
+        (args.out / CURVE_FILE).unlink(missing_ok=True)
+        (args.out / CURVE_FIGURE).unlink(missing_ok=True)
     steps_before = model.num_timesteps if model else 0
 
     # ---------------------------------------------------------------- train, phase by phase
@@ -228,9 +328,11 @@ def main(argv: list[str] | None = None) -> None:
             model.set_env(env)
         env.seed(args.seed + phase * n_envs)
         phase_start, clock = model.num_timesteps, time.perf_counter()
+        callbacks = [Checkpoint(args.checkpoint_freq, args.out), EpisodeSummaries(),
+                     LearningCurve(args.curve_freq, evaluated, reference, args.out, curve)]
         model.learn(
             total_timesteps=phase_end - model.num_timesteps,
-            callback=[Checkpoint(args.checkpoint_freq, args.out), EpisodeSummaries()],
+            callback=callbacks,
             tb_log_name="ppo",
             reset_num_timesteps=not args.resume and not timings,
             progress_bar=args.progress_bar,
@@ -239,18 +341,19 @@ def main(argv: list[str] | None = None) -> None:
         timings.append((label, model.num_timesteps - phase_start, time.perf_counter() - clock))
     assert model is not None and env is not None  # the last phase always trains: total_timesteps > steps_before
     save_run(model, args.out)
+    final = LearningCurve(args.curve_freq, evaluated, reference, args.out, curve)
+    final.init_callback(model)
+    final.add_point()  # the end of the run
 
     # ---------------------------------------------------------------- check and report
-    normalize_obs = env.normalize_obs if isinstance(env, VecNormalize) else (lambda obs: obs)
-    learned = mean_return(lambda obs: model.predict(normalize_obs(obs), deterministic=True)[0], env_kwargs)
-    reference_level = int(np.argmin(np.abs(np.asarray(env.unwrapped.config.setting_levels) - REFERENCE_SETTING)))
-    reference = mean_return(lambda obs: np.full((len(obs), *env.action_space.shape), reference_level), env_kwargs)
+    learned = curve[-1][1]
     episodes = [info["r"] for info in model.ep_info_buffer]
     final_return = f"{np.mean(episodes):.1f}" if episodes else "n/a (no episode ended)"
     command = shlex.join(["python", "-m", "train.train_ppo", *(sys.argv[1:] if argv is None else argv)])
     phase_rows = "\n".join(f"| {label}: steps, time, throughput | {steps:,}, {seconds:.0f} s, "
                            f"{steps / seconds:,.0f} steps/s |" for label, steps, seconds in timings)
-    files = f"`{MODEL_FILE}`" + (f", `{VECNORMALIZE_FILE}`" if isinstance(env, VecNormalize) else "")
+    files = ", ".join(f"`{name}`" for name in (MODEL_FILE, ENV_FILE, CURVE_FILE, CURVE_FIGURE)) + (
+        f", `{VECNORMALIZE_FILE}`" if isinstance(env, VecNormalize) else "")
     report = f"""# PPO on {ENV_ID}
 
 Command: `{command}` ({f"resumed from a checkpoint at {steps_before:,} steps" if args.resume else "fresh run"})
@@ -264,7 +367,9 @@ Command: `{command}` ({f"resumed from a checkpoint at {steps_before:,} steps" if
 {phase_rows}
 | final mean episode return, last {len(episodes)} training episodes (stochastic policy) | {final_return} |
 | mean return, deterministic policy, {EVAL_EPISODES} episodes seeded {EVAL_SEED}+ | {learned:.1f} |
-| mean return, constant {REFERENCE_SETTING} s, same episodes | {reference:.1f} |
+| mean return, best constant ({seconds(reference.blind_setting)} s), same episodes | {reference.blind_return:.1f} |
+| mean return, oracle ({reference.oracle}), same episodes | {reference.oracle_return:.1f} |
+| share of the oracle gap captured | {reference.share(learned):.2f} |
 
 Files: {files}, this report; TensorBoard logs in `{args.tensorboard_log}/`.
 """

@@ -43,7 +43,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 import timegap_env
-from agents.oracles import NOMINAL, LookupOracle, StabilityOracle, bin_centres
+from agents.oracles import NOMINAL, LookupOracle, StabilityOracle, TruthPolicy, bin_centres
 from agents.policies import seconds
 from agents.protocol import EVAL_SEED_START
 from timegap_env.config import DEGRADATION_KINDS, SIZE_RANGE_FIELDS, EnvConfig
@@ -145,6 +145,22 @@ def measure_lookup(config: EnvConfig, train_episodes: int) -> tuple[dict[str, fl
     return table, rows
 
 
+def all_oracles(config: EnvConfig, table: dict[str, float]) -> list[TruthPolicy]:
+    """Every oracle: the stability oracle at each margin of MARGINS, the lookup oracle (``table``, see
+    :func:`measure_lookup`) on the condition acting now and on the episode's whole schedule."""
+    return [*(StabilityOracle(config, margin) for margin in MARGINS),
+            LookupOracle(table, config), LookupOracle(table, config, whole_episode=True)]
+
+
+def choose_oracle(config: EnvConfig, oracles: Sequence[TruthPolicy]) -> TruthPolicy:
+    """*The* oracle: of ``oracles``, the best by mean return on the SELECTION_EPISODES selection episodes."""
+    selection = list(range(SELECTION_SEED_START, SELECTION_SEED_START + SELECTION_EPISODES))
+    assert selection[-1] < EVAL_SEED_START
+    means = [run(config, selection, lambda obs, infos, o=o: o.act(infos["degradation"]))["return"].mean()
+             for o in oracles]
+    return oracles[int(np.argmax(means))]
+
+
 def auc(positive: np.ndarray, negative: np.ndarray) -> float:
     """P(a positive scores above a negative), ties counting half (the Mann-Whitney AUC)."""
     if positive.size == 0 or negative.size == 0:
@@ -175,13 +191,8 @@ def main(argv: Sequence[str] | None = None) -> None:
     blind = int(np.argmax(fixed["return"].mean(axis=0)))
     flag_aware = np.unravel_index(int(np.argmax(pairs["return"].mean(axis=0))), pairs["return"].shape[1:])
     hindsight = fixed["return"].max(axis=1)
-    oracles = [*(StabilityOracle(config, margin) for margin in MARGINS),
-               LookupOracle(table, config), LookupOracle(table, config, whole_episode=True)]
-    selection = list(range(SELECTION_SEED_START, SELECTION_SEED_START + SELECTION_EPISODES))
-    assert selection[-1] < EVAL_SEED_START
-    on_selection = {o.name: run(config, selection, lambda obs, infos, o=o: o.act(infos["degradation"]))["return"].mean()
-                    for o in oracles}
-    best_oracle = max(on_selection, key=on_selection.get)  # chosen before the held-out episodes
+    oracles = all_oracles(config, table)
+    best_oracle = choose_oracle(config, oracles).name  # chosen before the held-out episodes
     oracle_results = {oracle.name: run(config, seeds, lambda obs, infos, o=oracle: o.act(infos["degradation"]))
                       for oracle in oracles}
     for name, result in oracle_results.items():

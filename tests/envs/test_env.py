@@ -199,7 +199,7 @@ def test_checkers_pass_without_warnings_on_every_registered_id():
     ids = [env_id for env_id in gym.registry if env_id.startswith(timegap_env.ENV_ID.split("-")[0])]
     assert ids == [timegap_env.ENV_ID]
     for env_id in ids:
-        for config in ({}, {"action_mode": "per_vehicle"}):
+        for config in ({}, {"action_mode": "per_vehicle"}, {"action_mode": "relative"}):
             with warnings.catch_warnings():
                 warnings.simplefilter("error")
                 env = gym.make(env_id, config=config)

@@ -11,8 +11,9 @@ from timegap_env.leaders import default_ngsim_path
 LEVELS = EnvConfig().setting_levels
 
 
-def test_vector_env_equals_single_envs_step_by_step():
-    config = {"episode_duration": 6.0, "dropout_probability_range": (0.0, 0.1),
+@pytest.mark.parametrize("action_mode", ["platoon", "relative"])
+def test_vector_env_equals_single_envs_step_by_step(action_mode):
+    config = {"episode_duration": 6.0, "dropout_probability_range": (0.0, 0.1), "action_mode": action_mode,
               "degradation": {"v2v_outage_duration_range": (1.0, 3.0), "midway_onset_probability": 0.7}}
     n = 3
     native = gym.make_vec("TimeGapMonitor-v0", num_envs=n, vectorization_mode="vector_entry_point", config=config)
@@ -23,7 +24,7 @@ def test_vector_env_equals_single_envs_step_by_step():
     np.testing.assert_array_equal(obs_native, obs_reference)
     rng = np.random.default_rng(0)
     for step in range(20):  # three episodes of 6 steps each and more: crosses autoresets
-        actions = rng.integers(0, len(LEVELS), size=n)
+        actions = rng.integers(0, len(LEVELS) if action_mode == "platoon" else 3, size=n)
         step_native = native.step(actions)
         step_reference = reference.step(actions)
         for got, want in zip(step_native[:4], step_reference[:4]):

@@ -10,6 +10,7 @@ import yaml
 from stable_baselines3 import PPO
 from stable_baselines3.common.vec_env import VecNormalize
 
+from agents.learned import LearnedPolicy
 from agents.protocol import EVAL_SEED_START
 from timegap_env import ENV_ID
 from timegap_env.envs.sb3 import TimeGapVecEnv
@@ -53,7 +54,9 @@ def test_tiny_training_run_saves_loads_and_resumes(tmp_path: Path) -> None:
     common = ["--hyperparams", str(hyperparams), "--out", str(out), "--tensorboard-log", str(tmp_path / "runs"),
               "--no-progress-bar", "--checkpoint-freq", "32"]
     train_ppo.main(common)
-    assert sorted(p.name for p in out.iterdir()) == ["model.zip", "training.md", "vecnormalize.pkl"]
+    assert sorted(p.name for p in out.iterdir()) == ["curve.csv", "curve.png", "env.json", "model.zip", "training.md",
+                                                     "vecnormalize.pkl"]
+    assert LearnedPolicy.load(out).action_mode == "platoon"
     model = PPO.load(out / "model.zip", device="cpu")
     assert model.num_timesteps == 128
     with open(out / "vecnormalize.pkl", "rb") as file:
@@ -74,10 +77,27 @@ def test_tiny_training_run_saves_loads_and_resumes(tmp_path: Path) -> None:
         assert pickle.load(file).obs_rms.count > count + 63  # continued the saved statistics
     report = (out / "training.md").read_text()
     assert "| timesteps, this command / total | 64 / 192 |" in report and "warm-up" not in report
+    curve = (out / "curve.csv").read_text().splitlines()
+    assert curve[0] == "timesteps,mean_return,share_of_oracle_gap" and [row.split(",")[0] for row in curve[1:]][-2:] == [
+        "128", "192"]  # the first run's end, then the resumed run's end
     with pytest.raises(ValueError, match="timesteps = 192"):
         train_ppo.main([*common, "--resume", "--timesteps", "192"])
     with pytest.raises(ValueError, match="n_envs = 2"):
         train_ppo.main([*common, "--resume", "--timesteps", "256", "--n-envs", "2"])
+
+
+def test_a_relative_run_is_loaded_in_its_action_mode(tmp_path: Path) -> None:
+    hyperparams = tmp_path / "ppo.yml"
+    hyperparams.write_text(yaml.safe_dump({ENV_ID: {
+        "n_envs": 2, "n_timesteps": 32, "policy": "MlpPolicy", "n_steps": 16, "batch_size": 32, "n_epochs": 1,
+        "env_kwargs": {"config": {"episode_duration": 5.0, "action_mode": "relative"}},
+    }}))
+    out = tmp_path / "run"
+    train_ppo.main(["--hyperparams", str(hyperparams), "--out", str(out), "--tensorboard-log", str(tmp_path / "runs"),
+                    "--no-progress-bar", "--curve-freq", "16"])
+    policy = LearnedPolicy.load(out)
+    assert policy.action_mode == "relative" and policy.model.action_space.n == 3
+    assert len((out / "curve.csv").read_text().splitlines()) == 1 + 3  # at 16 and 32 steps, and the end
 
 
 def test_training_seeds_stay_below_evaluation_seeds(tmp_path: Path) -> None:

@@ -33,7 +33,9 @@ class TimeGapMonitorEnv(gym.Env):
 
     An index into ``setting_levels`` (default 0.6, 0.8, ..., 2.2 s).
     ``action_mode="platoon"``: ``Discrete(L)``, one setting for every follower;
-    ``action_mode="per_vehicle"``: ``MultiDiscrete([L] * N)``. A new setting is
+    ``action_mode="per_vehicle"``: ``MultiDiscrete([L] * N)``;
+    ``action_mode="relative"``: ``Discrete(3)``, the platoon's setting one level
+    down (0), kept (1) or one level up (2), clipped to the ladder. A new setting is
     ramped by the controller (``platoon.setting_ramp_rate``) and re-centres that
     follower's prior and chart. An action outside the space raises ``ValueError``.
 

@@ -118,7 +118,7 @@ class PlatoonTask:
     def step(self, action: np.ndarray) -> StepResult:
         """Apply the action, run one decision interval of ticks, and score it."""
         cfg, loop, platoon = self.config, self.loop, self.loop.platoon
-        changed = loop.change_setting(self.ladder.settings(action))
+        changed = loop.change_setting(self.ladder.settings(action, platoon.setting))
         ticks = loop.ticks + np.arange(self.ticks_per_decision)[:, None]  # (n_ticks, n_envs), before each tick
         leader_speed, leader_accel = self.episodes.leader_at(ticks + 1)
         block = loop.run(leader_speed, leader_accel, loop.degradation.v2v_up(ticks))
