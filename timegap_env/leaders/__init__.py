@@ -1,7 +1,8 @@
 """The leader: the human-driven vehicle every platoon follows, as a speed profile.
 
 - :mod:`~timegap_env.leaders.profile`: :class:`LeaderProfile`, from speeds, accelerations or a CSV;
-- :mod:`~timegap_env.leaders.synthetic`: seeded synthetic families (the paper's aggressive cycles, ...);
+- :mod:`~timegap_env.leaders.synthetic`: seeded synthetic families (the paper's aggressive cycles, ...,
+  and the held-out harsh ones: stop-and-go waves, emergency braking);
 - :mod:`~timegap_env.leaders.ngsim`: real NGSIM I-80 drivers;
 - :mod:`~timegap_env.leaders.openacc`: real commercial ACC platoons (OpenACC), and their lead cars;
 - :mod:`~timegap_env.leaders.idm`: highway-env's IDM driver reacting to a disturbance;
@@ -12,11 +13,21 @@ from timegap_env.leaders.idm import idm_leader
 from timegap_env.leaders.ngsim import default_ngsim_path, read_ngsim, vehicle_ids, vehicle_profile
 from timegap_env.leaders.openacc import OpenAccRun, default_openacc_dir, openacc_paths, read_openacc
 from timegap_env.leaders.profile import LeaderProfile
-from timegap_env.leaders.scenarios import SCENARIOS, get_scenario, make_leader
-from timegap_env.leaders.synthetic import aggressive_cycles, hard_braking, sinusoid, stochastic_human
+from timegap_env.leaders.scenarios import HELD_OUT_FAMILIES, SCENARIOS, get_scenario, make_leader
+from timegap_env.leaders.synthetic import (
+    EmergencyBrakingConfig,
+    StopAndGoConfig,
+    aggressive_cycles,
+    emergency_braking,
+    hard_braking,
+    sinusoid,
+    stochastic_human,
+    stop_and_go,
+)
 
 __all__ = [
-    "SCENARIOS", "LeaderProfile", "OpenAccRun", "aggressive_cycles", "default_ngsim_path", "default_openacc_dir",
-    "get_scenario", "hard_braking", "idm_leader", "make_leader", "openacc_paths", "read_ngsim", "read_openacc",
-    "sinusoid", "stochastic_human", "vehicle_ids", "vehicle_profile",
+    "HELD_OUT_FAMILIES", "SCENARIOS", "EmergencyBrakingConfig", "LeaderProfile", "OpenAccRun", "StopAndGoConfig",
+    "aggressive_cycles", "default_ngsim_path", "default_openacc_dir", "emergency_braking", "get_scenario",
+    "hard_braking", "idm_leader", "make_leader", "openacc_paths", "read_ngsim", "read_openacc", "sinusoid",
+    "stochastic_human", "stop_and_go", "vehicle_ids", "vehicle_profile",
 ]

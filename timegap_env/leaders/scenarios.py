@@ -49,12 +49,17 @@ LEADER_FAMILIES: dict[str, LeaderFamily] = {
     "sinusoid": lambda seed, leader: synthetic.sinusoid(seed, leader=leader),
     "hard_braking": lambda seed, leader: synthetic.hard_braking(seed, leader=leader),
     "stochastic_human": lambda seed, leader: synthetic.stochastic_human(seed, leader=leader),
+    "stop_and_go": lambda seed, leader: synthetic.stop_and_go(seed, leader=leader),
+    "emergency_braking": lambda seed, leader: synthetic.emergency_braking(seed, leader=leader),
     "ngsim": lambda seed, leader: ngsim_leader(seed, leader, within_band=False),
     "ngsim_in_band": lambda seed, leader: ngsim_leader(seed, leader, within_band=True),
     "openacc": openacc.openacc_leader,  # the human-driven lead car of a real ACC platoon (OpenACC AstaZero)
     # highway-env's IDM driver reacting to scripted hard braking ahead of it
     "idm": lambda seed, leader: idm.idm_leader(synthetic.hard_braking(seed, leader=leader), seed=seed),
 }
+
+# Harsh leaders the default training mix (EnvConfig.scenario_weights) never draws: for held-out evaluation.
+HELD_OUT_FAMILIES: tuple[str, ...] = ("stop_and_go", "emergency_braking")
 
 
 @dataclasses.dataclass(frozen=True)

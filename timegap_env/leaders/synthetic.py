@@ -3,14 +3,26 @@
 - :func:`aggressive_cycles`: the paper's leader, alternating hard acceleration and deceleration;
 - :func:`sinusoid`: a speed oscillation;
 - :func:`hard_braking`: cruising with hard braking events;
-- :func:`stochastic_human`: a human-like wandering speed.
+- :func:`stochastic_human`: a human-like wandering speed;
+- :func:`stop_and_go`: congestion waves, braking to a crawl (0-5 m/s) and back, again and again;
+- :func:`emergency_braking`: highway cruising with emergency stops at 6-7.5 m/s^2.
 
 Each takes a seed, its own parameters (a config of :mod:`timegap_env.config`) and the
 :class:`~timegap_env.config.LeaderConfig` every profile shares (tick, length, speed band).
+
+The last two are harsh, held-out families (:data:`~timegap_env.leaders.scenarios.HELD_OUT_FAMILIES`):
+the default training mix (``EnvConfig.scenario_weights``) never draws them. They leave the band's
+low end on purpose (their speeds lie in [0, speed_band[1]]), their accelerations stay within the
+followers' command limits [``PlatoonConfig.accel_min``, ``PlatoonConfig.accel_max``] = [-8, 4] m/s^2
+(a follower can always brake harder than the leader) and change by at most their ``max_jerk``.
+Their parameters (:class:`StopAndGoConfig`, :class:`EmergencyBrakingConfig`) live here for now, with
+the same validation as the configs of :mod:`timegap_env.config`.
 """
 
 from __future__ import annotations
 
+import dataclasses
+import math
 from typing import NamedTuple
 
 import numba
@@ -18,6 +30,7 @@ import numpy as np
 
 from timegap_env.config import (
     AggressiveCyclesConfig,
+    ConfigMixin,
     HardBrakingConfig,
     LeaderConfig,
     SinusoidConfig,
@@ -95,6 +108,149 @@ def hard_braking(
         accel[start : start + brake_ticks] = -decel
         accel[start + brake_ticks : start + brake_ticks + recover_ticks] = params.recovery_accel
     return LeaderProfile.from_acceleration(accel, leader, name="hard_braking")
+
+
+@dataclasses.dataclass(frozen=True)
+class StopAndGoConfig(ConfigMixin):
+    """Congestion waves: cruise, brake hard to a crawl, crawl, accelerate back to the cruise speed, repeat."""
+
+    cruise_speed_range: tuple[float, float] = (15.0, 25.0)  # speed between the waves, one per seed [m/s]
+    crawl_speed_range: tuple[float, float] = (0.0, 5.0)  # speed at the bottom of a wave, one per wave [m/s]
+    decel_range: tuple[float, float] = (2.0, 4.0)  # magnitude of a wave's braking [m/s^2]
+    accel_range: tuple[float, float] = (1.0, 2.5)  # acceleration out of a wave (and to the first cruise) [m/s^2]
+    crawl_duration_range: tuple[float, float] = (2.0, 10.0)  # time at the crawl speed [s]
+    cruise_duration_range: tuple[float, float] = (10.0, 40.0)  # time at the cruise speed before each wave [s]
+    max_jerk: float = 5.0  # largest rate of change of the acceleration, a brisk human driver [m/s^3]
+
+    def __post_init__(self) -> None:
+        self._band("cruise_speed_range", low_min=1e-9)
+        self._band("crawl_speed_range")
+        for field in ("decel_range", "accel_range", "crawl_duration_range", "cruise_duration_range"):
+            self._band(field, low_min=1e-9)
+        self._positive("max_jerk")
+        if self.crawl_speed_range[1] >= self.cruise_speed_range[0]:
+            self._fail("crawl_speed_range", self.crawl_speed_range,
+                       f"must lie below cruise_speed_range {self.cruise_speed_range}")
+
+
+@dataclasses.dataclass(frozen=True)
+class EmergencyBrakingConfig(ConfigMixin):
+    """Highway cruising with emergency stops: near-full braking to a low speed or standstill, a pause, recovery."""
+
+    cruise_speed_range: tuple[float, float] = (25.0, 33.0)  # highway speed (56-74 mph), one per seed [m/s]
+    n_events_range: tuple[int, int] = (1, 3)  # emergency stops per profile, both ends included [-]
+    decel_range: tuple[float, float] = (6.0, 7.5)  # braking: near a car's ~8-9, below the followers' 8 [m/s^2]
+    standstill_probability: float = 0.5  # chance that a stop ends at standstill, not at a low speed [-]
+    low_speed_range: tuple[float, float] = (1.0, 5.0)  # speed a stop ends at when not at standstill [m/s]
+    pause_duration_range: tuple[float, float] = (2.0, 8.0)  # time at the low speed or standstill [s]
+    recovery_accel_range: tuple[float, float] = (1.5, 3.0)  # re-acceleration to the cruise speed [m/s^2]
+    min_cruise_duration: float = 10.0  # least cruising before each stop [s]
+    max_jerk: float = 15.0  # largest rate of change of the acceleration; full braking builds up in 0.4-0.5 s [m/s^3]
+
+    def __post_init__(self) -> None:
+        low, high = self.n_events_range
+        integers = all(isinstance(n, (int, np.integer)) and not isinstance(n, bool) for n in (low, high))
+        if not integers or not 1 <= low <= high:
+            self._fail("n_events_range", self.n_events_range, "must be integers 1 <= low <= high")
+        for field in ("cruise_speed_range", "decel_range", "low_speed_range", "pause_duration_range",
+                      "recovery_accel_range"):
+            self._band(field, low_min=1e-9)
+        self._positive("min_cruise_duration", "max_jerk")
+        if not 0 <= self._finite("standstill_probability") <= 1:
+            self._fail("standstill_probability", self.standstill_probability, "must be in [0, 1]")
+        if self.low_speed_range[1] >= self.cruise_speed_range[0]:
+            self._fail("low_speed_range", self.low_speed_range,
+                       f"must lie below cruise_speed_range {self.cruise_speed_range}")
+
+
+def stop_and_go(
+    seed: int | None, params: StopAndGoConfig = StopAndGoConfig(), leader: LeaderConfig = LeaderConfig()
+) -> LeaderProfile:
+    """Congestion waves: reach a seeded cruise speed [m/s], then repeat until the profile ends: cruise, brake at
+    2-4 m/s^2 to a crawl of 0-5 m/s, crawl for 2-10 s, accelerate at 1-2.5 m/s^2 back to the cruise speed.
+
+    Every speed change is a jerk-limited trapezoid (:func:`_speed_change`). Speeds lie in
+    [0, speed_band[1]]; with the defaults a 250 s profile holds at least two crawls.
+    """
+    rng = np.random.default_rng(seed)
+    cruise = min(rng.uniform(*params.cruise_speed_range), leader.speed_band[1])
+    start = _speed_change(cruise - leader.initial_speed, rng.uniform(*params.accel_range), params.max_jerk, leader.dt)
+    segments, length = [start], start.size
+    while length < leader.n_samples:  # wave after wave until the profile is full
+        crawl = rng.uniform(*params.crawl_speed_range)
+        wave = (
+            np.zeros(_ticks(rng.uniform(*params.cruise_duration_range), leader.dt)),
+            _speed_change(crawl - cruise, rng.uniform(*params.decel_range), params.max_jerk, leader.dt),
+            np.zeros(_ticks(rng.uniform(*params.crawl_duration_range), leader.dt)),
+            _speed_change(cruise - crawl, rng.uniform(*params.accel_range), params.max_jerk, leader.dt),
+        )
+        segments.extend(wave)
+        length += sum(segment.size for segment in wave)
+    accel = np.concatenate(segments)[: leader.n_samples]
+    return LeaderProfile.from_acceleration(accel, _down_to_standstill(leader), name="stop_and_go")
+
+
+def emergency_braking(
+    seed: int | None, params: EmergencyBrakingConfig = EmergencyBrakingConfig(), leader: LeaderConfig = LeaderConfig()
+) -> LeaderProfile:
+    """Highway cruising at a seeded speed [m/s] with 1-3 emergency stops at seeded moments: brake at 6-7.5 m/s^2
+    to standstill (half the stops) or to 1-5 m/s, pause 2-8 s, re-accelerate at 1.5-3 m/s^2 to the cruise speed.
+
+    Every speed change is a jerk-limited trapezoid (:func:`_speed_change`). Each stop follows at least
+    ``min_cruise_duration`` of cruising; the rest of the cruising time is split at random between the gaps
+    before the stops and after the last. Stops that do not fit in the profile are dropped, last first.
+    Speeds lie in [0, speed_band[1]].
+    """
+    rng = np.random.default_rng(seed)
+    cruise = min(rng.uniform(*params.cruise_speed_range), leader.speed_band[1])
+    start = _speed_change(cruise - leader.initial_speed, rng.uniform(*params.recovery_accel_range), params.max_jerk,
+                          leader.dt)
+    events: list[np.ndarray] = []
+    for _ in range(int(rng.integers(params.n_events_range[0], params.n_events_range[1] + 1))):
+        stop = 0.0 if rng.random() < params.standstill_probability else rng.uniform(*params.low_speed_range)
+        events.append(np.concatenate((
+            _speed_change(stop - cruise, rng.uniform(*params.decel_range), params.max_jerk, leader.dt),
+            np.zeros(_ticks(rng.uniform(*params.pause_duration_range), leader.dt)),
+            _speed_change(cruise - stop, rng.uniform(*params.recovery_accel_range), params.max_jerk, leader.dt),
+        )))
+    min_cruise = _ticks(params.min_cruise_duration, leader.dt)
+    while events and start.size + sum(event.size + min_cruise for event in events) > leader.n_samples:
+        events.pop()
+    spare = leader.n_samples - start.size - sum(event.size + min_cruise for event in events)  # [ticks]
+    shares = rng.random(len(events) + 1)
+    cruises = np.floor(spare * shares / shares.sum()).astype(int) + min_cruise  # before each stop, then after the last
+    segments = [start]
+    for event, ticks in zip(events, cruises[:-1], strict=True):  # the last cruise is the zeros after
+        segments.extend((np.zeros(ticks), event))
+    accel = np.zeros(leader.n_samples)
+    body = np.concatenate(segments)
+    accel[: body.size] = body
+    return LeaderProfile.from_acceleration(accel, _down_to_standstill(leader), name="emergency_braking")
+
+
+def _ticks(duration: float, dt: float) -> int:
+    """Whole ticks in ``duration`` [s] at ``dt`` [s], at least one."""
+    return max(1, int(round(duration / dt)))
+
+
+def _down_to_standstill(leader: LeaderConfig) -> LeaderConfig:
+    """``leader`` with its speed band opened down to standstill: [0, speed_band[1]] [m/s]."""
+    return leader.with_overrides({"speed_band": (0.0, leader.speed_band[1])})
+
+
+def _speed_change(change: float, magnitude: float, max_jerk: float, dt: float) -> np.ndarray:
+    """Accelerations [m/s^2], one a tick, that change the speed by exactly ``change`` [m/s] when integrated at
+    ``dt`` [s]: a trapezoid rising by at most ``max_jerk`` [m/s^3] to a plateau of at most ``magnitude``
+    [m/s^2] and falling back the same way (its last tick is the last non-zero one)."""
+    size = abs(change)
+    if size == 0.0:
+        return np.zeros(0)
+    planned = min(magnitude, math.sqrt(size * max_jerk))  # a short change never reaches ``magnitude`` [m/s^2]
+    ramp = max(1, math.ceil(planned / (max_jerk * dt) - 1e-9))  # ticks up to the plateau
+    plateau = max(0, math.ceil(size / (planned * dt) - ramp - 1e-9))  # ticks at the plateau
+    peak = size / (dt * (ramp + plateau))  # <= planned: the shape below sums to ramp + plateau
+    shape = np.concatenate((np.arange(1, ramp + 1) / ramp, np.ones(plateau), np.arange(ramp - 1, 0, -1) / ramp))
+    return math.copysign(peak, change) * shape
 
 
 class _HumanDraws(NamedTuple):
