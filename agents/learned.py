@@ -43,10 +43,15 @@ class ObservationNormalizer:
             saved = pickle.load(file)
         if not isinstance(saved, VecNormalize):
             raise ValueError(f"vecnormalize = {str(path)!r}: holds a {type(saved).__name__}, not a VecNormalize")
+        return cls.of(saved, str(path))
+
+    @classmethod
+    def of(cls, saved: VecNormalize, where: str = "the VecNormalize") -> ObservationNormalizer | None:
+        """A frozen copy of ``saved``'s statistics now; None if it does not normalise observations."""
         if not saved.norm_obs:
             return None
         if isinstance(saved.obs_rms, dict):
-            raise ValueError(f"vecnormalize = {str(path)!r}: normalises dict observations; TimeGapMonitor's are a Box")
+            raise ValueError(f"vecnormalize = {where!r}: normalises dict observations; TimeGapMonitor's are a Box")
         return cls(
             mean=np.asarray(saved.obs_rms.mean, dtype=np.float64),
             var=np.asarray(saved.obs_rms.var, dtype=np.float64),
@@ -64,17 +69,23 @@ class LearnedPolicy:
     """An SB3 model behind the same ``predict`` as the hand-written policies.
 
     ``action_mode``: as given (a run's ``ENV_FILE`` gives it), else from the model's action space:
-    ``Discrete`` -> "platoon", ``MultiDiscrete`` -> "per_vehicle".
+    ``Discrete`` -> "platoon", ``MultiDiscrete`` -> "per_vehicle". ``frame_stack`` k > 1: the model
+    reads the last k normalised observations side by side, oldest first, zeros before the first (as
+    SB3's ``VecFrameStack``); ``predict`` then carries them as its ``state``: pass back the state it
+    returned, None at the episodes' start.
     """
 
     def __init__(self, model: BaseAlgorithm, normalizer: ObservationNormalizer | None = None, name: str = "PPO",
-                 action_mode: str | None = None) -> None:
+                 action_mode: str | None = None, frame_stack: int = 1) -> None:
         expected = {"platoon": spaces.Discrete, "relative": spaces.Discrete, "per_vehicle": spaces.MultiDiscrete}
         if action_mode is None:
             action_mode = "per_vehicle" if isinstance(model.action_space, spaces.MultiDiscrete) else "platoon"
         if action_mode not in expected or not isinstance(model.action_space, expected[action_mode]):
             raise ValueError(f"action_mode = {action_mode!r}: does not fit model.action_space = {model.action_space}")
+        if isinstance(frame_stack, bool) or not isinstance(frame_stack, int) or frame_stack < 1:
+            raise ValueError(f"frame_stack = {frame_stack!r}: must be an integer >= 1")
         self.action_mode = action_mode
+        self.frame_stack = frame_stack
         self.model = model
         self.normalizer = normalizer
         self.name = name
@@ -105,13 +116,16 @@ class LearnedPolicy:
                 raise FileNotFoundError(f"vecnormalize = {str(vecnormalize)!r}: no such file")
             normalizer = ObservationNormalizer.from_vecnormalize(vecnormalize)
         env_path = model_path.parent / ENV_FILE
-        action_mode = None
+        action_mode, frame_stack = None, 1
         if env_path.is_file():
             try:
-                action_mode = json.loads(env_path.read_text()).get("config", {}).get("action_mode", "platoon")
-            except (json.JSONDecodeError, AttributeError) as error:
-                raise ValueError(f"{env_path}: not a JSON object of gym.make keyword arguments ({error})") from error
-        return cls(algorithm.load(model_path, device="cpu"), normalizer, name, action_mode)
+                run = json.loads(env_path.read_text())
+                action_mode = run["env_kwargs"].get("config", {}).get("action_mode", "platoon")
+                frame_stack = run["frame_stack"]
+            except (json.JSONDecodeError, AttributeError, KeyError, TypeError) as error:
+                raise ValueError(f"{env_path}: not a JSON object with env_kwargs (gym.make's) and frame_stack "
+                                 f"({error!r})") from error
+        return cls(algorithm.load(model_path, device="cpu"), normalizer, name, action_mode, frame_stack)
 
     @property
     def observation_shape(self) -> tuple[int, ...]:
@@ -125,11 +139,22 @@ class LearnedPolicy:
         episode_start: np.ndarray | None = None,
         deterministic: bool = True,
     ) -> tuple[np.ndarray, Any]:
-        """The model's action for one observation (obs_dim,) or a batch (n_envs, obs_dim), observations normalised first."""
+        """The model's action for one observation (obs_dim,) or a batch (n_envs, obs_dim), observations normalised first;
+        with frame stacking, ``state`` is the stack so far (None: a new episode) and the new stack is returned."""
         obs = np.asarray(observation, dtype=np.float32)
         if self.normalizer is not None:
             obs = self.normalizer(obs)
-        return self.model.predict(obs, state=state, episode_start=episode_start, deterministic=deterministic)
+        if self.frame_stack == 1:
+            return self.model.predict(obs, state=state, episode_start=episode_start, deterministic=deterministic)
+        width = obs.shape[-1]
+        stack = np.zeros((*obs.shape[:-1], width * self.frame_stack), dtype=np.float32) if state is None else state
+        stack = np.concatenate([stack[..., width:], obs], axis=-1)
+        if episode_start is not None and np.ndim(obs) == 2:  # episodes that start now see zeros before them
+            starting = np.asarray(episode_start, dtype=bool)
+            stack[starting, :-width] = 0.0
+        action, _ = self.model.predict(stack, deterministic=deterministic)
+        return action, stack
 
     def __repr__(self) -> str:
-        return f"LearnedPolicy({self.name!r}, action_mode={self.action_mode!r}, normalized={self.normalizer is not None})"
+        return (f"LearnedPolicy({self.name!r}, action_mode={self.action_mode!r}, normalized={self.normalizer is not None}, "
+                f"frame_stack={self.frame_stack})")

@@ -5,7 +5,7 @@
     python -m train.train_ppo --resume --timesteps 3000000       # continue results/ppo/ to 3 M steps in all
 
 Hyperparameters come from ``hyperparams/ppo.yml`` (rl-zoo3's layout: the env id, then
-``n_envs``, ``n_timesteps``, ``policy``, ``normalize``, ``env_kwargs`` and PPO's own
+``n_envs``, ``n_timesteps``, ``policy``, ``normalize``, ``frame_stack``, ``env_kwargs`` and PPO's own
 arguments); ``--timesteps`` and ``--n-envs`` override them. An optional ``warmup``
 (``n_timesteps``, ``env_kwargs``) trains the first steps in another env config (the
 default: a decision every 5 s), then the run switches to ``env_kwargs``, keeping the
@@ -51,8 +51,9 @@ import torch
 import yaml
 from stable_baselines3 import PPO
 from stable_baselines3.common.callbacks import BaseCallback
-from stable_baselines3.common.vec_env import VecEnv, VecNormalize
+from stable_baselines3.common.vec_env import VecEnv, VecFrameStack, VecNormalize
 
+from agents.learned import LearnedPolicy, ObservationNormalizer
 from agents.policies import seconds
 from agents.protocol import ENV_FILE, EVAL_SEED_START, MODEL_FILE, VECNORMALIZE_FILE
 from timegap_env import ENV_ID
@@ -64,7 +65,7 @@ REPORT_FILE = "training.md"
 CURVE_FILE, CURVE_FIGURE = "curve.csv", "curve.png"
 EVAL_SEED = 9_000  # first seed of the end-of-training check, below EVAL_SEED_START [-]
 EVAL_EPISODES = 32  # episodes of the end-of-training check [-]
-RUN_KEYS = {"n_envs", "n_timesteps", "policy", "normalize", "env_kwargs", "warmup"}  # the rest of the yml is PPO's
+RUN_KEYS = {"n_envs", "n_timesteps", "policy", "normalize", "frame_stack", "env_kwargs", "warmup"}  # the rest: PPO's
 SUMMARY_KEYS = {"collision", "mean_setting", "switches", "time_out_of_control"}  # logged per episode
 STRING_KWARGS = ("policy_kwargs", "normalize")  # may be Python expressions as in rl-zoo3: "dict(net_arch=[64])"
 
@@ -120,8 +121,8 @@ def save_run(model: PPO, out: Path) -> None:
     """Write model.zip (and vecnormalize.pkl) in ``out``, each replaced atomically."""
     model.save(out / f"{MODEL_FILE}.tmp.zip")
     os.replace(out / f"{MODEL_FILE}.tmp.zip", out / MODEL_FILE)
-    if isinstance(model.get_env(), VecNormalize):
-        model.get_env().save(out / f"{VECNORMALIZE_FILE}.tmp")
+    if model.get_vec_normalize_env() is not None:
+        model.get_vec_normalize_env().save(out / f"{VECNORMALIZE_FILE}.tmp")
         os.replace(out / f"{VECNORMALIZE_FILE}.tmp", out / VECNORMALIZE_FILE)
 
 
@@ -188,9 +189,10 @@ class LearningCurve(BaseCallback):
     ``config``'s env; written to ``out``'s curve.csv and curve.png each time."""
 
     def __init__(self, every: int, config: EnvConfig, reference: CurveReference, out: Path,
-                 points: list[tuple[int, float]]) -> None:  # every = 0: only when add_point is called
+                 points: list[tuple[int, float]], frame_stack: int) -> None:  # every = 0: only when add_point is called
         super().__init__()
         self.every, self.config, self.reference, self.out = every, config, reference, out
+        self.frame_stack = frame_stack
         self.points = points  # (timesteps, mean return), shared across the phases of a run
         self.last = 0
 
@@ -205,10 +207,17 @@ class LearningCurve(BaseCallback):
 
     def add_point(self) -> None:
         """Measure the policy now and rewrite the curve's files."""
-        env = self.model.get_env()
-        normalize = env.normalize_obs if isinstance(env, VecNormalize) else (lambda obs: obs)
-        result = run(self.config, self.reference.seeds,
-                     lambda obs, infos: self.model.predict(normalize(obs), deterministic=True)[0])
+        statistics = self.model.get_vec_normalize_env()
+        policy = LearnedPolicy(self.model, ObservationNormalizer.of(statistics) if statistics else None,
+                               action_mode=self.config.action_mode, frame_stack=self.frame_stack)
+        state = None  # the frame stack, carried from step to step; every episode starts together
+
+        def choose(obs: np.ndarray, infos: dict[str, Any]) -> np.ndarray:
+            nonlocal state
+            action, state = policy.predict(obs, state=state, deterministic=True)
+            return action
+
+        result = run(self.config, self.reference.seeds, choose)
         self.points.append((self.model.num_timesteps, float(result["return"].mean())))
         write_curve(self.points, self.reference, self.out)
 
@@ -248,6 +257,7 @@ def main(argv: list[str] | None = None) -> None:
     del hyperparams["n_envs"], hyperparams["n_timesteps"]
     policy = hyperparams.pop("policy")
     normalize = hyperparams.pop("normalize", False)
+    frame_stack = hyperparams.pop("frame_stack", 1)
     env_kwargs = hyperparams.pop("env_kwargs", None) or {}
     warmup = hyperparams.pop("warmup", None)
     if warmup is not None and (not isinstance(warmup, dict) or set(warmup) != {"n_timesteps", "env_kwargs"}
@@ -268,13 +278,16 @@ def main(argv: list[str] | None = None) -> None:
     if not 0 <= args.seed <= EVAL_SEED_START - len(phases) * n_envs:
         raise ValueError(f"seed = {args.seed}: sub-env seeds seed .. seed + {len(phases) * n_envs - 1} "
                          f"must lie in [0, {EVAL_SEED_START})")
+    if isinstance(frame_stack, bool) or not isinstance(frame_stack, int) or frame_stack < 1:
+        raise ValueError(f"hyperparams {ENV_ID}.frame_stack = {frame_stack!r}: must be an integer >= 1")
     if not isinstance(normalize, (bool, dict)):
         raise ValueError(f"hyperparams {ENV_ID}.normalize = {normalize!r}: "
                          "must be true, false or a dict of VecNormalize arguments")
     # One thread: the network is tiny, the 2 cores are better left to the env (two threads measured 7x slower).
     torch.set_num_threads(1)
     args.out.mkdir(parents=True, exist_ok=True)
-    (args.out / ENV_FILE).write_text(json.dumps(env_kwargs, indent=1, sort_keys=True) + "\n")
+    (args.out / ENV_FILE).write_text(json.dumps({"env_kwargs": env_kwargs, "frame_stack": frame_stack}, indent=1,
+                                                sort_keys=True) + "\n")
     evaluated = EnvConfig.from_dict(env_kwargs.get("config"))
     reference = CurveReference.measure(evaluated)
     curve: list[tuple[int, float]] = []
@@ -305,7 +318,7 @@ def main(argv: list[str] | None = None) -> None:
     steps_before = model.num_timesteps if model else 0
 
     # ---------------------------------------------------------------- train, phase by phase
-    env: VecEnv | None = None
+    env: VecEnv | None = None  # the phase's env, normalised; the model steps it through VecFrameStack if frame_stack > 1
     timings: list[tuple[str, int, float]] = []  # (phase, steps, seconds)
     for phase, (phase_end, phase_env_kwargs) in enumerate(phases):
         if model is not None and model.num_timesteps >= phase_end:
@@ -321,15 +334,16 @@ def main(argv: list[str] | None = None) -> None:
         if env is not None:
             env.close()
         env = phase_env
+        stepped = VecFrameStack(env, frame_stack) if frame_stack > 1 else env
         if model is None:
-            model = PPO(policy, env, seed=args.seed, device="cpu", tensorboard_log=str(args.tensorboard_log),
+            model = PPO(policy, stepped, seed=args.seed, device="cpu", tensorboard_log=str(args.tensorboard_log),
                         **hyperparams)
         else:
-            model.set_env(env)
-        env.seed(args.seed + phase * n_envs)
+            model.set_env(stepped)
+        stepped.seed(args.seed + phase * n_envs)
         phase_start, clock = model.num_timesteps, time.perf_counter()
         callbacks = [Checkpoint(args.checkpoint_freq, args.out), EpisodeSummaries(),
-                     LearningCurve(args.curve_freq, evaluated, reference, args.out, curve)]
+                     LearningCurve(args.curve_freq, evaluated, reference, args.out, curve, frame_stack)]
         model.learn(
             total_timesteps=phase_end - model.num_timesteps,
             callback=callbacks,
@@ -341,7 +355,7 @@ def main(argv: list[str] | None = None) -> None:
         timings.append((label, model.num_timesteps - phase_start, time.perf_counter() - clock))
     assert model is not None and env is not None  # the last phase always trains: total_timesteps > steps_before
     save_run(model, args.out)
-    final = LearningCurve(args.curve_freq, evaluated, reference, args.out, curve)
+    final = LearningCurve(args.curve_freq, evaluated, reference, args.out, curve, frame_stack)
     final.init_callback(model)
     final.add_point()  # the end of the run
 

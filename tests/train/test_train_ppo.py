@@ -2,8 +2,12 @@
 
 from __future__ import annotations
 
+import json
 import pickle
 from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
 
 import pytest
 import yaml
@@ -56,6 +60,8 @@ def test_tiny_training_run_saves_loads_and_resumes(tmp_path: Path) -> None:
     train_ppo.main(common)
     assert sorted(p.name for p in out.iterdir()) == ["curve.csv", "curve.png", "env.json", "model.zip", "training.md",
                                                      "vecnormalize.pkl"]
+    assert json.loads((out / "env.json").read_text()) == {"env_kwargs": {"config": {"episode_duration": 10.0}},
+                                                          "frame_stack": 1}
     assert LearnedPolicy.load(out).action_mode == "platoon"
     model = PPO.load(out / "model.zip", device="cpu")
     assert model.num_timesteps == 128
@@ -86,18 +92,26 @@ def test_tiny_training_run_saves_loads_and_resumes(tmp_path: Path) -> None:
         train_ppo.main([*common, "--resume", "--timesteps", "256", "--n-envs", "2"])
 
 
-def test_a_relative_run_is_loaded_in_its_action_mode(tmp_path: Path) -> None:
+def test_a_relative_frame_stacked_run_is_loaded_as_it_was_trained(tmp_path: Path) -> None:
     hyperparams = tmp_path / "ppo.yml"
     hyperparams.write_text(yaml.safe_dump({ENV_ID: {
-        "n_envs": 2, "n_timesteps": 32, "policy": "MlpPolicy", "n_steps": 16, "batch_size": 32, "n_epochs": 1,
-        "env_kwargs": {"config": {"episode_duration": 5.0, "action_mode": "relative"}},
+        "n_envs": 2, "n_timesteps": 32, "policy": "MlpPolicy", "normalize": True, "frame_stack": 3, "n_steps": 16,
+        "batch_size": 32, "n_epochs": 1, "env_kwargs": {"config": {"episode_duration": 5.0, "action_mode": "relative"}},
     }}))
     out = tmp_path / "run"
     train_ppo.main(["--hyperparams", str(hyperparams), "--out", str(out), "--tensorboard-log", str(tmp_path / "runs"),
                     "--no-progress-bar", "--curve-freq", "16"])
     policy = LearnedPolicy.load(out)
-    assert policy.action_mode == "relative" and policy.model.action_space.n == 3
+    assert policy.action_mode == "relative" and policy.model.action_space.n == 3 and policy.frame_stack == 3
     assert len((out / "curve.csv").read_text().splitlines()) == 1 + 3  # at 16 and 32 steps, and the end
+    env = gym.make_vec(ENV_ID, num_envs=2, vectorization_mode="vector_entry_point",
+                       config={"episode_duration": 5.0, "action_mode": "relative"})
+    obs, _ = env.reset(seed=[1, 2])
+    action, stack = policy.predict(obs)
+    assert action.shape == (2,) and stack.shape == (2, 3 * obs.shape[1]) and not stack[:, :-obs.shape[1]].any()
+    obs, *_ = env.step(action)
+    _, stack = policy.predict(obs, state=stack, episode_start=np.array([False, True]))
+    assert stack[0, obs.shape[1]:2 * obs.shape[1]].any() and not stack[1, :-obs.shape[1]].any()
 
 
 def test_training_seeds_stay_below_evaluation_seeds(tmp_path: Path) -> None:
