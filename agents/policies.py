@@ -1,4 +1,5 @@
-"""Hand-written policies for ``TimeGapMonitor-v0``: the paper's rule, fixed settings, a V2V-aware heuristic.
+"""Hand-written policies for ``TimeGapMonitor-v0``: the paper's rule, a chart-driven step rule, fixed settings, a
+V2V-aware heuristic.
 
 Every policy here has stable-baselines3's interface,
 ``predict(obs, state=None, episode_start=None, deterministic=True) -> (action, state)``,
@@ -8,8 +9,8 @@ shaped like SB3's: ``()`` or ``(n_envs,)`` for ``action_mode="platoon"``,
 ``(N,)`` or ``(n_envs, N)`` for ``"per_vehicle"``, ladder indices (int64).
 
 The policies are stateless: they read all they need from the observation
-(:func:`timegap_env.envs.observation.decode_observation`), never from the env, and return
-``state`` unchanged.
+(:func:`timegap_env.envs.observation.decode_observation`, :func:`time_since_alarm`), never from the env,
+and return ``state`` unchanged.
 Each is built for one :class:`EnvConfig` (the env's), which fixes the action
 mode, the ladder of settings and the scaling of the features.
 """
@@ -17,7 +18,7 @@ mode, the ladder of settings and the scaling of the features.
 from __future__ import annotations
 
 from collections.abc import Mapping
-from typing import Any, Protocol, runtime_checkable
+from typing import Any, NamedTuple, Protocol, runtime_checkable
 
 import numpy as np
 
@@ -27,6 +28,10 @@ from timegap_env.monitoring.charts import switch_rule
 
 V2V_SETTING = 1.0  # string stable with V2V (CACC) from 1.0 s with the default gains [s]
 ACC_SETTING = 1.6  # string stable without V2V (ACC) from about 1.6 s with the default gains [s]
+# ChartStepPolicy's defaults: the best cell of `python -m train.tune_rule` on training seeds (results/rule/tuning.md).
+CHART_STEP_K_UP = 4  # exceedances within the chart's window that send a follower one level up [-]
+CHART_STEP_QUIET_TIME = 35.0  # time without an alarm that sends a follower one level down [s]
+CHART_STEP_MIN_SETTING = 1.6  # the lowest level the rule asks for, the driver's preferred setting [s]
 
 
 @runtime_checkable
@@ -69,11 +74,32 @@ def level_index(config: EnvConfig, setting: float, field: str = "setting") -> in
     return int(matches[0])
 
 
+def exceedance_threshold(config: EnvConfig, count: Any, field: str) -> None:
+    """``ValueError`` naming ``field`` unless ``count`` is an integer the observation can tell: 1 to 2 x the env's
+    ``chart.switch_exceedances``, where the exceedance feature saturates."""
+    saturation = exceedance_scale(config)
+    if isinstance(count, bool) or not isinstance(count, (int, np.integer)):
+        raise ValueError(f"{field} = {count!r}: must be an integer")
+    if not 1 <= count <= saturation:
+        raise ValueError(
+            f"{field} = {count}: must be in [1, {saturation}]; the observation's "
+            f"exceedance feature saturates at 2 x the env's chart.switch_exceedances = {saturation}"
+        )
+
+
+def time_since_alarm(observation: np.ndarray, config: EnvConfig) -> np.ndarray:
+    """Each follower's time since its chart's last alarm or re-centring [s], (n_envs, n_followers), from observations
+    (n_envs, obs_dim): the feature times ``config.chart.exceedance_window``, where it saturates (longer reads as it)."""
+    features = observation.reshape(observation.shape[0], config.platoon.n_followers, len(FEATURES))
+    return features[..., FEATURES.index("time_since_alarm")] * np.float64(config.chart.exceedance_window)
+
+
 class ObservationPolicy:
     """Base of the hand-written policies: shape checks, decoding, and SB3's ``predict`` signature.
 
     A subclass sets ``name`` and defines ``_platoon_action(view) -> (n_envs,)`` and
-    ``_per_vehicle_action(view) -> (n_envs, n_followers)``, both ladder indices.
+    ``_per_vehicle_action(view) -> (n_envs, n_followers)``, both ladder indices; ``view`` is what ``_view``
+    reads from the observations (by default :func:`decode_observation`'s :class:`FollowerView`).
     """
 
     name = "policy"
@@ -94,13 +120,17 @@ class ObservationPolicy:
         obs = np.asarray(observation, dtype=np.float64)
         if obs.ndim not in (1, 2) or obs.shape[-1] != self.obs_dim:
             raise ValueError(f"observation shape {obs.shape}: expected ({self.obs_dim},) or (n_envs, {self.obs_dim})")
-        view = decode_observation(np.atleast_2d(obs), self.config)
+        view = self._view(np.atleast_2d(obs))
         if self.action_mode == "platoon":
             action = self._platoon_action(view)
         else:
             action = self._per_vehicle_action(view)
         action = np.asarray(action, dtype=np.int64)
         return (action[0] if obs.ndim == 1 else action), state
+
+    def _view(self, observation: np.ndarray) -> Any:
+        """What the actions are chosen from, for observations (n_envs, obs_dim)."""
+        return decode_observation(observation, self.config)
 
     def _platoon_action(self, view: FollowerView) -> np.ndarray:
         raise NotImplementedError
@@ -144,14 +174,7 @@ class PaperRulePolicy(ObservationPolicy):
         self.switch_exceedances = chart.switch_exceedances if switch_exceedances is None else switch_exceedances
         self.exceedance_window = chart.exceedance_window if exceedance_window is None else exceedance_window
         self.switch_to = chart.switch_to if switch_to is None else switch_to
-        saturation = exceedance_scale(self.config)
-        if isinstance(self.switch_exceedances, bool) or not isinstance(self.switch_exceedances, (int, np.integer)):
-            raise ValueError(f"switch_exceedances = {self.switch_exceedances!r}: must be an integer")
-        if not 1 <= self.switch_exceedances <= saturation:
-            raise ValueError(
-                f"switch_exceedances = {self.switch_exceedances}: must be in [1, {saturation}]; the observation's "
-                f"exceedance feature saturates at 2 x the env's chart.switch_exceedances = {saturation}"
-            )
+        exceedance_threshold(self.config, self.switch_exceedances, "switch_exceedances")
         if not np.isclose(self.exceedance_window, chart.exceedance_window):
             raise ValueError(
                 f"exceedance_window = {self.exceedance_window} s: the observation counts exceedances over the env's "
@@ -171,6 +194,79 @@ class PaperRulePolicy(ObservationPolicy):
 
     def _per_vehicle_action(self, view: FollowerView) -> np.ndarray:
         return np.where(self._triggered(view), self.switch_index, view.setting_index)
+
+
+class ChartView(NamedTuple):
+    """What :class:`ChartStepPolicy` reads from a batch of observations."""
+
+    follower: FollowerView  # the decoded features (n_envs, n_followers)
+    time_since_alarm: np.ndarray  # since each chart's last alarm or re-centring, saturating (n_envs, n_followers) [s]
+
+
+class ChartStepPolicy(ObservationPolicy):
+    """One ladder level up when a chart shows excursions, one level down when it has been quiet, never below a floor.
+
+    A generalisation of the paper's rule (``k`` exceedances within ``W`` s -> 1.0 s) in which the chart
+    picks the direction. Per follower, at each decision:
+
+    - at least ``k_up`` exceedances within the env's ``chart.exceedance_window`` -> one level up (safer);
+    - otherwise, no alarm for at least ``quiet_time`` s -> one level down;
+    - otherwise its setting is kept;
+
+    and the result is clipped to [``min_setting``, the ladder's top] (a setting below the floor goes straight
+    to it). The env re-centres a follower's chart when its setting changes, clearing the count and restarting
+    the time since the last alarm, so every step needs fresh evidence: at most one level down per
+    ``quiet_time``. The policy is stateless: the count, the time since the last alarm and the setting are in
+    the observation.
+
+    - ``action_mode="platoon"``: the largest level any follower asks for (one up-step outvotes the rest);
+    - ``action_mode="per_vehicle"``: each follower its own.
+
+    Defaults: the best cell of ``python -m train.tune_rule`` on training seeds (``results/rule/tuning.md``),
+    ``CHART_STEP_K_UP``, ``CHART_STEP_QUIET_TIME``, ``CHART_STEP_MIN_SETTING``; the tuned floor is the env's
+    starting setting, so with the defaults the rule only rises above it and comes back. ``k_up`` may be at most 2 ×
+    ``config.chart.switch_exceedances`` and ``quiet_time`` at most ``config.chart.exceedance_window``, where the
+    observation's features saturate.
+    """
+
+    def __init__(
+        self,
+        config: EnvConfig | Mapping[str, Any] | None = None,
+        *,
+        k_up: int = CHART_STEP_K_UP,
+        quiet_time: float = CHART_STEP_QUIET_TIME,
+        min_setting: float = CHART_STEP_MIN_SETTING,
+    ) -> None:
+        super().__init__(config)
+        exceedance_threshold(self.config, k_up, "k_up")
+        window = self.config.chart.exceedance_window
+        number = isinstance(quiet_time, (int, float, np.integer, np.floating)) and not isinstance(quiet_time, bool)
+        if not (number and 0 < quiet_time <= window):
+            raise ValueError(f"quiet_time = {quiet_time!r} s: must be in (0, {window}]; the observation's time since "
+                             f"the last alarm saturates at the env's chart.exceedance_window = {window} s")
+        self.k_up, self.quiet_time, self.min_setting = int(k_up), float(quiet_time), float(min_setting)
+        self.floor_index = level_index(self.config, min_setting, "min_setting")
+        self.top_index = len(self.config.setting_levels) - 1
+        self.quiet_tolerance = self.config.platoon.dt / 2  # absorbs the float32 feature's rounding [s]
+        self.name = (f"chart steps (up at {self.k_up}, down after {seconds(quiet_time)} s, "
+                     f"floor {seconds(min_setting)} s)")
+        if self.action_mode == "per_vehicle":
+            self.name += " per vehicle"
+
+    def _view(self, observation: np.ndarray) -> ChartView:
+        return ChartView(decode_observation(observation, self.config), time_since_alarm(observation, self.config))
+
+    def _asked(self, view: ChartView) -> np.ndarray:
+        """The level each follower asks for (n_envs, n_followers)."""
+        up = view.follower.exceedances >= self.k_up
+        down = ~up & (view.time_since_alarm >= self.quiet_time - self.quiet_tolerance)
+        return np.clip(view.follower.setting_index + up - down, self.floor_index, self.top_index)
+
+    def _platoon_action(self, view: ChartView) -> np.ndarray:
+        return self._asked(view).max(axis=1)
+
+    def _per_vehicle_action(self, view: ChartView) -> np.ndarray:
+        return self._asked(view)
 
 
 class FixedPolicy(ObservationPolicy):

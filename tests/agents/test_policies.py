@@ -5,7 +5,14 @@ import numpy as np
 import pytest
 
 import timegap_env
-from agents.policies import NamedPolicy, PaperRulePolicy, V2VAwarePolicy, fixed_policies, level_index
+from agents.policies import (
+    ChartStepPolicy,
+    NamedPolicy,
+    PaperRulePolicy,
+    V2VAwarePolicy,
+    fixed_policies,
+    level_index,
+)
 from timegap_env.config import EnvConfig
 from timegap_env.envs.observation import FEATURES, decode_observation
 
@@ -142,8 +149,12 @@ def test_batched_equals_one_by_one_and_actions_fit_the_env(action_mode):
     config = {"action_mode": action_mode}
     env = gym.make(timegap_env.ENV_ID, config=config)
     obs = real_observation(config)
-    batch = np.stack([obs, with_features(obs, exceedances=1.0), with_features(obs, v2v=0.0)])
-    for policy in [PaperRulePolicy(config), V2VAwarePolicy(config), *fixed_policies(config)]:
+    batch = np.stack([obs, with_features(obs, exceedances=1.0), with_features(obs, v2v=0.0),
+                      with_features(obs, time_since_alarm=np.array([1, 0, 1, 1, 1], dtype=np.float32)),
+                      with_features(obs, time_since_alarm=1.0)])
+    policies = [PaperRulePolicy(config), ChartStepPolicy(config), ChartStepPolicy(config, min_setting=1.0),
+                V2VAwarePolicy(config), *fixed_policies(config)]
+    for policy in policies:
         assert isinstance(policy, NamedPolicy) and policy.action_mode == action_mode
         actions, _ = policy.predict(batch)
         for row, action in zip(batch, actions):
@@ -158,3 +169,96 @@ def test_observation_shape_and_config_mismatches_are_errors():
         PaperRulePolicy().predict(obs[:-1])
     with pytest.raises(ValueError, match="not on setting_levels"):
         PaperRulePolicy({"setting_levels": (0.6, 1.0, 1.6, 3.0)}).predict(with_features(obs, setting=0.3))
+
+
+# ---------------------------------------------------------------- the chart step rule
+LEVELS = np.asarray(EnvConfig().setting_levels)
+
+
+def at_setting(obs: np.ndarray, setting: float | np.ndarray) -> np.ndarray:
+    """``obs`` with the followers' setting feature at ``setting`` [s], one level or one per follower."""
+    return with_features(obs, setting=((np.asarray(setting) - LEVELS[0]) / (LEVELS[-1] - LEVELS[0])).astype(np.float32))
+
+
+def counts(count: int | np.ndarray) -> np.ndarray:
+    """The exceedance feature for ``count`` exceedances under the default chart (saturating at 6)."""
+    return (np.asarray(count) / 6).astype(np.float32)
+
+
+def quiet(seconds: float | np.ndarray) -> np.ndarray:
+    """The time-since-alarm feature for ``seconds`` without an alarm under the default 35 s window."""
+    return np.minimum(np.asarray(seconds) / 35.0, 1.0).astype(np.float32)
+
+
+def test_chart_steps_go_up_on_excursions_and_down_when_quiet():
+    config = EnvConfig()
+    obs, at = real_observation(), lambda setting: level_index(config, setting)
+    policy = ChartStepPolicy(config, k_up=2, quiet_time=20.0, min_setting=1.0)
+    assert policy.predict(with_features(obs, exceedances=counts(1), time_since_alarm=quiet(5)))[0] == at(1.6)
+    assert policy.predict(with_features(obs, exceedances=counts(2), time_since_alarm=quiet(5)))[0] == at(1.8)
+    assert policy.predict(with_features(obs, exceedances=counts(0), time_since_alarm=quiet(19)))[0] == at(1.6)
+    assert policy.predict(with_features(obs, exceedances=counts(0), time_since_alarm=quiet(20)))[0] == at(1.4)
+    # excursions in the window outvote a quiet spell since them
+    assert policy.predict(with_features(obs, exceedances=counts(2), time_since_alarm=quiet(20)))[0] == at(1.8)
+
+
+def test_chart_steps_stay_within_the_floor_and_the_ladder_top():
+    config = EnvConfig()
+    obs, at = real_observation(), lambda setting: level_index(config, setting)
+    policy = ChartStepPolicy(config, k_up=1, quiet_time=10.0, min_setting=1.2)
+    calm, busy = with_features(obs, time_since_alarm=quiet(35)), with_features(obs, exceedances=counts(6))
+    assert policy.predict(at_setting(calm, 1.4))[0] == at(1.2)
+    assert policy.predict(at_setting(calm, 1.2))[0] == at(1.2)
+    assert policy.predict(at_setting(calm, 0.6))[0] == at(1.2), "below the floor: back to it"
+    assert policy.predict(at_setting(busy, 2.0))[0] == at(2.2)
+    assert policy.predict(at_setting(busy, 2.2))[0] == at(2.2)
+
+
+def test_chart_steps_platoon_takes_the_largest_level_asked_per_vehicle_each_its_own():
+    config = EnvConfig()
+    obs, at = real_observation(), lambda setting: level_index(config, setting)
+    one_busy = with_features(obs, exceedances=counts([0, 0, 3, 0, 0]), time_since_alarm=quiet([35, 35, 0, 35, 35]))
+    one_calm = with_features(obs, time_since_alarm=quiet([35, 5, 5, 5, 5]))
+    all_calm = with_features(obs, time_since_alarm=quiet(35))
+    platoon = ChartStepPolicy(config, k_up=3, quiet_time=35.0, min_setting=1.0)
+    np.testing.assert_array_equal(platoon.predict(np.stack([one_busy, one_calm, all_calm]))[0],
+                                  [at(1.8), at(1.6), at(1.4)])
+    per_vehicle = ChartStepPolicy({"action_mode": "per_vehicle"}, k_up=3, quiet_time=35.0, min_setting=1.0)
+    assert per_vehicle.name.endswith("per vehicle") and not platoon.name.endswith("per vehicle")
+    np.testing.assert_array_equal(per_vehicle.predict(one_busy)[0], [at(1.4), at(1.4), at(1.8), at(1.4), at(1.4)])
+    np.testing.assert_array_equal(per_vehicle.predict(one_calm)[0], [at(1.4)] + [at(1.6)] * 4)
+    mixed = at_setting(one_busy, np.array([1.0, 1.2, 2.2, 1.6, 0.8]))
+    np.testing.assert_array_equal(per_vehicle.predict(mixed)[0], [at(1.0), at(1.0), at(2.2), at(1.4), at(1.0)])
+
+
+def test_chart_step_parameters_and_their_limits():
+    for bad, message in [({"k_up": 7}, "k_up = 7"), ({"k_up": 1.5}, "k_up = 1.5"), ({"k_up": True}, "k_up = True"),
+                         ({"quiet_time": 40.0}, "quiet_time = 40.0 s"), ({"quiet_time": 0.0}, "quiet_time = 0.0 s"),
+                         ({"min_setting": 1.1}, "min_setting = 1.1")]:
+        with pytest.raises(ValueError, match=message):
+            ChartStepPolicy(**bad)
+    # an env whose chart counts over 60 s lets the rule wait that long
+    assert ChartStepPolicy({"chart": {"exceedance_window": 60.0}}, quiet_time=60.0).quiet_time == 60.0
+
+
+@pytest.mark.parametrize("action_mode", ["platoon", "per_vehicle"])
+def test_chart_steps_follow_the_env_s_chart_up_and_down(action_mode):
+    """In a real env, every action is the rule applied to the chart's own count and run length."""
+    env = gym.make(timegap_env.ENV_ID, config=BUSY_CHART | {"action_mode": action_mode})
+    obs, _ = env.reset(seed=0, options={"scenario": "aggressive_cycles"})
+    cfg, loop = env.unwrapped.config, env.unwrapped.task.loop
+    policy = ChartStepPolicy(cfg, k_up=2, quiet_time=20.0, min_setting=1.2)
+    moves = set()
+    for step in range(cfg.max_episode_steps):
+        current = np.array([level_index(cfg, s) for s in loop.platoon.setting[0]])
+        up = loop.chart.exceedances_in_window[0] >= 2
+        down = ~up & (loop.chart.run_length[0] * cfg.platoon.dt >= 20.0 - 1e-9)
+        asked = np.clip(current + up - down, level_index(cfg, 1.2), len(cfg.setting_levels) - 1)
+        expected = asked.max() if action_mode == "platoon" else asked
+        action, _ = policy.predict(obs)
+        np.testing.assert_array_equal(action, expected, err_msg=f"step {step}")
+        moves |= set(np.sign(np.atleast_1d(action) - (current[0] if action_mode == "platoon" else current)).tolist())
+        obs, _, terminated, truncated, _ = env.step(action)
+        if terminated or truncated:
+            break
+    assert {-1, 1} <= moves, f"the scenario should send the rule both ways: {moves}"
