@@ -4,11 +4,20 @@ Held out from training:
 
 - **Seeds.** Training uses seeds below ``EVAL_SEED_START`` = 10 000; evaluation episode k
   (k = 0, 1, ..., ``--episodes`` - 1, numbered across groups) is reset with seed 10 000 + k.
-- **Leader families.** Groups of episodes, each a ``reset(options=...)``:
-  ``ngsim_in_band`` (real NGSIM I-80 drivers, their acceleration integrated within
-  20-80 mph; only when ``timegap_env.default_ngsim_path()`` exists), ``idm``
-  (highway-env's IDM driver behind scripted braking), and ``training_mix`` (the default
-  family mix of training, on the held-out seeds). Episodes are split evenly across groups.
+- **Groups** (``GROUPS``), each config overrides and reset options: ``training_mix`` (the
+  training families and degradation mix on the held-out seeds); ``larger_degradations`` (every
+  episode degraded, sizes beyond the training ranges: a generalisation split); human leaders:
+  ``ngsim_in_band`` (real NGSIM I-80 drivers, their acceleration integrated within 20-80 mph),
+  ``openacc`` (the human lead cars of the OpenACC platoons), each only when its data is found,
+  and ``idm`` (highway-env's IDM driver behind scripted braking); and two harsh families the
+  training never saw, ``stop_and_go`` and ``emergency_braking``. Episodes are split evenly
+  across groups.
+
+Policies: the paper's rule (platoon, per vehicle), the chart-step rule (tuned on training seeds by
+``train/tune_rule.py``), every fixed setting, the V2V-aware heuristic, *the* oracle of
+``train/value_of_information.py`` (reads the ground truth; its lookup measured on training seeds,
+chosen on selection seeds) and the trained PPO model. The share of the oracle gap captured is
+(policy - best fixed) / (oracle - best fixed), per group with the best fixed setting of that group.
 
 Every policy runs the same (group, seed) episodes in the native vector env, one batch per
 group; after each reset the script fingerprints every episode (leader speed, degradation,
@@ -17,14 +26,16 @@ so platoon-wide and per-vehicle action modes are checked to draw identical scena
 
 Statistics: per policy and group, the mean over episodes with a 95 % percentile bootstrap
 interval (``BOOTSTRAP_RESAMPLES`` resamples of the episodes, fixed seed); the collision rate
-with a 95 % Wilson score interval; the return's paired difference to ``--reference`` with a
-paired bootstrap (same episodes, resampled together). Min TTC is capped at ``TTC_CAP``
-(inf = never closing in on the predecessor) before averaging.
+with a 95 % Wilson score interval; the return's paired difference to ``--reference`` and the
+share of the oracle gap with a paired bootstrap (same episodes, resampled together). Min TTC is
+capped at ``TTC_CAP`` (inf = never closing in on the predecessor) before averaging. Time below
+stable: seconds per follower whose setting at a step's end lies below the smallest string-stable
+setting of its true parameters at the step's start.
 
 Writes ``table.md``, ``table.csv`` (one row per policy and group), ``episodes.csv`` (every
 episode of every policy), ``profiles.png`` and ``metrics.png`` to ``--out``.
 
-    python -m train.evaluate [--episodes 30] [--policies rule_platoon fixed_1.6 ...] [--out results/eval]
+    python -m train.evaluate [--episodes 112] [--policies rule_platoon fixed_1.6 ...] [--out results/eval]
 """
 
 from __future__ import annotations
@@ -46,21 +57,51 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 import timegap_env
-from agents.policies import NamedPolicy, PaperRulePolicy, V2VAwarePolicy, fixed_policies, seconds
+from agents.oracles import TruthPolicy
+from agents.policies import ChartStepPolicy, NamedPolicy, PaperRulePolicy, V2VAwarePolicy, fixed_policies, seconds
 from agents.protocol import EVAL_SEED_START, MODEL_FILE
 from timegap_env.config import EnvConfig
 from timegap_env.envs.observation import observation_space
-from timegap_env.leaders import default_ngsim_path
+from timegap_env.leaders import default_ngsim_path, default_openacc_dir, openacc_paths
+from train.value_of_information import DEFAULT_TRAIN_EPISODES, all_oracles, choose_oracle, measure_lookup
 
-GROUP_OPTIONS: dict[str, dict[str, Any] | None] = {  # group -> reset options
-    "ngsim_in_band": {"scenario": "ngsim_in_band"},
-    "idm": {"scenario": "idm"},
-    "training_mix": None,
+
+@dataclasses.dataclass(frozen=True)
+class Group:
+    """A held-out group of episodes: the env's config overrides and the reset options, and the data it needs."""
+
+    description: str
+    config: dict[str, Any] = dataclasses.field(default_factory=dict)  # EnvConfig overrides
+    options: dict[str, Any] | None = None  # reset options
+    data: str | None = None  # "ngsim" or "openacc": only run when that data is found
+
+
+LARGER_DEGRADATIONS = {  # every episode degraded, every size beyond the training range (DegradationConfig's)
+    "kind_weights": {"lag": 1.0, "gain": 1.0, "v2v_latency": 1.0, "packet_loss": 1.0, "radar_bias": 1.0,
+                     "radar_noise": 1.0},
+    "lag_factor_range": (2.5, 3.5), "gain_range": (0.45, 0.6), "v2v_latency_range": (0.6, 0.9),
+    "packet_loss_range": (0.9, 0.97), "radar_bias_range": (4.0, 6.0), "radar_noise_range": (1.0, 1.5),
 }
-DEFAULT_EPISODES = 30  # per policy, split across the groups
+GROUPS: dict[str, Group] = {
+    "training_mix": Group("the training families and degradation mix on held-out seeds"),
+    "larger_degradations": Group("every episode degraded, sizes beyond the training ranges (lag x2.5-3.5, gain "
+                                 "0.45-0.6, V2V latency 0.6-0.9 s, packet loss 90-97 %, radar bias 4-6 m, radar "
+                                 "noise 1-1.5 m)", config={"degradation": LARGER_DEGRADATIONS}),
+    "ngsim_in_band": Group("NGSIM I-80 drivers' acceleration integrated within 20-80 mph",
+                           options={"scenario": "ngsim_in_band"}, data="ngsim"),
+    "openacc": Group("the human lead cars of the OpenACC platoons", options={"scenario": "openacc"}, data="openacc"),
+    "idm": Group("highway-env's IDM driver behind scripted braking", options={"scenario": "idm"}),
+    "stop_and_go": Group("a harsh family the training never saw: congestion waves down to a crawl",
+                         options={"scenario": "stop_and_go"}),
+    "emergency_braking": Group("a harsh family the training never saw: emergency stops from highway speed",
+                               options={"scenario": "emergency_braking"}),
+}
+DEFAULT_EPISODES = 112  # per policy, split across the groups
 DEFAULT_MODEL = Path("results/ppo", MODEL_FILE)
 DEFAULT_OUT = Path("results/eval")
 DEFAULT_REFERENCE = "rule_platoon"
+ORACLE = "oracle"  # the policy key of the oracle
+FIXED_PREFIX = "fixed_"  # the policy keys of the fixed settings
 ALL_EPISODES = "all"  # the group name of the rows over every episode
 BOOTSTRAP_RESAMPLES = 10_000
 BOOTSTRAP_SEED = 0
@@ -76,6 +117,7 @@ METRICS: dict[str, str] = {  # column -> label; "return" is the undiscounted sum
     "max_deviation": "max |τ̂ − τ*| [s]",
     "min_ttc": f"min TTC [s, capped at {TTC_CAP:g}]",
     "collision": "collision rate",
+    "time_below_stable": "time below the smallest stable setting [s / follower]",
     "rms_jerk": "RMS jerk [m/s³]",
     "mean_setting": "mean τ* [s]",
     "mean_capacity": "capacity implied [veh/h]",
@@ -100,15 +142,20 @@ class Profile:
     center: np.ndarray  # (n_ticks, n_followers) chart centre line, the applied (ramped) setting tau* [s]
     half_width: float  # control limits at center -/+ half_width [s]
     scenario: str
+    degradation: str  # what degraded which followers
+    onset: float  # the degradation's onset [s] (inf: none)
+    end: float  # its end [s] (inf: never)
 
 
 def available_groups() -> tuple[list[str], str]:
-    """The held-out groups to run, and a note for the table header on what was left out."""
-    path = default_ngsim_path()
-    if path.exists():
-        return list(GROUP_OPTIONS), f"NGSIM leaders from `{path}`."
-    groups = [group for group in GROUP_OPTIONS if group != "ngsim_in_band"]
-    return groups, f"**NGSIM data not found at `{path}`**: no `ngsim_in_band` group; synthetic held-out seeds only."
+    """The held-out groups to run (those whose data is found), and a note for the table header."""
+    found = {"ngsim": default_ngsim_path().exists(),
+             "openacc": default_openacc_dir().is_dir() and bool(openacc_paths(default_openacc_dir()))}
+    where = {"ngsim": default_ngsim_path(), "openacc": default_openacc_dir()}
+    groups = [name for name, group in GROUPS.items() if group.data is None or found[group.data]]
+    notes = [f"{kind} data from `{where[kind]}`." if ok else
+             f"**{kind} data not found at `{where[kind]}`**: its group is left out." for kind, ok in found.items()]
+    return groups, " ".join(notes)
 
 
 def plan_episodes(episodes: int, groups: Sequence[str]) -> list[Episode]:
@@ -123,19 +170,24 @@ def plan_episodes(episodes: int, groups: Sequence[str]) -> list[Episode]:
     return plan
 
 
-def build_policies(names: Sequence[str] | None, model: Path) -> dict[str, NamedPolicy]:
-    """Policies by CLI name; ``names=None`` is the default set (PPO only if ``model`` exists)."""
+def build_policies(names: Sequence[str] | None, model: Path) -> dict[str, NamedPolicy | TruthPolicy]:
+    """Policies by CLI name; ``names=None`` is the default set (PPO only if ``model`` exists). The oracle's lookup
+    is measured on training seeds and the oracle chosen on selection seeds (``train.value_of_information``)."""
     config = EnvConfig()  # the default, whose action mode is one setting for the platoon
     policies: dict[str, Any] = {
         "rule_platoon": PaperRulePolicy(config),
         "rule_per_vehicle": PaperRulePolicy(config.with_overrides({"action_mode": "per_vehicle"})),
-        **{f"fixed_{seconds(policy.setting)}": policy for policy in fixed_policies(config)},
+        "chart_step": ChartStepPolicy(config),
+        **{f"{FIXED_PREFIX}{seconds(policy.setting)}": policy for policy in fixed_policies(config)},
         "v2v_aware": V2VAwarePolicy(config),
     }
-    wanted = list(policies) + ["ppo"] if names is None else list(names)
-    unknown = sorted(set(wanted) - set(policies) - {"ppo"})
+    wanted = list(policies) + [ORACLE, "ppo"] if names is None else list(names)
+    unknown = sorted(set(wanted) - set(policies) - {ORACLE, "ppo"})
     if unknown:
-        raise ValueError(f"--policies {unknown}: unknown; known: {sorted(policies) + ['ppo']}")
+        raise ValueError(f"--policies {unknown}: unknown; known: {sorted(policies) + [ORACLE, 'ppo']}")
+    if ORACLE in wanted:
+        table, _ = measure_lookup(config, DEFAULT_TRAIN_EPISODES)
+        policies[ORACLE] = choose_oracle(config, all_oracles(config, table))
     if "ppo" in wanted:
         if model.is_file():
             from agents.learned import LearnedPolicy  # torch is slow to import; only when needed
@@ -154,28 +206,36 @@ def build_policies(names: Sequence[str] | None, model: Path) -> dict[str, NamedP
 
 
 def run_batch(
-    policy: NamedPolicy, group: str, seeds: list[int], record_profile: bool
+    policy: NamedPolicy | TruthPolicy, group: str, seeds: list[int], record_profile: bool
 ) -> tuple[list[dict[str, Any]], list[str], Profile | None]:
-    """Run ``policy`` once on every seed of ``group`` in the default env (in the policy's action mode).
+    """Run ``policy`` once on every seed of ``group`` (in the policy's action mode); an oracle reads the ground truth.
 
     Returns a record and a scenario fingerprint per episode, and env 0's profile if ``record_profile``.
     """
     n = len(seeds)
     venv = gym.make_vec(timegap_env.ENV_ID, num_envs=n, vectorization_mode="vector_entry_point",
-                        config={"action_mode": policy.action_mode})
-    obs, infos = venv.reset(seed=seeds, options=GROUP_OPTIONS[group])
+                        config={**GROUPS[group].config, "action_mode": policy.action_mode})
+    obs, infos = venv.reset(seed=seeds, options=GROUPS[group].options)
     task, config = venv.unwrapped.task, venv.unwrapped.config
     prints = [task.fingerprint(env) for env in range(n)]
     scenarios = list(infos["scenario"])
+    truth0 = {name: value[0] for name, value in infos["degradation"].items()}  # env 0's schedule, for the profile
     trace = task.start_trace() if record_profile else None  # env 0 at every tick
-    returns, steps = np.zeros(n), np.zeros(n, dtype=np.int64)
+    returns, steps, below = np.zeros(n), np.zeros(n, dtype=np.int64), np.zeros(n)
     active = np.ones(n, dtype=bool)
     summaries: list[dict[str, float]] = [{} for _ in range(n)]
+    state = None  # a policy's memory (a learned policy's frame stack), carried from step to step
     while active.any():
-        action, _ = policy.predict(obs, deterministic=True)
+        truth = infos["degradation"]
+        if isinstance(policy, TruthPolicy):
+            action = policy.act(truth)
+        else:
+            action, state = policy.predict(obs, state=state, deterministic=True)
         obs, reward, terminated, truncated, infos = venv.step(action)
         returns += np.where(active, reward, 0.0)
         steps += active
+        unstable = infos["setting"] < truth["smallest_stable_setting"] - 1e-9  # (n, N), the step's end vs its start
+        below += np.where(active, unstable.mean(axis=1) * config.decision_interval, 0.0)
         ended = (terminated | truncated) & active
         for env in np.flatnonzero(ended):
             summaries[env] = {name: float(value[env]) for name, value in infos["episode_summary"].items()}
@@ -183,19 +243,25 @@ def run_batch(
     venv.close()
     records = [
         {"group": group, "seed": seed, "scenario": scenarios[env], "steps": int(steps[env]),
-         "return": float(returns[env]), **summaries[env]}
+         "return": float(returns[env]), "time_below_stable": float(below[env]), **summaries[env]}
         for env, seed in enumerate(seeds)
     ]
     profile = None
     if trace is not None:
         episode = slice(int(steps[0]) * config.ticks_per_decision)  # env 0's episode, not its autoreset successor
         arrays = trace.arrays()
+        hit = truth0["kind"] != "none"
+        onset = float(truth0["onset"][hit].min()) if hit.any() else math.inf
+        end = float(truth0["end"][hit].max()) if hit.any() else math.inf
         profile = Profile(
             t=arrays.t[episode],
             estimate=arrays.estimate[episode],
             center=arrays.center[episode],
             half_width=config.chart.half_width,
             scenario=f"{group} seed {seeds[0]} ({scenarios[0]})",
+            degradation=(f"{next(k for k in truth0['kind'] if k != 'none')} on followers "
+                         f"{[int(f) + 1 for f in np.flatnonzero(hit)]}" if hit.any() else "no degradation"),
+            onset=onset, end=end,
         )
     return records, prints, profile
 
@@ -208,6 +274,9 @@ def run_all(
     Raises ``RuntimeError`` if two policies were given different scenarios for the same episode.
     """
     groups = list(dict.fromkeys(episode.group for episode in plan))
+    batches = {group: [episode.seed for episode in plan if episode.group == group] for group in groups}
+    if profile_group is not None:
+        batches[profile_group] = profile_first(profile_group, batches[profile_group])
     records: dict[str, list[dict[str, Any]]] = {}
     profiles: dict[str, Profile] = {}
     timings: dict[str, float] = {}
@@ -216,8 +285,7 @@ def run_all(
         start = time.perf_counter()
         records[key], prints = [], []
         for group in groups:
-            seeds = [episode.seed for episode in plan if episode.group == group]
-            batch, batch_prints, profile = run_batch(policy, group, seeds, record_profile=group == profile_group)
+            batch, batch_prints, profile = run_batch(policy, group, batches[group], record_profile=group == profile_group)
             records[key] += batch
             prints += batch_prints
             if profile is not None:
@@ -230,6 +298,22 @@ def run_all(
         timings[key] = time.perf_counter() - start
         print(f"{policy.name:>28}: {len(plan)} episodes in {timings[key]:.1f} s")
     return records, profiles, timings
+
+
+def profile_first(group: str, seeds: list[int]) -> list[int]:
+    """``seeds`` with the first one whose episode degrades a follower midway (a hidden kind) moved to the front, so
+    that profiles.png shows an onset; unchanged if there is none."""
+    venv = gym.make_vec(timegap_env.ENV_ID, num_envs=len(seeds), vectorization_mode="vector_entry_point",
+                        config=GROUPS[group].config)
+    _, infos = venv.reset(seed=seeds, options=GROUPS[group].options)
+    venv.close()
+    truth = infos["degradation"]
+    midway = ((truth["kind"] != "none") & (truth["kind"] != "v2v_outage") & (truth["onset"] > 0)
+              & np.isfinite(truth["onset"])).any(axis=1)
+    if not midway.any():
+        return seeds
+    first = int(np.argmax(midway))
+    return [seeds[first]] + seeds[:first] + seeds[first + 1:]
 
 
 # ---------------------------------------------------------------- statistics
@@ -256,13 +340,39 @@ def metric_values(records: list[dict[str, Any]], metric: str) -> np.ndarray:
     return np.minimum(values, TTC_CAP) if metric == "min_ttc" else values
 
 
+def oracle_share(policy: np.ndarray, blind: np.ndarray, oracle: np.ndarray) -> tuple[float, float, float]:
+    """The share of the oracle gap captured, mean(policy - blind) / mean(oracle - blind), with its 95 % paired
+    bootstrap interval (the episodes resampled together); NaN where the oracle does not beat the blind constant."""
+    gained, gap = np.asarray(policy) - np.asarray(blind), np.asarray(oracle) - np.asarray(blind)
+    if gap.mean() <= 0:
+        return math.nan, math.nan, math.nan
+    rng = np.random.default_rng(BOOTSTRAP_SEED)
+    index = rng.integers(0, gap.size, size=(BOOTSTRAP_RESAMPLES, gap.size))
+    resampled_gap = gap[index].mean(axis=1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        shares = np.where(resampled_gap > 0, gained[index].mean(axis=1) / resampled_gap, np.nan)
+    if np.isnan(shares).any():  # a resample where the oracle gains nothing: no interval
+        return float(gained.mean() / gap.mean()), math.nan, math.nan
+    low, high = np.quantile(shares, [(1 - CONFIDENCE) / 2, (1 + CONFIDENCE) / 2])
+    return float(gained.mean() / gap.mean()), float(low), float(high)
+
+
+def best_fixed(records: dict[str, list[dict[str, Any]]], group: str) -> str | None:
+    """The fixed setting with the best mean return over ``group``'s episodes (``all``: every episode)."""
+    fixed = {key: metric_values([r for r in rows if group in (ALL_EPISODES, r["group"])], "return").mean()
+             for key, rows in records.items() if key.startswith(FIXED_PREFIX)}
+    return max(fixed, key=fixed.get) if fixed else None
+
+
 def summarise(
-    policies: dict[str, NamedPolicy], records: dict[str, list[dict[str, Any]]], reference: str | None
+    policies: dict[str, NamedPolicy | TruthPolicy], records: dict[str, list[dict[str, Any]]], reference: str | None
 ) -> list[dict[str, Any]]:
-    """One row per group (``all`` first) and policy: mean, CI low, CI high of every metric."""
+    """One row per group (``all`` first) and policy: mean, CI low, CI high of every metric, the paired difference to
+    ``reference`` and the share of the oracle gap against the group's best fixed setting (when both were run)."""
     groups = [ALL_EPISODES] + list(dict.fromkeys(record["group"] for record in next(iter(records.values()))))
     rows = []
     for group in groups:
+        blind = best_fixed(records, group)
         for key, policy in policies.items():
             chosen = [r for r in records[key] if group in (ALL_EPISODES, r["group"])]
             row: dict[str, Any] = {"policy": key, "name": policy.name, "action_mode": policy.action_mode,
@@ -280,6 +390,12 @@ def summarise(
                 difference = metric_values(chosen, "return") - metric_values(baseline, "return")
                 row.update(zip(("return_vs_reference_mean", "return_vs_reference_ci_low",
                                 "return_vs_reference_ci_high"), bootstrap_mean(difference)))
+            if blind is not None and ORACLE in records:
+                returns = {name: metric_values([r for r in records[name] if group in (ALL_EPISODES, r["group"])],
+                                               "return") for name in (key, blind, ORACLE)}
+                row["best_fixed"] = blind
+                row.update(zip(("oracle_share_mean", "oracle_share_ci_low", "oracle_share_ci_high"),
+                               oracle_share(returns[key], returns[blind], returns[ORACLE])))
             rows.append(row)
     return rows
 
@@ -287,7 +403,7 @@ def summarise(
 # ---------------------------------------------------------------- outputs
 FORMATS = {"return": ".1f", "time_out_of_control": ".2f", "exceedances": ".2f", "max_deviation": ".3f",
            "min_ttc": ".1f", "collision": ".2f", "rms_jerk": ".2f", "mean_setting": ".2f", "mean_capacity": ".0f",
-           "switches": ".2f", "return_vs_reference": ".1f"}
+           "switches": ".2f", "return_vs_reference": ".1f", "oracle_share": ".2f", "time_below_stable": ".1f"}
 
 
 def cell(row: dict[str, Any], metric: str) -> str:
@@ -296,6 +412,8 @@ def cell(row: dict[str, Any], metric: str) -> str:
     interval = f"[{row[f'{metric}_ci_low']:{f}}, {row[f'{metric}_ci_high']:{f}}]"
     if metric == "collision":
         return f"{row['collisions']}/{row['episodes']} {interval}"
+    if math.isnan(row[f"{metric}_mean"]):
+        return "n/a"
     return f"{row[f'{metric}_mean']:{f}} {interval}"
 
 
@@ -305,13 +423,17 @@ def write_tables(rows: list[dict[str, Any]], header: list[str], reference: str |
         writer = csv.DictWriter(file, fieldnames=list(rows[0]))
         writer.writeheader()
         writer.writerows(rows)
-    columns = ["return"] + (["return_vs_reference"] if reference else []) + list(METRICS)[1:]
-    labels = [METRICS.get(c, f"Δ return vs {reference} (paired)") for c in columns]
+    share = "oracle_share_mean" in rows[0]
+    columns = ["return"] + (["return_vs_reference"] if reference else []) + (["oracle_share"] if share else []) \
+        + list(METRICS)[1:]
+    labels = [METRICS.get(c, "share of the oracle gap" if c == "oracle_share" else f"Δ return vs {reference} (paired)")
+              for c in columns]
     lines = header + [""]
     for group in dict.fromkeys(row["group"] for row in rows):
         chosen = [row for row in rows if row["group"] == group]
         title = "All episodes" if group == ALL_EPISODES else f"Group `{group}`"
-        lines += [f"## {title} ({chosen[0]['episodes']} episodes per policy)", "",
+        blind = f"; best fixed setting: {chosen[0]['best_fixed']}" if share else ""
+        lines += [f"## {title} ({chosen[0]['episodes']} episodes per policy{blind})", "",
                   "| policy | " + " | ".join(labels) + " |", "|---" * (len(columns) + 1) + "|"]
         lines += [f"| {row['name']} | " + " | ".join(cell(row, c) for c in columns) + " |" for row in chosen]
         lines.append("")
@@ -341,6 +463,9 @@ def plot_profiles(policies: dict[str, NamedPolicy], profiles: dict[str, Profile]
         ax.plot(p.t, center - p.half_width, color="C3", ls="--", lw=0.9, label="LCL / UCL")
         ax.plot(p.t, center + p.half_width, color="C3", ls="--", lw=0.9)
         ax.plot(p.t, center, color="k", ls=":", lw=0.9, label="τ* (CL)")
+        for moment, label in ((p.onset, "degradation onset"), (p.end, "its end")):
+            if math.isfinite(moment) and moment <= p.t[-1]:
+                ax.axvline(moment, color="C2", lw=1.0, ls="-." if label == "its end" else "-", label=label)
         ax.set_title(policies[key].name, fontsize=9)
         ax.grid(alpha=0.3)
     for ax in axes.flat[len(keys):]:
@@ -350,7 +475,8 @@ def plot_profiles(policies: dict[str, NamedPolicy], profiles: dict[str, Profile]
     for ax in axes[:, 0]:
         ax.set_ylabel("time gap [s]")
     axes[0, 0].legend(fontsize=7, loc="upper right")
-    fig.suptitle(f"Time gap estimates, {next(iter(profiles.values())).scenario} (other followers grey)", fontsize=10)
+    first = next(iter(profiles.values()))
+    fig.suptitle(f"Time gap estimates, {first.scenario}, {first.degradation} (other followers grey)", fontsize=10)
     fig.tight_layout()
     fig.savefig(out / "profiles.png", dpi=120)
     plt.close(fig)
@@ -386,15 +512,15 @@ def main(argv: Sequence[str] | None = None) -> None:
     parser.add_argument("--episodes", type=int, default=DEFAULT_EPISODES,
                         help=f"episodes per policy, split across the held-out groups (default {DEFAULT_EPISODES})")
     parser.add_argument("--policies", nargs="+", metavar="NAME",
-                        help="rule_platoon rule_per_vehicle fixed_<level> (e.g. fixed_1.6) v2v_aware ppo "
-                             "(default: all, ppo if --model exists)")
+                        help="rule_platoon rule_per_vehicle chart_step fixed_<level> (e.g. fixed_1.6) v2v_aware oracle "
+                             "ppo (default: all, ppo if --model exists)")
     parser.add_argument("--model", type=Path, default=DEFAULT_MODEL,
                         help=f"SB3 PPO zip, vecnormalize.pkl beside it is used if present (default {DEFAULT_MODEL})")
     parser.add_argument("--reference", default=DEFAULT_REFERENCE,
                         help=f"policy the paired return differences are taken against (default {DEFAULT_REFERENCE})")
     parser.add_argument("--profile-group", default="training_mix",
-                        help="group whose first episode profiles.png shows (default training_mix: at tau* = 1.6 s "
-                             "the held-out families barely leave the limits)")
+                        help="group one of whose episodes profiles.png shows: the first with a hidden degradation "
+                             "starting midway (default training_mix)")
     parser.add_argument("--out", type=Path, default=DEFAULT_OUT, help=f"output directory (default {DEFAULT_OUT})")
     args = parser.parse_args(argv)
 
@@ -418,9 +544,12 @@ def main(argv: Sequence[str] | None = None) -> None:
         "# Held-out evaluation (`python -m train.evaluate`)", "",
         f"Episodes per policy: {len(plan)} ({counts}), seeds {plan[0].seed}–{plan[-1].seed} "
         f"(training uses seeds < {EVAL_SEED_START}). {data_note}",
-        "Groups: `ngsim_in_band` = NGSIM I-80 drivers' acceleration integrated within 20–80 mph; `idm` = highway-env "
-        "IDM driver behind scripted braking; `training_mix` = the training families on held-out seeds. Default env "
-        "config otherwise (degradations of the followers, from the default mix, and sensor dropouts drawn from the seed).",
+        "Groups: " + "; ".join(f"`{g}` = {GROUPS[g].description}" for g in planned_groups) + ". Default env config "
+        "otherwise (degradations of the followers, from the default mix, and sensor dropouts drawn from the seed).",
+        *([f"Oracle: `{policies[ORACLE].name}` (reads the ground truth, not deployable; chosen on selection seeds by "
+           "`train.value_of_information`). Share of the oracle gap = (policy − best fixed) / (oracle − best fixed), "
+           "the group's best fixed setting, paired bootstrap interval; n/a where the oracle does not beat it."]
+          if ORACLE in policies else []),
         "Every policy ran the same episodes: the leader, degradation, dropout rate and sensor-noise key of each "
         "episode were fingerprinted after reset and compared across policies and action modes.",
         f"Cells: mean [95 % percentile bootstrap interval, {BOOTSTRAP_RESAMPLES} resamples of the episodes]; "

@@ -9,7 +9,7 @@ from stable_baselines3 import PPO
 
 import timegap_env
 from agents.policies import FixedPolicy, PaperRulePolicy
-from train import evaluate
+from train import evaluate, value_of_information
 
 
 def test_plan_uses_held_out_seeds_split_across_groups():
@@ -20,11 +20,38 @@ def test_plan_uses_held_out_seeds_split_across_groups():
         evaluate.plan_episodes(0, ["idm"])
 
 
-def test_without_ngsim_data_the_groups_are_synthetic_and_the_header_says_so(monkeypatch, tmp_path):
+def test_without_data_the_groups_are_synthetic_and_the_header_says_so(monkeypatch, tmp_path):
     monkeypatch.setenv("TIMEGAP_NGSIM_PATH", str(tmp_path / "absent.csv"))
+    monkeypatch.setenv("TIMEGAP_OPENACC_PATH", str(tmp_path / "absent_dir"))
     groups, note = evaluate.available_groups()
-    assert groups == ["idm", "training_mix"]
-    assert "NGSIM data not found" in note and "absent.csv" in note
+    assert groups == ["training_mix", "larger_degradations", "idm", "stop_and_go", "emergency_braking"]
+    assert "ngsim data not found" in note and "absent.csv" in note and "openacc data not found" in note
+
+
+def test_the_larger_degradations_lie_beyond_the_training_ranges():
+    default = evaluate.EnvConfig().degradation
+    larger = evaluate.EnvConfig.from_dict(evaluate.GROUPS["larger_degradations"].config).degradation
+    assert larger.kind_weights.get("none", 0.0) == 0.0
+    assert larger.lag_factor_range[0] >= default.lag_factor_range[1] and larger.gain_range[1] <= default.gain_range[0]
+    for field in ("v2v_latency_range", "packet_loss_range", "radar_bias_range", "radar_noise_range"):
+        assert getattr(larger, field)[0] >= getattr(default, field)[1], field
+
+
+def test_the_profile_episode_is_one_degraded_midway():
+    seeds = list(range(evaluate.EVAL_SEED_START, evaluate.EVAL_SEED_START + 12))
+    ordered = evaluate.profile_first("training_mix", seeds)
+    assert sorted(ordered) == seeds
+    venv = gym.make_vec(timegap_env.ENV_ID, num_envs=1, vectorization_mode="vector_entry_point")
+    _, infos = venv.reset(seed=ordered[:1])
+    truth = infos["degradation"]
+    assert ((truth["kind"] != "none") & (truth["onset"] > 0) & np.isfinite(truth["onset"])).any()
+
+
+def test_the_share_of_the_oracle_gap():
+    blind, oracle = np.zeros(4), np.array([2.0, 4.0, 2.0, 4.0])
+    share, low, high = evaluate.oracle_share(np.array([1.0, 2.0, 1.0, 2.0]), blind, oracle)
+    assert share == 0.5 and low == high == 0.5  # every resample captures half
+    assert np.isnan(evaluate.oracle_share(blind, blind, -oracle)).all()  # an oracle below the constant: no gap
 
 
 def test_platoon_and_per_vehicle_envs_draw_identical_scenarios():
@@ -55,11 +82,13 @@ def test_policy_selection():
     assert isinstance(defaults["fixed_2.2"], FixedPolicy)
 
 
-def test_two_episodes_write_tables_and_figures(tmp_path):
+def test_two_episodes_write_tables_and_figures(tmp_path, monkeypatch):
+    monkeypatch.setattr(evaluate, "DEFAULT_TRAIN_EPISODES", 1)  # a quick oracle
+    monkeypatch.setattr(value_of_information, "SELECTION_EPISODES", 2)
     model = PPO("MlpPolicy", gym.make(timegap_env.ENV_ID), n_steps=64, batch_size=32, n_epochs=1, seed=0, device="cpu")
     model.learn(64).save(tmp_path / "model.zip")
     out = tmp_path / "eval"
-    evaluate.main(["--episodes", "2", "--policies", "rule_platoon", "rule_per_vehicle", "fixed_1.6", "ppo",
+    evaluate.main(["--episodes", "2", "--policies", "rule_platoon", "rule_per_vehicle", "fixed_1.6", "oracle", "ppo",
                    "--model", str(tmp_path / "model.zip"), "--out", str(out)])
     for name in ("table.md", "table.csv", "episodes.csv", "profiles.png", "metrics.png"):
         assert (out / name).stat().st_size > 0, name
@@ -70,7 +99,10 @@ def test_two_episodes_write_tables_and_figures(tmp_path):
     assert expected <= set(rows[0])
     groups = [evaluate.ALL_EPISODES] + [g for g, _ in zip(evaluate.available_groups()[0], range(2))]
     assert [(r["policy"], r["group"]) for r in rows] == [
-        (p, g) for g in groups for p in ("rule_platoon", "rule_per_vehicle", "fixed_1.6", "ppo")]
+        (p, g) for g in groups for p in ("rule_platoon", "rule_per_vehicle", "fixed_1.6", "oracle", "ppo")]
+    assert {r["best_fixed"] for r in rows} == {"fixed_1.6"}
+    assert all(float(r["oracle_share_mean"]) == 0.0 or np.isnan(float(r["oracle_share_mean"]))
+               for r in rows if r["policy"] == "fixed_1.6")
     assert all(r["episodes"] == "2" for r in rows if r["group"] == evaluate.ALL_EPISODES)
     # the rule and fixed 1.6 s start equal; the paired difference of a policy to itself is exactly 0
     reference = next(r for r in rows if r["policy"] == "rule_platoon" and r["group"] == evaluate.ALL_EPISODES)
