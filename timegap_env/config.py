@@ -453,6 +453,8 @@ class EnvConfig(ConfigMixin):
     decision_interval: float = 1.0  # time between two actions, a multiple of platoon.dt [s]
     episode_duration: float = 250.0  # [s]
     action_mode: str = "platoon"  # one of ACTION_MODES: one setting for all followers, one each, or a relative step
+    random_initial_setting: bool = False  # each episode starts at a ladder level drawn from the seed, not at
+    # platoon.initial_setting (for training: a relative policy then learns to reach a setting, not only to keep one)
     setting_levels: tuple[float, ...] = (0.6, 0.8, 1.0, 1.2, 1.4, 1.6, 1.8, 2.0, 2.2)  # settings to choose from [s]
     preferred_setting: float = 1.6  # the setting the driver chose [s]
     scenario_weights: dict[str, float] = dataclasses.field(default_factory=_default_scenario_weights)  # family -> weight
@@ -487,6 +489,8 @@ class EnvConfig(ConfigMixin):
         for name, config in (("monitor", self.monitor), ("chart", self.chart), ("leader", self.leader)):
             if not math.isclose(config.dt, dt):
                 self._fail(f"{name}.dt", config.dt, f"must equal platoon.dt = {dt}")
+        if not isinstance(self.random_initial_setting, (bool, np.bool_)):
+            self._fail("random_initial_setting", self.random_initial_setting, "must be True or False")
         if self.action_mode not in ACTION_MODES:
             self._fail("action_mode", self.action_mode, f"must be one of {ACTION_MODES}")
         levels = np.asarray(self.setting_levels, dtype=float)

@@ -233,3 +233,13 @@ def test_whole_numbers_in_the_config_run_as_their_floats():
     again = run_episode(gym.make("TimeGapMonitor-v0", config=as_float), lambda obs: level_index(1.0), seed=3)
     assert first[0] == again[0]
     np.testing.assert_array_equal(first[1][-1]["estimate"], again[1][-1]["estimate"])
+
+
+def test_a_random_initial_setting_starts_the_platoon_there():
+    env = gym.make(timegap_env.ENV_ID, config={"random_initial_setting": True, "action_mode": "relative"})
+    starts = set()
+    for seed in range(8):
+        obs, info = env.reset(seed=seed)
+        np.testing.assert_array_equal(info["setting"], info["setting"][0])
+        starts.add(float(info["setting"][0]))
+    assert len(starts) >= 3

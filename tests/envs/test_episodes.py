@@ -75,3 +75,16 @@ def test_unknown_options_and_families_are_named():
         Episodes(EnvConfig.from_dict({"scenario_weights": {"rush_hour": 1.0}}), 1)
     with pytest.raises(ValueError, match="scenario = 'rush_hour'"):
         draw(EnvConfig(), 1, 0, seed=0, options={"scenario": "rush_hour"})
+
+
+def test_a_random_initial_setting_is_drawn_last_and_leaves_the_episode_as_it_was():
+    random = CONFIG.with_overrides({"random_initial_setting": True})
+    settings = set()
+    for seed in range(12):
+        plain, drawn = draw(CONFIG, 1, 0, seed), draw(random, 1, 0, seed)
+        assert plain.initial_setting[0] == CONFIG.platoon.initial_setting
+        assert drawn.initial_setting[0] in CONFIG.setting_levels
+        settings.add(float(drawn.initial_setting[0]))
+        np.testing.assert_array_equal(drawn.leader_speed, plain.leader_speed)
+        assert drawn.degradations[0] == plain.degradations[0] and drawn.noise_keys[0] == plain.noise_keys[0]
+    assert len(settings) >= 4

@@ -75,7 +75,8 @@ class TimeGapMonitorEnv(gym.Env):
     a longer actuation lag, a lower gain, V2V latency or packet loss, a V2V outage, a biased
     or noisy radar, commercial ACC cars, or none; only the outage shows in the V2V flag) and
     a sensor dropout rate (0-5 %), all from the env's seed. The followers start in equilibrium
-    at ``platoon.initial_setting`` (1.6 s). ``reset(options={"scenario": name})`` picks a family
+    at ``platoon.initial_setting`` (1.6 s; with ``random_initial_setting``, at a ladder level drawn
+    from the seed). ``reset(options={"scenario": name})`` picks a family
     (see ``timegap_env.SCENARIOS``, e.g. ``"ngsim_in_band"``, ``"idm"``);
     ``reset(options={"leader_speed": array})`` runs your own leader speed series
     [m/s at 10 Hz]; ``reset(options={"degradation": {"kind": "gain", "size": 0.7,

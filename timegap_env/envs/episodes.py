@@ -41,7 +41,8 @@ class Episodes:
     Per env: ``leader_speed`` [m/s] and ``leader_accel`` [m/s^2] (n_envs, max_ticks + 1), the
     leader at every tick, held at its last value beyond the profile; ``episode_ticks`` (n_envs,)
     ticks in the episode; ``degradations`` (a tuple of :class:`~timegap_env.sim.degradation.Degradation`
-    per env); ``dropout_probability`` (n_envs,) [-]; ``noise_keys`` (n_envs,) uint64 of the sensor noise
+    per env); ``dropout_probability`` (n_envs,) [-]; ``initial_setting`` (n_envs,) [s], the setting the episode
+    starts at; ``noise_keys`` (n_envs,) uint64 of the sensor noise
     and ``packet_loss_keys`` of the V2V losses; ``scenario`` (n_envs,), the leader's name.
     """
 
@@ -57,6 +58,7 @@ class Episodes:
         self.episode_ticks = np.full(n_envs, max_ticks)
         self.degradations: list[tuple[Degradation, ...]] = [() for _ in range(n_envs)]
         self.dropout_probability = np.zeros(n_envs)
+        self.initial_setting = np.full(n_envs, config.platoon.initial_setting)  # [s]
         self.noise_keys = np.zeros(n_envs, dtype=np.uint64)
         self.scenario = np.full(n_envs, "", dtype=object)
         families = list(config.scenario_weights)
@@ -85,6 +87,8 @@ class Episodes:
         self.degradations[env] = parse_degradations(options["degradation"], n_followers) if "degradation" in options else drawn
         self.dropout_probability[env] = rng.uniform(*cfg.dropout_probability_range)
         self.noise_keys[env] = rng.integers(0, 2**63, dtype=np.uint64)
+        if cfg.random_initial_setting:  # drawn last: the rest of the episode is the one it would be without
+            self.initial_setting[env] = cfg.setting_levels[int(rng.integers(len(cfg.setting_levels)))]
 
     def _load_leader(self, env: int, profile: LeaderProfile) -> None:
         """Put ``profile`` in env's leader buffer, cut to the episode and padded to whole decisions."""

@@ -100,7 +100,7 @@ class PlatoonTask:
             episodes.draw(env, rngs[env], options)
             loop.degrade(env, episodes.degradations[env], episodes.packet_loss_keys[env])
         loop.reset(episodes.leader_speed[:, 0], episodes.leader_accel[:, 0], mask=mask,
-                   setting=self.config.platoon.initial_setting, noise_key=episodes.noise_keys,
+                   setting=episodes.initial_setting[:, None], noise_key=episodes.noise_keys,
                    dropout_probability=episodes.dropout_probability)
         loop.platoon.set_v2v(loop.degradation.v2v_up(loop.ticks), mask=mask)  # the others keep their last tick's
         self._previous_accel[mask] = loop.platoon.a[mask, 1:]
