@@ -8,6 +8,7 @@ import pytest
 from stable_baselines3 import PPO
 
 import timegap_env
+from timegap_env.leaders.scenarios import HELD_OUT_FAMILIES
 from agents.policies import FixedPolicy, PaperRulePolicy
 from train import evaluate, value_of_information
 
@@ -26,6 +27,12 @@ def test_without_data_the_groups_are_synthetic_and_the_header_says_so(monkeypatc
     groups, note = evaluate.available_groups()
     assert groups == ["training_mix", "larger_degradations", "idm", "stop_and_go", "emergency_braking"]
     assert "ngsim data not found" in note and "absent.csv" in note and "openacc data not found" in note
+
+
+def test_every_held_out_family_is_a_group_and_none_is_trained_on():
+    for family in HELD_OUT_FAMILIES:
+        assert evaluate.GROUPS[family].options == {"scenario": family}
+        assert family not in evaluate.EnvConfig().scenario_weights
 
 
 def test_the_larger_degradations_lie_beyond_the_training_ranges():
