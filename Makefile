@@ -17,10 +17,11 @@ $(STAMP): pyproject.toml
 demo: $(STAMP)
 	MPLBACKEND=Agg $(PY) -m train.demo
 	MPLBACKEND=Agg $(PY) -m train.reproduce_paper
-	MPLBACKEND=Agg $(PY) -m train.evaluate
 	MPLBACKEND=Agg $(PY) -m train.field_validation
 	MPLBACKEND=Agg $(PY) -m train.value_of_information
 	MPLBACKEND=Agg $(PY) -m train.detection_benchmark
+	MPLBACKEND=Agg $(PY) -m train.tune_rule
+	MPLBACKEND=Agg $(PY) -m train.evaluate
 
 test: $(STAMP)
 	MPLBACKEND=Agg $(PY) -m pytest -q

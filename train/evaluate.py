@@ -414,6 +414,8 @@ def cell(row: dict[str, Any], metric: str) -> str:
         return f"{row['collisions']}/{row['episodes']} {interval}"
     if math.isnan(row[f"{metric}_mean"]):
         return "n/a"
+    if math.isnan(row[f"{metric}_ci_low"]):  # a share whose gap's own interval reaches 0
+        return f"{row[f'{metric}_mean']:{f}} [unbounded]"
     return f"{row[f'{metric}_mean']:{f}} {interval}"
 
 
@@ -548,7 +550,8 @@ def main(argv: Sequence[str] | None = None) -> None:
         "otherwise (degradations of the followers, from the default mix, and sensor dropouts drawn from the seed).",
         *([f"Oracle: `{policies[ORACLE].name}` (reads the ground truth, not deployable; chosen on selection seeds by "
            "`train.value_of_information`). Share of the oracle gap = (policy − best fixed) / (oracle − best fixed), "
-           "the group's best fixed setting, paired bootstrap interval; n/a where the oracle does not beat it."]
+           "the group's best fixed setting, paired bootstrap interval; n/a where the oracle does not beat it, "
+           "[unbounded] where it does not in some resamples (the gap's own interval reaches 0)."]
           if ORACLE in policies else []),
         "Every policy ran the same episodes: the leader, degradation, dropout rate and sensor-noise key of each "
         "episode were fingerprinted after reset and compared across policies and action modes.",
