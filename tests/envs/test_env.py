@@ -243,3 +243,16 @@ def test_a_random_initial_setting_starts_the_platoon_there():
         np.testing.assert_array_equal(info["setting"], info["setting"][0])
         starts.add(float(info["setting"][0]))
     assert len(starts) >= 3
+
+
+@pytest.mark.parametrize("make", [
+    lambda: gym.make(timegap_env.ENV_ID).unwrapped,
+    lambda: gym.make_vec(timegap_env.ENV_ID, num_envs=2, vectorization_mode="vector_entry_point"),
+])
+def test_stepping_before_reset_raises_reset_needed(make):
+    env = make()
+    action = env.action_space.sample()
+    with pytest.raises(gym.error.ResetNeeded, match="before reset"):
+        env.step(action)
+    env.reset(seed=0)
+    env.step(action)

@@ -6,6 +6,7 @@ from collections.abc import Mapping
 from typing import Any
 
 import gymnasium as gym
+from gymnasium.error import ResetNeeded
 import numpy as np
 
 from timegap_env.config import EnvConfig
@@ -117,15 +118,19 @@ class TimeGapMonitorEnv(gym.Env):
         self.observation_space = observation_space(self.config)
         self.action_space = action_space(self.config)
         self._renderer = None
+        self._was_reset = False  # step() before the first reset() raises gymnasium's ResetNeeded
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict]:
         super().reset(seed=seed)
         self.task.reset(np.ones(1, dtype=bool), [self.np_random], options)
+        self._was_reset = True
         if self.task.trace is not None:
             self.task.trace.clear()
         return self.task.observation()[0].ravel(), self._info()
 
     def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict]:
+        if not self._was_reset:
+            raise ResetNeeded("TimeGapMonitorEnv.step() called before reset(): call reset() first")
         indices = np.asarray(action)
         if not np.issubdtype(indices.dtype, np.integer) or not self.action_space.contains(indices.astype(np.int64)):
             raise ValueError(f"action = {action!r} is outside the action space {self.action_space}")

@@ -11,6 +11,7 @@ from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
+from gymnasium.error import ResetNeeded
 from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
@@ -55,6 +56,7 @@ class TimeGapMonitorVectorEnv(VectorEnv):
         self._rngs = [seeding.np_random()[0] for _ in range(self.num_envs)]
         self._steps = np.zeros(self.num_envs, dtype=np.int64)
         self.step_diagnostics = bool(step_diagnostics)
+        self._was_reset = False  # step() before the first reset() raises gymnasium's ResetNeeded
 
     def reset(
         self, *, seed: int | list[int | None] | None = None, options: dict[str, Any] | None = None
@@ -71,10 +73,13 @@ class TimeGapMonitorVectorEnv(VectorEnv):
             self._rngs = [seeding.np_random(s)[0] for s in seeds]
         everyone = np.ones(self.num_envs, dtype=bool)
         self.task.reset(everyone, self._rngs, options)
+        self._was_reset = True
         self._steps[:] = 0
         return self._observations(), self._infos()
 
     def step(self, actions: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
+        if not self._was_reset:
+            raise ResetNeeded("TimeGapMonitorVectorEnv.step() called before reset(): call reset() first")
         result = self.task.step(np.asarray(actions))  # checks them against the action space
         self._steps += 1
         truncated = result.truncated | ((self._steps >= self.max_episode_steps) & ~result.terminated)
