@@ -256,3 +256,16 @@ def test_stepping_before_reset_raises_reset_needed(make):
         env.step(action)
     env.reset(seed=0)
     env.step(action)
+
+
+def test_an_env_copies_and_pickles_after_rendering():
+    import copy
+    import pickle
+
+    env = gym.make(timegap_env.ENV_ID, render_mode="rgb_array")
+    env.reset(seed=0)
+    frame = env.render()
+    for twin in (copy.deepcopy(env), pickle.loads(pickle.dumps(env))):
+        np.testing.assert_array_equal(twin.render(), frame)
+        twin.step(0)
+    env.step(0)

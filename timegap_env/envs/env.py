@@ -128,6 +128,11 @@ class TimeGapMonitorEnv(gym.Env):
             self.task.trace.clear()
         return self.task.observation()[0].ravel(), self._info()
 
+    def __getstate__(self) -> dict[str, Any]:
+        """For copy and pickle: everything but the renderer (pygame surfaces and fonts do not pickle), which the next
+        render() builds again."""
+        return {**self.__dict__, "_renderer": None}
+
     def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict]:
         if not self._was_reset:
             raise ResetNeeded("TimeGapMonitorEnv.step() called before reset(): call reset() first")
