@@ -44,6 +44,7 @@ import argparse
 import csv
 import dataclasses
 import math
+import os
 import time
 from collections.abc import Sequence
 from pathlib import Path
@@ -96,6 +97,7 @@ GROUPS: dict[str, Group] = {
     "emergency_braking": Group("a harsh family the training never saw: emergency stops from highway speed",
                                options={"scenario": "emergency_braking"}),
 }
+REPO = Path(__file__).resolve().parents[1]
 DEFAULT_EPISODES = 112  # per policy, split across the groups
 DEFAULT_MODEL = Path("results/ppo", MODEL_FILE)
 DEFAULT_OUT = Path("results/eval")
@@ -151,7 +153,8 @@ def available_groups() -> tuple[list[str], str]:
     """The held-out groups to run (those whose data is found), and a note for the table header."""
     found = {"ngsim": default_ngsim_path().exists(),
              "openacc": default_openacc_dir().is_dir() and bool(openacc_paths(default_openacc_dir()))}
-    where = {"ngsim": default_ngsim_path(), "openacc": default_openacc_dir()}
+    where = {kind: os.path.relpath(path.resolve(), REPO)  # relative, so the committed table holds no machine path
+             for kind, path in (("ngsim", default_ngsim_path()), ("openacc", default_openacc_dir()))}
     groups = [name for name, group in GROUPS.items() if group.data is None or found[group.data]]
     notes = [f"{kind} data from `{where[kind]}`." if ok else
              f"**{kind} data not found at `{where[kind]}`**: its group is left out." for kind, ok in found.items()]
