@@ -3,6 +3,7 @@
     python -m train.train_ppo                                    # the committed model in results/ppo/
     python -m train.train_ppo --timesteps 20000 --out /tmp/ppo   # a short run elsewhere
     python -m train.train_ppo --resume --timesteps 3000000       # continue results/ppo/ to 3 M steps in all
+    python -m train.train_ppo --env-config '{"action_mode": "platoon"}' --frame-stack 4 --out /tmp/ppo  # a variant
 
 Hyperparameters come from ``hyperparams/ppo.yml`` (rl-zoo3's layout: the env id, then
 ``n_envs``, ``n_timesteps``, ``policy``, ``normalize``, ``frame_stack``, ``env_kwargs`` and PPO's own
@@ -78,6 +79,11 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                         help="seed of PyTorch and the envs; phase k's sub-env i gets seed + k n_envs + i (default: 0)")
     parser.add_argument("--n-envs", type=int, default=None,
                         help="platoons stepped together (default: n_envs of the yml)")
+    parser.add_argument("--env-config", type=json.loads, default={},
+                        help="EnvConfig overrides as JSON, merged into the config of env_kwargs and of the warm-up's "
+                             "(default: none), e.g. '{\"action_mode\": \"platoon\"}'")
+    parser.add_argument("--frame-stack", type=int, default=None,
+                        help="observations the policy reads at once (default: frame_stack of the yml, else 1)")
     parser.add_argument("--hyperparams", type=Path, default=Path("hyperparams/ppo.yml"),
                         help="rl-zoo3-style yml keyed by env id (default: %(default)s)")
     parser.add_argument("--out", type=Path, default=Path("results/ppo"),
@@ -115,6 +121,11 @@ def load_hyperparams(path: Path) -> dict[str, Any]:
         if key not in hyperparams:
             raise ValueError(f"hyperparams {ENV_ID}.{key}: missing")
     return hyperparams
+
+
+def with_env_config(env_kwargs: dict[str, Any], overrides: dict[str, Any]) -> dict[str, Any]:
+    """``env_kwargs`` (gym.make's) with ``overrides`` merged into its ``config``."""
+    return {**env_kwargs, "config": {**(env_kwargs.get("config") or {}), **overrides}} if overrides else env_kwargs
 
 
 def save_run(model: PPO, out: Path) -> None:
@@ -257,15 +268,15 @@ def main(argv: list[str] | None = None) -> None:
     del hyperparams["n_envs"], hyperparams["n_timesteps"]
     policy = hyperparams.pop("policy")
     normalize = hyperparams.pop("normalize", False)
-    frame_stack = hyperparams.pop("frame_stack", 1)
-    env_kwargs = hyperparams.pop("env_kwargs", None) or {}
+    frame_stack = hyperparams.pop("frame_stack", 1) if args.frame_stack is None else args.frame_stack
+    env_kwargs = with_env_config(hyperparams.pop("env_kwargs", None) or {}, args.env_config)
     warmup = hyperparams.pop("warmup", None)
     if warmup is not None and (not isinstance(warmup, dict) or set(warmup) != {"n_timesteps", "env_kwargs"}
                                or not 0 < int(warmup["n_timesteps"]) < total_timesteps):
         raise ValueError(f"hyperparams {ENV_ID}.warmup = {warmup!r}: needs env_kwargs and n_timesteps "
                          f"in (0, timesteps = {total_timesteps})")
     # Phases (end [total steps], env_kwargs): the warm-up's coarser decisions, then the env as evaluated.
-    phases = [(int(warmup["n_timesteps"]), warmup["env_kwargs"])] if warmup else []
+    phases = [(int(warmup["n_timesteps"]), with_env_config(warmup["env_kwargs"], args.env_config))] if warmup else []
     phases.append((total_timesteps, env_kwargs))
     if n_envs < 1:
         raise ValueError(f"n_envs = {n_envs}: must be >= 1")

@@ -114,6 +114,14 @@ def test_a_relative_frame_stacked_run_is_loaded_as_it_was_trained(tmp_path: Path
     assert stack[0, obs.shape[1]:2 * obs.shape[1]].any() and not stack[1, :-obs.shape[1]].any()
 
 
+def test_env_config_overrides_merge_into_a_phase_config() -> None:
+    kwargs = {"config": {"action_mode": "relative", "decision_interval": 5.0}, "max_episode_steps": 9}
+    assert train_ppo.with_env_config(kwargs, {"action_mode": "platoon"}) == {
+        "config": {"action_mode": "platoon", "decision_interval": 5.0}, "max_episode_steps": 9}
+    assert train_ppo.with_env_config({}, {"action_mode": "platoon"}) == {"config": {"action_mode": "platoon"}}
+    assert train_ppo.with_env_config(kwargs, {}) is kwargs
+
+
 def test_training_seeds_stay_below_evaluation_seeds(tmp_path: Path) -> None:
     seed = EVAL_SEED_START - 10
     with pytest.raises(ValueError, match=f"seed = {seed}"):
