@@ -75,6 +75,8 @@ def test_people_driving_have_no_distance_setting(tmp_path):
         ("10.1,8.1,1.0,12.6", "10.1,8.1,1.0,twelve", r"row 8, column 'IVS1' = 'twelve' is not a number"),
         ("10.2,", "10.25,", r"time steps must be 0.1 s; rows 8 and 9 are 0.15 s apart"),
         ("10.1,8.1", ",8.1", "row 8, column 'Time' is empty"),
+        ("10.1,8.1", "NaN,8.1", "row 8, column 'Time' = 'NaN' is not a finite number"),
+        ("10.1,8.1,1.0,12.6", "10.1,8.1,1.0,-inf", "row 8, column 'IVS1' = '-inf' is not a finite number"),
         ("10.2,8.2,1.0,,8.3,1.0,13.2,8.4,1.0\n", "10.2,8.2\n", "row 9 has 2 fields, the header 9"),
     ],
 )
@@ -83,6 +85,13 @@ def test_malformed_files_are_named_with_what_is_wrong(tmp_path, old, new, messag
     with pytest.raises(ValueError, match=message) as error:
         read_openacc(path)
     assert str(path) in str(error.value)
+
+
+def test_a_file_ending_in_its_metadata_is_named(tmp_path):
+    path = write(tmp_path, GOOD.split("ACC,1")[0])
+    with pytest.raises(ValueError, match="ends after line 3: expected the metadata line 'ACC'") as error:
+        read_openacc(path)
+    assert str(error.value).startswith(f"{path}: ")
 
 
 def test_an_empty_table_is_named(tmp_path):

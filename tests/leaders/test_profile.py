@@ -43,14 +43,18 @@ def test_user_csv_with_and_without_time(tmp_path):
         ("velocity\n1\n2\n", "missing column 'speed'"),
         ("speed\n20\nfast\n", "row 3, column 'speed' = 'fast'"),
         ("time,speed\n0,20\n0.1,20\n0.3,20\n", "even steps"),
-        ("speed\n20\nnan\n", r"speed\[1\] = nan"),
+        ("speed\n20\nnan\n", "row 3, column 'speed' = 'nan' is not a finite number"),
+        ("speed\n20\n\n21\nfast\n", "row 5, column 'speed' = 'fast'"),  # a blank line is skipped, yet counted
+        ("time,speed\n0,20\n0.1\n", r"row 3 has fewer fields than the header \(2\)"),
+        ("speed\n20\n", "one data row after the header; a profile needs at least 2"),
     ],
 )
 def test_malformed_user_csv_is_named(tmp_path, content, message):
     path = tmp_path / "bad.csv"
     path.write_text(content)
-    with pytest.raises(ValueError, match=message):
+    with pytest.raises(ValueError, match=message) as error:
         LeaderProfile.from_csv(path)
+    assert str(error.value).startswith(f"{path}: ")
 
 
 @pytest.mark.parametrize(

@@ -18,16 +18,14 @@ from __future__ import annotations
 
 import csv
 import dataclasses
-import gzip
 import operator
 import os
 from pathlib import Path
-from typing import TextIO
 
 import numpy as np
 
 from timegap_env.config import LeaderConfig
-from timegap_env.leaders.profile import LeaderProfile
+from timegap_env.leaders.profile import LeaderProfile, open_csv
 
 FOOT = 0.3048  # [m per ft]
 FRAME_DT = 0.1  # time between two NGSIM frames [s]
@@ -58,26 +56,21 @@ class NgsimTable:
 def read_ngsim(path: str | Path) -> NgsimTable:
     """Read ``Vehicle_ID``, ``Frame_ID``, ``v_Vel`` and ``v_Acc`` from an NGSIM ``.csv`` or ``.csv.gz``.
 
-    Raises ``ValueError`` naming the file and the column, row or value at fault.
-    Rows are numbered as lines of the file, the header being row 1.
+    Raises ``ValueError`` naming the file and what is wrong: the file itself (see :func:`open_csv`), a
+    missing column, no data rows, or the row, column and value at fault. Rows are numbered as lines of
+    the file, the header being row 1. Names may be padded with spaces; trailing blank lines are ignored.
     """
     path = Path(path)
-    with _open_text(path) as handle:
-        reader = csv.reader(handle)
-        header = next(reader, None)
-        if header is None:
-            raise ValueError(f"{path}: empty file (no header row)")
-        header = [name.strip() for name in header]
-        missing = [name for name in REQUIRED_COLUMNS if name not in header]
-        if missing:
-            raise ValueError(f"{path}: missing column(s) {missing} (found columns {header})")
-        pick = operator.itemgetter(*(header.index(name) for name in REQUIRED_COLUMNS))
-        try:
-            rows = list(map(pick, reader))
-        except IndexError:
-            raise ValueError(
-                f"{path}: row {reader.line_num} has fewer fields than the header ({len(header)})"
-            ) from None
+    reader = csv.reader(open_csv(path))
+    header = [name.strip() for name in next(reader)]
+    missing = [name for name in REQUIRED_COLUMNS if name not in header]
+    if missing:
+        raise ValueError(f"{path}: missing column(s) {missing} (found columns {header})")
+    pick = operator.itemgetter(*(header.index(name) for name in REQUIRED_COLUMNS))
+    try:
+        rows = list(map(pick, reader))
+    except IndexError:
+        raise ValueError(f"{path}: row {reader.line_num} has fewer fields than the header ({len(header)})") from None
     if not rows:
         raise ValueError(f"{path}: no data rows after the header")
     vehicle_id, frame, v_vel, v_acc = ([row[j] for row in rows] for j in range(len(REQUIRED_COLUMNS)))
@@ -153,13 +146,6 @@ def vehicle_profile(
             f"within_band.dt = {within_band.dt}: must equal the NGSIM frame period {FRAME_DT} s"
         )
     return LeaderProfile.from_acceleration(accel, within_band, name=f"{name}-in-band")
-
-
-def _open_text(path: Path) -> TextIO:
-    """Open a ``.csv`` or gzip-compressed ``.csv.gz`` file as text for the ``csv`` module."""
-    if path.suffix == ".gz":
-        return gzip.open(path, "rt", newline="")
-    return path.open(newline="")
 
 
 def _adjacent_checks(table: NgsimTable, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

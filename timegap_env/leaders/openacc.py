@@ -24,16 +24,14 @@ from __future__ import annotations
 import csv
 import dataclasses
 import datetime
-import gzip
 import os
 from collections.abc import Sequence
 from pathlib import Path
-from typing import TextIO
 
 import numpy as np
 
 from timegap_env.config import LeaderConfig
-from timegap_env.leaders.profile import LeaderProfile
+from timegap_env.leaders.profile import LeaderProfile, open_csv
 
 PATH_VARIABLE = "TIMEGAP_OPENACC_PATH"  # a directory of OpenACC files
 SHARED_DIR = Path("shared", "data", "openacc")
@@ -91,21 +89,25 @@ def openacc_paths(directory: str | Path | None = None) -> list[Path]:
 def read_openacc(path: str | Path) -> OpenAccRun:
     """Read one OpenACC ``.csv`` or ``.csv.gz`` file.
 
-    Raises ``ValueError`` naming the file and what is wrong: a missing or malformed metadata line,
-    a missing or non-numeric column, a time step that is not 0.1 s, an empty table. Rows are
-    numbered as lines of the file.
+    Raises ``ValueError`` naming the file and what is wrong: the file itself (see :func:`open_csv`), a
+    missing or malformed metadata line, a missing column, a value that is neither a number nor empty
+    (an empty or NaN value is a gap in the record; ``inf`` is an error), a time step that is not 0.1 s,
+    an empty table. Rows are numbered as lines of the file. Trailing blank lines are ignored.
     """
     path = Path(path)
-    with _open_text(path) as handle:
-        metadata = {}
-        for line_number, expected in enumerate(METADATA, start=1):
-            fields = [field.strip() for field in handle.readline().rstrip("\r\n").split(",")]
-            if fields[0] != expected:
-                raise ValueError(f"{path}: line {line_number} is {fields[0]!r}: expected the metadata line {expected!r}")
-            metadata[expected] = [field for field in fields[1:] if field]
-        reader = csv.reader(handle)
-        header = [name.strip() for name in next(reader, [])]
-        rows = list(reader)
+    handle = open_csv(path)
+    metadata = {}
+    for line_number, expected in enumerate(METADATA, start=1):
+        line = handle.readline()
+        if not line:
+            raise ValueError(f"{path}: ends after line {line_number - 1}: expected the metadata line {expected!r}")
+        fields = [field.strip() for field in line.rstrip("\r\n").split(",")]
+        if fields[0] != expected:
+            raise ValueError(f"{path}: line {line_number} is {fields[0]!r}: expected the metadata line {expected!r}")
+        metadata[expected] = [field for field in fields[1:] if field]
+    reader = csv.reader(handle)
+    header = [name.strip() for name in next(reader, [])]
+    rows = list(reader)
     date, acc, setting, vehicles = _parse_metadata(path, metadata)
     if "Time" not in header:
         raise ValueError(f"{path}: missing column 'Time' (found columns {header[:8]}...)")
@@ -122,7 +124,10 @@ def read_openacc(path: str | Path) -> OpenAccRun:
 
     t = column("Time")
     if np.isnan(t).any():
-        raise ValueError(f"{path}: row {first_data_line + int(np.flatnonzero(np.isnan(t))[0])}, column 'Time' is empty")
+        i = int(np.flatnonzero(np.isnan(t))[0])
+        text = rows[i][columns["Time"]]
+        what = f"= {text!r} is not a finite number" if text.strip() else "is empty"
+        raise ValueError(f"{path}: row {first_data_line + i}, column 'Time' {what}")
     steps = np.diff(t)
     wrong = np.flatnonzero(np.abs(steps - TICK) > TICK_TOLERANCE)
     if wrong.size:
@@ -169,9 +174,10 @@ def _parse_metadata(path: Path, metadata: dict[str, list[str]]) -> tuple[datetim
 
 
 def _parse_column(path: Path, name: str, texts: list[str], first_data_line: int) -> np.ndarray:
-    """One column as floats, NaN where empty; ValueError naming the row of the first value that is not a number."""
+    """One column as floats, NaN where empty or NaN; ValueError naming the row of the first value that is
+    not a number, or infinite."""
     try:
-        return np.array([text or "nan" for text in texts], dtype=float)
+        values = np.array([text or "nan" for text in texts], dtype=float)
     except ValueError:
         for i, text in enumerate(texts):
             try:
@@ -179,13 +185,11 @@ def _parse_column(path: Path, name: str, texts: list[str], first_data_line: int)
             except ValueError:
                 raise ValueError(f"{path}: row {first_data_line + i}, column {name!r} = {text!r} is not a number") from None
         raise
-
-
-def _open_text(path: Path) -> TextIO:
-    """Open a ``.csv`` or gzip-compressed ``.csv.gz`` file as text."""
-    if path.suffix == ".gz":
-        return gzip.open(path, "rt", newline="")
-    return path.open(newline="")
+    infinite = np.flatnonzero(np.isinf(values))
+    if infinite.size:
+        i = int(infinite[0])
+        raise ValueError(f"{path}: row {first_data_line + i}, column {name!r} = {texts[i]!r} is not a finite number")
+    return values
 
 
 def repeated_runs(runs: Sequence[OpenAccRun]) -> dict[str, str]:

@@ -9,19 +9,61 @@ sampled every ``dt`` [s]. Sources:
 - the seeded synthetic families of :mod:`timegap_env.leaders.synthetic`, real NGSIM
   I-80 vehicles (:mod:`timegap_env.leaders.ngsim`) and highway-env's IDM driver
   (:mod:`timegap_env.leaders.idm`), named in :mod:`timegap_env.leaders.scenarios`.
+
+Every leader file (the user's CSV, NGSIM, OpenACC) is read through :func:`open_csv`, which
+checks it (gzip, UTF-8 text, not empty) and names the file in its errors.
 """
 
 from __future__ import annotations
 
 import csv
 import dataclasses
+import gzip
+import io
 import math
+import zlib
 from pathlib import Path
 
 import numba
 import numpy as np
 
 from timegap_env.config import LeaderConfig
+
+
+GZIP_MAGIC = b"\x1f\x8b"  # the first two bytes of every gzip file
+
+
+def open_csv(path: Path) -> io.StringIO:
+    """The whole text of a ``.csv`` or gzip-compressed ``.csv.gz`` file, checked, as a stream for :mod:`csv`.
+
+    The text is UTF-8 (a leading byte-order mark is dropped) and its trailing blank lines are dropped.
+    Raises ``FileNotFoundError`` for a missing file and ``ValueError`` naming the file when it is empty,
+    named ``.gz`` but not gzip, a truncated or corrupt gzip stream, or binary (not UTF-8, or NUL bytes).
+    """
+    data = path.read_bytes()
+    if path.suffix == ".gz":
+        if not data.startswith(GZIP_MAGIC):
+            what = "an empty file" if not data else f"its first bytes are {data[:8]!r}"
+            raise ValueError(f"{path}: not gzip-compressed although named .gz ({what})")
+        try:
+            data = gzip.decompress(data)
+        except (EOFError, zlib.error, gzip.BadGzipFile) as err:
+            raise ValueError(f"{path}: truncated or corrupt gzip data ({err})") from err
+    try:
+        text = data.decode("utf-8").removeprefix("\ufeff")
+    except UnicodeDecodeError as err:
+        where = "of the decompressed data " if path.suffix == ".gz" else ""
+        raise ValueError(
+            f"{path}: not UTF-8 text (byte {err.start} {where}is {data[err.start]:#04x}): "
+            "binary data or another encoding"
+        ) from err
+    if "\0" in text:
+        raise ValueError(f"{path}: NUL byte at character {text.index(chr(0))}: binary data, not CSV text")
+    last = len(text.rstrip())  # where the text ends without its trailing white space
+    if last == 0:
+        raise ValueError(f"{path}: empty file (no text)")
+    end = text.find("\n", last)  # the end of the last line with text; blank lines follow it
+    return io.StringIO(text if end < 0 else text[:end], newline="")
 
 
 def _series(name: str, values: np.ndarray) -> np.ndarray:
@@ -95,37 +137,45 @@ class LeaderProfile:
 
     @classmethod
     def from_csv(cls, path: str | Path, dt: float = LeaderConfig.dt, name: str | None = None) -> LeaderProfile:
-        """Read a profile from a CSV file with a header.
+        """Read a profile from a ``.csv`` or gzip-compressed ``.csv.gz`` file with a header.
 
         Columns: ``speed`` [m/s] (required); ``time`` [s] (optional, evenly
         spaced, sets ``dt``); ``accel`` [m/s^2] (optional, else differentiated).
+        Names may be padded with spaces (``time, speed``); blank lines are skipped.
+        Raises ``ValueError`` naming the file and what is wrong (see :func:`open_csv`);
+        rows are numbered as lines of the file, the header being row 1.
         """
         path = Path(path)
-        with path.open(newline="") as handle:
-            reader = csv.DictReader(handle)
-            columns = reader.fieldnames or []
-            if "speed" not in columns:
-                raise ValueError(f"{path}: missing column 'speed' (found columns {columns})")
-            rows = list(reader)
+        reader = csv.DictReader(open_csv(path))
+        columns = [column.strip() for column in reader.fieldnames]
+        if "speed" not in columns:
+            raise ValueError(f"{path}: missing column 'speed' (found columns {columns})")
+        reader.fieldnames = columns
+        rows = [(reader.line_num, row) for row in reader]
+        if len(rows) < 2:
+            found = "one data row" if rows else "no data rows"
+            raise ValueError(f"{path}: {found} after the header; a profile needs at least 2")
         data = {}
         for column in ("time", "speed", "accel"):
             if column not in columns:
                 continue
             values = np.empty(len(rows))
-            for i, row in enumerate(rows):
+            for i, (line, row) in enumerate(rows):
+                if row[column] is None:
+                    raise ValueError(f"{path}: row {line} has fewer fields than the header ({len(columns)})")
                 try:
                     values[i] = float(row[column])
-                except (TypeError, ValueError):
-                    raise ValueError(
-                        f"{path}: row {i + 2}, column '{column}' = {row[column]!r} is not a number"
-                    ) from None
+                except ValueError:
+                    values[i] = math.nan  # not a number: reported just below, as NaN or inf text is
+                if not math.isfinite(values[i]):
+                    raise ValueError(f"{path}: row {line}, column '{column}' = {row[column]!r} is not a finite number")
             data[column] = values
         if "time" in data:
             steps = np.diff(data["time"])
-            if steps.size == 0 or not np.allclose(steps, steps[0], rtol=1e-6, atol=1e-9) or steps[0] <= 0:
+            if not np.allclose(steps, steps[0], rtol=1e-6, atol=1e-9) or steps[0] <= 0:
                 raise ValueError(f"{path}: column 'time' must increase in even steps")
             dt = float(steps[0])
-        name = name or path.stem
+        name = name or (Path(path.stem).stem if path.suffix == ".gz" else path.stem)
         if "accel" in data:
             return cls(speed=data["speed"], accel=data["accel"], dt=dt, name=name)
         return cls.from_speed(data["speed"], dt=dt, name=name)
