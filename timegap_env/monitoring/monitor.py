@@ -109,7 +109,9 @@ class TimeGapMonitor:
         )
         self._prior = Prior.from_cov(config.prior_standstill_spacing, config.prior_cov, config.noise_variance)
         self._kernel_args = (tuple(self._memory), tuple(self._rule), tuple(self._prior))  # as the kernel takes them
-        self._slot = 0 if W else -1  # slot of the next measurement, p; -1: no window
+        # each env's slot of its next measurement, p, counted from its reset (so an env's sums do not depend on
+        # when other envs reset, nor on earlier episodes); -1: no window
+        self._slot = np.full(n_envs, 0 if W else -1, dtype=np.int64)
         self._moments: Moments | None = None  # the posterior after the last tick; None: recompute when read
         self.reset(None, setting)
 
@@ -136,7 +138,7 @@ class TimeGapMonitor:
                              tau_var=np.empty(speed.shape))
         moments = Moments(*np.empty((len(Moments._fields),) + self.shape))  # the posterior after the last tick
         memory, rule, prior = self._kernel_args
-        self._slot = _update_kernel(speed, spacing, memory, self._slot, rule, prior, tuple(ticks), tuple(moments))
+        _update_kernel(speed, spacing, memory, self._slot, rule, prior, tuple(ticks), tuple(moments))
         self._moments = moments
         return ticks
 
@@ -146,11 +148,12 @@ class TimeGapMonitor:
         """Start the envs in ``mask`` ((n_envs,) bool, None = all) afresh.
 
         Their prior mean of tau becomes ``setting`` [s] (broadcastable to (n_envs, n_vehicles)),
-        their window is emptied and their ``skipped`` counters are zeroed.
+        their window is emptied and restarts at ring slot 0, and their ``skipped`` counters are zeroed.
         """
-        vehicles = np.broadcast_to(env_mask(mask, self.shape[0])[:, None], self.shape)
-        self._memory.skipped[vehicles] = 0
-        self.recenter(setting, vehicles)
+        envs = env_mask(mask, self.shape[0])
+        self._memory.skipped[envs] = 0
+        self._slot[envs & (self._slot >= 0)] = 0
+        self.recenter(setting, np.broadcast_to(envs[:, None], self.shape))
 
     def recenter(self, setting: ArrayLike, mask: ArrayLike | None = None) -> None:
         """The setting tau* changed to ``setting`` [s] for the vehicles in ``mask``.
@@ -246,14 +249,15 @@ class TimeGapMonitor:
 
 @numba.njit(cache=True)
 def _update_kernel(speed, spacing, memory, slot, rule, prior, out, out_moments):  # noqa: ANN001, ANN202
-    """:meth:`TimeGapMonitor.update_block`, tick by tick and vehicle by vehicle, in place; returns the next slot.
+    """:meth:`TimeGapMonitor.update_block`, tick by tick and vehicle by vehicle, in place.
 
     ``memory`` (:class:`WindowMemory`) is updated under ``rule`` (:class:`WindowRule`) and ``prior``
-    (:class:`Prior`); ``out`` (:class:`MonitorTicks`) gets each tick's verdict and posterior mean and
-    variance of tau, ``out_moments`` (:class:`Moments` of (n_envs, n_vehicles) arrays) the whole posterior after
-    the last tick; each structure comes as a plain tuple (see :mod:`timegap_env.sim.platoon`).
+    (:class:`Prior`); ``slot`` (n_envs,) is each env's next ring slot, advanced in place; ``out``
+    (:class:`MonitorTicks`) gets each tick's verdict and posterior mean and variance of tau,
+    ``out_moments`` (:class:`Moments` of (n_envs, n_vehicles) arrays) the whole posterior after the last
+    tick; each structure comes as a plain tuple (see :mod:`timegap_env.sim.platoon`).
 
-    ``slot = -1`` means no window: the window sums are the block sums, which never close.
+    ``slot[e] = -1`` means no window: the window sums are the block sums, which never close.
     The additions are those of the class docstring's drift guard, in the same order.
     """
     memory, rule, prior = WindowMemory(*memory), WindowRule(*rule), Prior(*prior)
@@ -264,6 +268,7 @@ def _update_kernel(speed, spacing, memory, slot, rule, prior, out, out_moments):
     x = np.empty(N_SUMS)
     for k in range(n_ticks):
         for e in range(n_envs):
+            p = slot[e]
             for i in range(n_vehicles):
                 v, s = speed[k, e, i], spacing[k, e, i]
                 used = 0.0 <= v <= rule.max_speed and 0.0 <= s <= rule.max_spacing  # NaN -> False
@@ -276,11 +281,11 @@ def _update_kernel(speed, spacing, memory, slot, rule, prior, out, out_moments):
                     if rule.forgetting < 1.0:
                         block_sum[c, e, i] *= rule.forgetting
                     block_sum[c, e, i] += x[c]
-                    if slot < 0:
+                    if p < 0:
                         window_sums[c, e, i] = block_sum[c, e, i]
                     else:
-                        slots[slot, c, e, i] = x[c]
-                        window_sums[c, e, i] = slots[slot + 1, c, e, i] * rule.suffix_weight[slot] + block_sum[c, e, i]
+                        slots[p, c, e, i] = x[c]
+                        window_sums[c, e, i] = slots[p + 1, c, e, i] * rule.suffix_weight[p] + block_sum[c, e, i]
                 sums = WindowSums(
                     window_sums[0, e, i], window_sums[1, e, i], window_sums[2, e, i], window_sums[3, e, i],
                     window_sums[4, e, i],
@@ -291,14 +296,14 @@ def _update_kernel(speed, spacing, memory, slot, rule, prior, out, out_moments):
                     out_moments.mean_s0[e, i], out_moments.mean_tau[e, i] = moments.mean_s0, moments.mean_tau
                     out_moments.var_s0[e, i], out_moments.cov_s0_tau[e, i] = moments.var_s0, moments.cov_s0_tau
                     out_moments.var_tau[e, i] = moments.var_tau
-        if slot < 0:  # no window
-            continue
-        if slot < window_ticks - 1:
-            slot += 1
-        else:  # the block is full: turn it into suffix sums
-            for m in range(window_ticks - 2, -1, -1):
-                slots[m] *= rule.age_weight[m]
-                slots[m] += slots[m + 1]
-            block_sum[:] = 0.0
-            slot = 0
-    return slot
+            if p < 0:  # no window
+                continue
+            if p < window_ticks - 1:
+                slot[e] = p + 1
+            else:  # env e's block is full: turn it into suffix sums
+                for m in range(window_ticks - 2, -1, -1):
+                    for c in range(N_SUMS):
+                        for i in range(n_vehicles):
+                            slots[m, c, e, i] = slots[m, c, e, i] * rule.age_weight[m] + slots[m + 1, c, e, i]
+                block_sum[:, e, :] = 0.0
+                slot[e] = 0
