@@ -1,8 +1,8 @@
-"""Oracles: policies that read the ground truth, ``info["degradation"]``. An upper reference, not deployable.
+"""Oracles: policies that read the ground truth, ``truth_of(info)``. An upper reference, not deployable.
 
 No car knows its own degradation; these policies do, so they say how much knowing is worth: what
 a policy reading the monitor could at best recover. Each takes the ground truth of the envs'
-current observations (``info["degradation"]`` of the native vector env, arrays (n_envs,
+current observations (:func:`timegap_env.envs.info.truth_of` of the native vector env's infos, arrays (n_envs,
 n_followers); of a single env, (n_followers,)) and returns ladder indices shaped like the env's
 action: (n_envs,) or () for ``action_mode="platoon"`` (one setting for the platoon: the largest
 any follower needs), (n_envs, N) or (N,) for ``"per_vehicle"``.

@@ -32,6 +32,7 @@ from agents.oracles import NOMINAL
 from agents.policies import seconds
 from agents.protocol import EVAL_SEED_START
 from timegap_env.config import DEGRADATION_KINDS, EnvConfig
+from timegap_env.envs.info import truth_of
 from train.value_of_information import (
     DEFAULT_OUT, DEFAULT_TRAIN_EPISODES, SELECTION_SEED_START, TARGET_SHARE, all_oracles, constants, measure_lookup,
     run,
@@ -53,7 +54,7 @@ def per_kind(config: EnvConfig, episodes: int, table: dict[str, float]) -> dict[
         pairs = constants(alone, seeds, flag_aware=True)
         oracles = all_oracles(alone, table)
         results[kind] = {"return": pairs["return"], "collision": pairs["collision"],
-                         **{f"oracle:{o.name}": run(alone, seeds, lambda obs, infos, o=o: o.act(infos["degradation"]))["return"]
+                         **{f"oracle:{o.name}": run(alone, seeds, lambda obs, infos, o=o: o.act(truth_of(infos)))["return"]
                             for o in oracles}}
     return results
 

@@ -47,6 +47,7 @@ from agents.oracles import NOMINAL, LookupOracle, StabilityOracle, TruthPolicy, 
 from agents.policies import seconds
 from agents.protocol import EVAL_SEED_START
 from timegap_env.config import DEGRADATION_KINDS, SIZE_RANGE_FIELDS, EnvConfig
+from timegap_env.envs.info import summary_of, truth_of
 from timegap_env.sim.degradation import round_to_tick
 
 DEFAULT_EPISODES = 120
@@ -69,7 +70,7 @@ def run(config: EnvConfig, seeds: Sequence[int], choose: Chooser, options: dict[
     fields = {field.name: getattr(config, field.name) for field in dataclasses.fields(config)}
     venv = gym.make_vec(timegap_env.ENV_ID, num_envs=n, vectorization_mode="vector_entry_point", config=fields)
     obs, infos = venv.reset(seed=list(seeds), options=options)
-    kinds = [next((k for k in row if k != NOMINAL), NOMINAL) for row in infos["degradation"]["kind"]]
+    kinds = [next((k for k in row if k != NOMINAL), NOMINAL) for row in truth_of(infos)["kind"]]
     returns, active = np.zeros(n), np.ones(n, dtype=bool)
     summaries: list[dict[str, float]] = [{} for _ in range(n)]
     while active.any():
@@ -77,7 +78,7 @@ def run(config: EnvConfig, seeds: Sequence[int], choose: Chooser, options: dict[
         returns += np.where(active, reward, 0.0)
         ended = (terminated | truncated) & active
         for env in np.flatnonzero(ended):
-            summaries[env] = {name: float(value[env]) for name, value in infos["episode_summary"].items()}
+            summaries[env] = {name: float(value[env]) for name, value in summary_of(infos["final_info"]).items()}
         active &= ~ended
     venv.close()
     return {"return": returns, "collision": np.array([s["collision"] for s in summaries], dtype=bool),
@@ -156,7 +157,7 @@ def choose_oracle(config: EnvConfig, oracles: Sequence[TruthPolicy]) -> TruthPol
     """*The* oracle: of ``oracles``, the best by mean return on the SELECTION_EPISODES selection episodes."""
     selection = list(range(SELECTION_SEED_START, SELECTION_SEED_START + SELECTION_EPISODES))
     assert selection[-1] < EVAL_SEED_START
-    means = [run(config, selection, lambda obs, infos, o=o: o.act(infos["degradation"]))["return"].mean()
+    means = [run(config, selection, lambda obs, infos, o=o: o.act(truth_of(infos)))["return"].mean()
              for o in oracles]
     return oracles[int(np.argmax(means))]
 
@@ -193,7 +194,7 @@ def main(argv: Sequence[str] | None = None) -> None:
     hindsight = fixed["return"].max(axis=1)
     oracles = all_oracles(config, table)
     best_oracle = choose_oracle(config, oracles).name  # chosen before the held-out episodes
-    oracle_results = {oracle.name: run(config, seeds, lambda obs, infos, o=oracle: o.act(infos["degradation"]))
+    oracle_results = {oracle.name: run(config, seeds, lambda obs, infos, o=oracle: o.act(truth_of(infos)))
                       for oracle in oracles}
     for name, result in oracle_results.items():
         assert list(result["kind"]) == list(kinds), f"{name} saw other episodes"

@@ -6,6 +6,7 @@ import pytest
 
 from agents.oracles import LookupOracle, StabilityOracle, condition_keys, size_bin
 from timegap_env.config import EnvConfig
+from timegap_env.envs.info import truth_of
 
 CONFIG = EnvConfig()
 LEVELS = np.asarray(CONFIG.setting_levels)
@@ -16,7 +17,7 @@ def truth_after(options: dict, steps: int = 3, config: dict | None = None) -> di
     env.reset(seed=0, options=options)
     for _ in range(steps):
         _, _, _, _, info = env.step(2)
-    return info["degradation"]
+    return truth_of(info)
 
 
 def test_the_stability_oracle_takes_the_smallest_level_above_the_stable_setting_plus_margin():
@@ -33,7 +34,7 @@ def test_the_stability_oracle_takes_the_smallest_level_above_the_stable_setting_
 def test_the_oracles_act_on_a_batch_of_envs_from_the_vector_envs_truth():
     envs = gym.make_vec("TimeGapMonitor-v0", num_envs=3, vectorization_mode="vector_entry_point")
     _, infos = envs.reset(seed=[1, 2, 3])
-    actions = StabilityOracle(CONFIG).act(infos["degradation"])
+    actions = StabilityOracle(CONFIG).act(truth_of(infos))
     assert actions.shape == (3,) and actions.dtype == np.int64
     envs.step(actions)
 

@@ -10,6 +10,7 @@ from stable_baselines3.common.env_checker import check_env as sb3_check_env
 
 import timegap_env
 from timegap_env.config import EnvConfig, RewardWeights
+from timegap_env.envs.info import KIND_NAMES, rewards_of, summary_of, truth_of
 from timegap_env.envs.observation import FEATURES
 
 LEVELS = np.array(EnvConfig().setting_levels)
@@ -75,15 +76,29 @@ def test_observations_stay_in_bounds_and_info_is_complete():
     env.action_space.seed(0)
     _, infos = run_episode(env, lambda obs: env.action_space.sample(), seed=3)
     step_keys = {"actual_time_gap", "estimate", "estimate_std", "setting", "lcl", "ucl", "alarm", "ttc", "jerk", "v2v",
-                 "collision", "rewards", "scenario", "skipped_measurements"}
+                 "collision", "skipped_measurements"}
     assert step_keys <= set(infos[1])
-    assert set(infos[1]["rewards"]) == {"tracking", "string_stability", "safety", "collision", "comfort", "efficiency",
-                                        "preference", "switching"}
-    summary = infos[-1]["episode_summary"]
+    assert set(rewards_of(infos[1])) == {"tracking", "string_stability", "safety", "collision", "comfort", "efficiency",
+                                         "preference", "switching"}
+    summary = summary_of(infos[-1])
     assert {"time_out_of_control", "exceedances", "max_deviation", "min_ttc", "rms_jerk", "switches",
             "mean_setting", "mean_capacity", "collision"} <= set(summary)
     assert infos[-1]["skipped_measurements"].sum() > 0  # 5 % dropouts are skipped, not fatal
     assert all(np.all(np.isfinite(info["estimate"])) for info in infos)
+
+
+def test_info_has_the_same_numeric_keys_from_reset_on():
+    """TorchRL and gymnasium's vector envs batch info by key: every value an array of a fixed shape and dtype,
+    no nested dicts, no strings, the same keys at reset and at every step (the summary only at the end)."""
+    env = gym.make("TimeGapMonitor-v0", config={"episode_duration": 5.0})
+    _, infos = run_episode(env, lambda obs: level_index(1.0), seed=0)
+    layout = {key: (value.shape, value.dtype) for key, value in infos[0].items()}
+    assert all(isinstance(value, np.ndarray) and value.dtype.kind in "biuf" for info in infos for value in info.values())
+    for info in infos[1:]:
+        assert {key: (value.shape, value.dtype) for key, value in info.items() if key in layout} == layout
+        assert set(info) - set(layout) == {f"episode_{name}" for name in summary_of(info)}
+    assert summary_of(infos[-1]) and not any(summary_of(info) for info in infos[:-1])
+    assert set(truth_of(infos[0])["kind"]) <= set(KIND_NAMES)
 
 
 def test_observation_bounds_hold_every_step():
@@ -101,9 +116,9 @@ def test_reward_is_the_weighted_sum_of_its_terms():
     weights = RewardWeights()
     for action in (level_index(1.0), level_index(2.2), level_index(0.6)):
         _, reward, _, _, info = env.step(action)
-        assert reward == pytest.approx(sum(getattr(weights, k) * v for k, v in info["rewards"].items()))
-        assert all(v <= 0 for v in info["rewards"].values())
-    assert info["rewards"]["switching"] == -1.0  # every follower changed setting on that step
+        assert reward == pytest.approx(sum(getattr(weights, k) * v for k, v in rewards_of(info).items()))
+        assert all(v <= 0 for v in rewards_of(info).values())
+    assert info["reward_switching"] == -1.0  # every follower changed setting on that step
 
 
 def test_setting_change_ramps_and_recentres_the_chart():
@@ -120,12 +135,12 @@ def test_setting_change_ramps_and_recentres_the_chart():
 
 def test_named_scenario_and_user_leader():
     env = gym.make("TimeGapMonitor-v0")
-    _, info = env.reset(seed=0, options={"scenario": "sinusoid"})
-    assert info["scenario"] == "sinusoid"
+    env.reset(seed=0, options={"scenario": "sinusoid"})
+    assert env.unwrapped.scenario == "sinusoid"
     speed = 20.0 + 3.0 * np.sin(np.arange(455) * 0.02)  # 45.4 s of field data at 10 Hz
     total, infos = run_episode(env, lambda obs: level_index(1.6), seed=0, options={"leader_speed": speed})
-    assert infos[0]["scenario"] == "user" and len(infos) - 1 == 46  # padded to whole decisions
-    assert infos[-1]["episode_summary"]["duration"] == pytest.approx(46.0)
+    assert env.unwrapped.scenario == "user" and len(infos) - 1 == 46  # padded to whole decisions
+    assert infos[-1]["episode_duration"] == pytest.approx(46.0)
     with pytest.raises(ValueError, match="scenario = 'rush_hour'"):
         env.reset(options={"scenario": "rush_hour"})
     with pytest.raises(ValueError, match=r"reset options \['weather'\] unknown"):
@@ -157,8 +172,8 @@ def test_collision_terminates_with_the_collision_penalty():
         if terminated:
             break
     assert terminated and not truncated and info["collision"]
-    assert info["rewards"]["collision"] == -1.0 and reward < -RewardWeights().collision * 0.99
-    assert info["episode_summary"]["collision"]
+    assert info["reward_collision"] == -1.0 and reward < -RewardWeights().collision * 0.99
+    assert info["episode_collision"]
 
 
 def test_same_seed_same_episode():
@@ -269,3 +284,48 @@ def test_an_env_copies_and_pickles_after_rendering():
         np.testing.assert_array_equal(twin.render(), frame)
         twin.step(0)
     env.step(0)
+
+
+@pytest.mark.parametrize("ending", ["terminated", "truncated"])
+def test_step_after_the_episode_ended_raises_until_reset(ending):
+    """Stepping on silently after the end ran on a collided platoon or past the leader's profile."""
+    env = gym.make("TimeGapMonitor-v0", config={"episode_duration": 60.0, "degradation": {"kind_weights": {"none": 1.0}}})
+    speed = np.r_[np.full(30, 30.0), np.maximum(30.0 - 2.0 * np.arange(1, 20), 0.0), np.zeros(300)]  # a 20 m/s^2 stop
+    options = {"leader_speed": speed} if ending == "terminated" else None
+    env.reset(seed=0, options=options)
+    while True:
+        _, _, terminated, truncated, _ = env.step(level_index(0.6 if ending == "terminated" else 1.6))
+        if terminated or truncated:
+            break
+    assert (terminated, truncated) == (ending == "terminated", ending == "truncated")
+    for _ in range(2):
+        with pytest.raises(gym.error.ResetNeeded, match="after the episode ended"):
+            env.step(level_index(1.6))
+    env.reset(seed=1)
+    env.step(level_index(1.6))
+
+
+@pytest.mark.parametrize("monitor", [{}, {"window": 7.3}, {"window": None, "forgetting": 0.99},
+                                     {"window": 3.0, "forgetting": 0.98}])
+def test_reset_with_a_seed_gives_the_same_bits_whatever_ran_before(monitor):
+    """The monitor's window ring restarts at reset: an episode does not depend on earlier ones' lengths."""
+    config = {"monitor": monitor, "episode_duration": 20.0}
+
+    def episode(env):
+        obs, info = env.reset(seed=42)
+        steps = [(obs, 0.0, info)]
+        for action in [0, 8, 3, 3, 5, 1, 7, 2] * 3:
+            obs, reward, terminated, truncated, info = env.step(action)
+            steps.append((obs, reward, info))
+            if terminated or truncated:
+                break
+        return steps
+
+    env = gym.make("TimeGapMonitor-v0", config=config)
+    first = episode(env)
+    env.reset(seed=3)
+    for _ in range(7):  # a partial episode of another length shifts where a shared ring would stand
+        env.step(4)
+    for (obs, reward, info), (obs2, reward2, info2) in zip(first, episode(env), strict=True):
+        assert obs.tobytes() == obs2.tobytes() and reward == reward2
+        assert all(info[key].tobytes() == info2[key].tobytes() for key in info)

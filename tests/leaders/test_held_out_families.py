@@ -105,7 +105,7 @@ def test_short_profiles_drop_the_stops_that_do_not_fit():
 def test_env_and_simulate_run_the_family(family):
     env = gym.make("TimeGapMonitor-v0")
     obs, info = env.reset(seed=3, options={"scenario": family})
-    assert info["scenario"] == family
+    assert env.unwrapped.scenario == family
     setting = int(np.argmin(np.abs(np.array(EnvConfig().setting_levels) - 1.6)))
     for _ in range(5):
         obs, reward, terminated, _, info = env.step(setting)

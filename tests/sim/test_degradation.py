@@ -7,6 +7,7 @@ import pytest
 
 import timegap_env
 from timegap_env.config import LeaderConfig, PlatoonConfig, SensorConfig
+from timegap_env.envs.info import truth_of
 from timegap_env.monitoring.sensors import Readings, Sensors
 from timegap_env.sim.degradation import Degradation, DegradationTable, parse_degradations, smallest_stable_setting
 from timegap_env.sim.presets import COMMERCIAL_ACC, acc_presets
@@ -141,7 +142,7 @@ def test_the_env_reports_the_ground_truth_and_never_observes_it():
     env = gym.make("TimeGapMonitor-v0")
     pinned = {"degradation": {"kind": "gain", "size": 0.7, "followers": [1, 2], "onset": 5.0}}
     obs, info = env.reset(seed=0, options=pinned)
-    truth = info["degradation"]
+    truth = truth_of(info)
     assert truth["kind"].tolist() == ["gain", "gain", "none", "none", "none"] and not truth["active"].any()
     assert truth["onset"].tolist()[:2] == [5.0, 5.0] and np.isinf(truth["onset"][2:]).all()
     unpinned_obs, _ = env.reset(seed=0, options={"degradation": None})
@@ -149,7 +150,7 @@ def test_the_env_reports_the_ground_truth_and_never_observes_it():
     env.reset(seed=0, options=pinned)
     for _ in range(6):
         _, _, _, _, info = env.step(2)
-    truth = info["degradation"]
+    truth = truth_of(info)
     assert truth["active"].tolist() == [True, True, False, False, False]
     assert truth["gain"].tolist() == [0.7, 0.7, 1.0, 1.0, 1.0]
     assert truth["smallest_stable_setting"][0] > truth["smallest_stable_setting"][2]
@@ -159,7 +160,7 @@ def test_the_env_reports_the_ground_truth_and_never_observes_it():
 def test_drawn_commercial_acc_followers_are_calibrated_cars():
     env = gym.make("TimeGapMonitor-v0", config={"degradation": {"kind_weights": {"commercial_acc": 1.0}}})
     _, info = env.reset(seed=1)
-    truth = info["degradation"]
+    truth = truth_of(info)
     assert set(truth["kind"]) == {"commercial_acc"} and not truth["v2v"].any()
     lags = {fit.model.lag for car, fit in acc_presets().items() if car != COMMERCIAL_ACC}
     assert set(truth["lag"]) <= lags

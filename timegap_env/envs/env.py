@@ -11,8 +11,10 @@ import numpy as np
 
 from timegap_env.config import EnvConfig
 from timegap_env.envs.action import action_space
+from timegap_env.envs.info import EPISODE_PREFIX, REWARD_PREFIX, of_env, prefixed
 from timegap_env.envs.observation import observation_space
 from timegap_env.envs.rendering import DEFAULT_TIME_WINDOW
+from timegap_env.envs.reward import REWARD_TERMS
 from timegap_env.envs.task import PlatoonTask
 
 
@@ -62,11 +64,20 @@ class TimeGapMonitorEnv(gym.Env):
 
     ## Rewards
 
-    A weighted sum of named terms, each <= 0 and about -1 at its worst, all returned in
-    ``info["rewards"]``: ``tracking``, ``alarms``, ``safety``, ``collision``, ``comfort``,
-    ``efficiency``, ``preference`` and ``switching``. Their formulas and the reasons for the
-    default weights are in :mod:`timegap_env.envs.reward`; the weights are
-    ``config["reward_weights"]`` (:class:`timegap_env.config.RewardWeights`).
+    A weighted sum of named terms, each <= 0 and about -1 at its worst, each in
+    ``info["reward_<term>"]``: ``tracking``, ``string_stability``, ``safety``, ``collision``,
+    ``comfort``, ``efficiency``, ``preference`` and ``switching``. They judge the true state, never
+    the monitor. Their formulas and the reasons for the default weights are in
+    :mod:`timegap_env.envs.reward`; the weights are ``config["reward_weights"]``
+    (:class:`timegap_env.config.RewardWeights`).
+
+    ## Info
+
+    Flat and numeric, the same keys from reset on (:mod:`timegap_env.envs.info`): the monitor and
+    the platoon (``estimate``, ``lcl``, ``ucl``, ``alarm``, ``actual_time_gap``, ``setting``, ...),
+    ``reward_<term>`` (0 at reset), the ground truth ``truth_<name>``, and at the step that ends an
+    episode its summary ``episode_<name>``. ``timegap_env.envs.info.truth_of(info)`` and
+    ``summary_of(info)`` read the groups back as dicts. ``env.unwrapped.scenario`` names the leader.
 
     ## Starting State
 
@@ -83,7 +94,7 @@ class TimeGapMonitorEnv(gym.Env):
     [m/s at 10 Hz]; ``reset(options={"degradation": {"kind": "gain", "size": 0.7,
     "followers": [1, 2], "onset": 60.0, "end": None}})`` pins the degradation (a list of such
     dicts for several, None for none; see :mod:`timegap_env.sim.degradation`).
-    ``info["degradation"]`` is the ground truth of every step: each follower's degradation,
+    ``truth_of(info)`` is the ground truth of every step: each follower's degradation,
     its true parameters and the smallest string-stable setting for them. It is for oracles
     and evaluation; the observation never holds it.
 
@@ -91,7 +102,8 @@ class TimeGapMonitorEnv(gym.Env):
 
     Terminated when a follower's gap reaches 0 (collision). Truncated when the
     leader profile or ``episode_duration`` (default 250 s = 250 steps) runs out; the env
-    truncates itself, so a longer ``episode_duration`` needs nothing else.
+    truncates itself, so a longer ``episode_duration`` needs nothing else. ``step()`` after
+    the end (or before the first ``reset()``) raises gymnasium's ``ResetNeeded``.
 
     ## Arguments
 
@@ -118,15 +130,17 @@ class TimeGapMonitorEnv(gym.Env):
         self.observation_space = observation_space(self.config)
         self.action_space = action_space(self.config)
         self._renderer = None
-        self._was_reset = False  # step() before the first reset() raises gymnasium's ResetNeeded
+        self._needs_reset = True  # step() before reset() or after the episode ended raises gymnasium's ResetNeeded
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict]:
         super().reset(seed=seed)
+        self._needs_reset = True  # stays so if the reset below raises
         self.task.reset(np.ones(1, dtype=bool), [self.np_random], options)
-        self._was_reset = True
+        self._needs_reset = False
         if self.task.trace is not None:
             self.task.trace.clear()
-        return self.task.observation()[0].ravel(), self._info()
+        no_rewards = {REWARD_PREFIX + name: np.zeros(()) for name in REWARD_TERMS}  # the same keys as step()'s
+        return self.task.observation()[0].ravel(), {**self._info(), **no_rewards}
 
     def __getstate__(self) -> dict[str, Any]:
         """For copy and pickle: everything but the renderer (pygame surfaces and fonts do not pickle), which the next
@@ -134,27 +148,30 @@ class TimeGapMonitorEnv(gym.Env):
         return {**self.__dict__, "_renderer": None}
 
     def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict]:
-        if not self._was_reset:
-            raise ResetNeeded("TimeGapMonitorEnv.step() called before reset(): call reset() first")
+        if self._needs_reset:
+            raise ResetNeeded("TimeGapMonitorEnv.step() called before reset() or after the episode ended "
+                              "(terminated or truncated): call reset() first")
         indices = np.asarray(action)
         if not np.issubdtype(indices.dtype, np.integer) or not self.action_space.contains(indices.astype(np.int64)):
             raise ValueError(f"action = {action!r} is outside the action space {self.action_space}")
         result = self.task.step(indices.astype(np.int64)[None])
-        info = self._info()
-        info["rewards"] = {name: float(term[0]) for name, term in result.terms.items()}
+        info = {**self._info(), **of_env(prefixed(REWARD_PREFIX, result.terms), 0)}
         terminated, truncated = bool(result.terminated[0]), bool(result.truncated[0])
         if terminated or truncated:
-            info["episode_summary"] = {name: value[0].item() for name, value in self.task.episode_summary().items()}
+            info.update(of_env(prefixed(EPISODE_PREFIX, self.task.episode_summary()), 0))
+            self._needs_reset = True
         if self.render_mode == "human":
             self.render()
         return self.task.observation()[0].ravel(), float(result.reward[0]), terminated, truncated, info
 
-    def _info(self) -> dict[str, Any]:
-        info: dict[str, Any] = {name: value[0] for name, value in self.task.info().items()}
-        info["collision"] = bool(info["collision"])
-        info["scenario"] = self.task.scenario[0]
-        info["degradation"] = {name: value[0] for name, value in self.task.ground_truth().items()}
-        return info
+    @property
+    def scenario(self) -> str:
+        """The name of the current episode's leader (a family of ``timegap_env.SCENARIOS``, NGSIM's, or "user")."""
+        return str(self.task.scenario[0])
+
+    def _info(self) -> dict[str, np.ndarray]:
+        """The monitor, the platoon and the ground truth now (:mod:`timegap_env.envs.info`)."""
+        return of_env(self.task.step_info(), 0)
 
     def render(self) -> np.ndarray | None:
         if self.render_mode is None:

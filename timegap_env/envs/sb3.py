@@ -11,8 +11,9 @@ N Python envs in a ``DummyVecEnv``, and follows SB3's conventions:
   already reset (``obs[i]`` is the new episode's) and ``infos[i]`` holds
   ``terminal_observation``, ``TimeLimit.truncated``, ``episode`` =
   ``{"r": return, "l": length [steps], "t": time since creation [s]}`` (as
-  ``Monitor`` writes it) and the env's ``episode_summary``. The native env's
-  per-step diagnostics (reward terms, estimates, ...) are not passed on.
+  ``Monitor`` writes it) and the env's summary ``episode_<name>`` (0-d arrays, as the
+  single env gives them). The native env's per-step diagnostics (reward terms, estimates,
+  ...) are not passed on.
 
 Sub-env i seeded with ``s + i`` equals ``gym.make("TimeGapMonitor-v0")`` seeded
 with ``s + i`` in a ``DummyVecEnv``, step by step.
@@ -30,6 +31,7 @@ from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices, VecEnvStepReturn
 
 from timegap_env import ENV_ID
+from timegap_env.envs.info import of_env
 
 
 class TimeGapVecEnv(VecEnv):
@@ -89,7 +91,7 @@ class TimeGapVecEnv(VecEnv):
                     "terminal_observation": np.asarray(info["final_obs"][i], dtype=np.float32),
                     "TimeLimit.truncated": bool(truncated[i] and not terminated[i]),
                     "episode": {"r": round(float(self._returns[i]), 6), "l": int(self._lengths[i]), "t": elapsed},
-                    "episode_summary": {name: value[i].item() for name, value in info["episode_summary"].items()},
+                    **of_env(info["final_info"], i),
                 }
             self._returns[dones] = 0.0
             self._lengths[dones] = 0

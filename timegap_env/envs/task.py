@@ -20,6 +20,7 @@ import numpy as np
 from timegap_env.config import EnvConfig
 from timegap_env.envs.action import SettingLadder
 from timegap_env.envs.episodes import Episodes, check_reset_options
+from timegap_env.envs.info import TRUTH_PREFIX, prefixed
 from timegap_env.envs.observation import FollowerState, ObservationScales, observe
 from timegap_env.envs.rendering import RenderFrame
 from timegap_env.envs.reward import RewardConstants, StepReadouts, StepTicks, score_step, weights_of
@@ -166,13 +167,18 @@ class PlatoonTask:
             "setting": platoon.setting.copy(),  # tau* asked for [s]
             "lcl": chart.center - half_width,  # [s]
             "ucl": chart.center + half_width,  # [s]
-            "alarm": chart.alarm,
+            "alarm": chart.alarm.copy(),
             "ttc": self._readouts.min_ttc.copy(),  # smallest time-to-collision during the step [s], inf if never closing
             "jerk": np.sqrt(self._readouts.jerk_squared / self.ticks_per_decision),  # RMS jerk during the step [m/s^3]
             "v2v": platoon.v2v.copy(),
             "collision": platoon.collided.any(axis=1),  # (n_envs,)
             "skipped_measurements": monitor.skipped.copy(),  # since reset [-]
         }
+
+    def step_info(self) -> dict[str, np.ndarray]:
+        """Every env's info now, flat (:mod:`~timegap_env.envs.info`): :meth:`info` and the ground truth as
+        ``truth_<name>``, each array with a leading n_envs axis."""
+        return {**self.info(), **prefixed(TRUTH_PREFIX, self.ground_truth())}
 
     def ground_truth(self) -> dict[str, np.ndarray]:
         """Each follower's degradation now, its true parameters and the smallest string-stable setting for them,

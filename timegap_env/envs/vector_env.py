@@ -2,7 +2,8 @@
 
 ``gym.make_vec("TimeGapMonitor-v0", num_envs=N, vectorization_mode="vector_entry_point")``.
 Sub-env i seeded with ``seed + i`` equals a single env seeded with ``seed + i``,
-step by step (same-step autoreset, as ``SyncVectorEnv(..., autoreset_mode=SAME_STEP)``).
+step by step, and the whole equals ``SyncVectorEnv`` over single envs with the same
+``autoreset_mode`` (observations, rewards, flags and infos).
 """
 
 from __future__ import annotations
@@ -18,20 +19,41 @@ from gymnasium.vector.utils import batch_space
 
 from timegap_env.config import EnvConfig
 from timegap_env.envs.action import action_space
+from timegap_env.envs.info import EPISODE_PREFIX, REWARD_PREFIX, prefixed, with_masks
 from timegap_env.envs.observation import observation_space
+from timegap_env.envs.reward import REWARD_TERMS
 from timegap_env.envs.task import PlatoonTask
+
+
+def parse_autoreset_mode(mode: str | AutoresetMode) -> AutoresetMode:
+    """gymnasium's AutoresetMode from itself, its value ("SameStep") or its name ("same_step")."""
+    if isinstance(mode, AutoresetMode):
+        return mode
+    for known in AutoresetMode:
+        if mode in (known.value, known.name.lower()):
+            return known
+    raise ValueError(f"autoreset_mode = {mode!r}: must be one of {[known.name.lower() for known in AutoresetMode]}")
 
 
 class TimeGapMonitorVectorEnv(VectorEnv):
     """``num_envs`` copies of :class:`~timegap_env.envs.env.TimeGapMonitorEnv` in one batched task.
 
-    When a sub-env's episode ends, it is reset in the same step: the returned
-    observation is the new episode's, the last one is in ``infos["final_obs"]``
-    and its summary in ``infos["episode_summary"]`` (masks ``_final_obs`` and
-    ``_episode_summary``). ``infos["degradation"]`` is the ground truth of the
-    returned observations (after the autoresets). ``step_diagnostics=False`` leaves
-    the per-step diagnostics (estimates, limits, reward terms, ground truth, ...) out
-    of ``step``'s infos, for learners that never read them.
+    Its infos are what gymnasium's own vector envs make of the single env's flat info
+    (:mod:`timegap_env.envs.info`): each key an array with a leading num_envs axis and a ``_<key>`` mask.
+    ``autoreset_mode`` (gymnasium's :class:`~gymnasium.vector.AutoresetMode` or its name) says what
+    happens when a sub-env's episode ends, as in ``SyncVectorEnv``:
+
+    - ``"same_step"`` (default): it is reset in the same step; the returned observation and infos are the
+      new episode's, the last observation is in ``infos["final_obs"]`` (an object array of float32 rows,
+      None where no episode ended) and the last step's info, its summary ``episode_<name>`` included,
+      in ``infos["final_info"]``;
+    - ``"next_step"``: the step returns the last observation and info (with ``episode_<name>``); the next
+      step ignores that sub-env's action and returns its reset (reward 0, not terminated or truncated);
+    - ``"disabled"``: the caller resets ended sub-envs with ``reset(options={"reset_mask": mask})``;
+      stepping one before raises ``ResetNeeded``.
+
+    ``step_diagnostics=False`` leaves the per-step keys (monitor, reward terms, ground truth) out of
+    ``step``'s infos, for learners that never read them; the episode summaries stay.
     """
 
     metadata = {"autoreset_mode": AutoresetMode.SAME_STEP, "render_modes": []}
@@ -42,9 +64,12 @@ class TimeGapMonitorVectorEnv(VectorEnv):
         config: Mapping[str, Any] | None = None,
         max_episode_steps: int | None = None,
         step_diagnostics: bool = True,
+        autoreset_mode: str | AutoresetMode = AutoresetMode.SAME_STEP,
     ) -> None:
         if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) or num_envs < 1:
             raise ValueError(f"num_envs = {num_envs!r}: must be an integer >= 1")
+        self.autoreset_mode = parse_autoreset_mode(autoreset_mode)
+        self.metadata = {**type(self).metadata, "autoreset_mode": self.autoreset_mode}
         self.num_envs = int(num_envs)
         self.config = EnvConfig.from_dict(config)
         self.max_episode_steps = max_episode_steps or self.config.max_episode_steps
@@ -57,10 +82,20 @@ class TimeGapMonitorVectorEnv(VectorEnv):
         self._steps = np.zeros(self.num_envs, dtype=np.int64)
         self.step_diagnostics = bool(step_diagnostics)
         self._was_reset = False  # step() before the first reset() raises gymnasium's ResetNeeded
+        self._ended = np.zeros(self.num_envs, dtype=bool)  # episodes that ended and are not reset yet
+
+    @property
+    def scenario(self) -> np.ndarray:
+        """The name of each sub-env's current leader (num_envs,) object array of str."""
+        return self.task.scenario.copy()
 
     def reset(
         self, *, seed: int | list[int | None] | None = None, options: dict[str, Any] | None = None
     ) -> tuple[np.ndarray, dict[str, Any]]:
+        """Reset every sub-env, or those of ``options["reset_mask"]`` ((num_envs,) bool); sub-env i is seeded
+        with ``seed + i`` (an int) or ``seed[i]`` (a list); other options as the single env's."""
+        options = dict(options or {})
+        mask = self._reset_mask(options.pop("reset_mask", None))
         if seed is None:
             seeds: list[int | None] = [None] * self.num_envs
         elif isinstance(seed, (int, np.integer)):
@@ -69,44 +104,71 @@ class TimeGapMonitorVectorEnv(VectorEnv):
             seeds = list(seed)
             if len(seeds) != self.num_envs:
                 raise ValueError(f"seed has {len(seeds)} entries: must have num_envs = {self.num_envs}")
-        if seed is not None:  # otherwise each sub-env's generator carries on, as a single env's would
-            self._rngs = [seeding.np_random(s)[0] for s in seeds]
-        everyone = np.ones(self.num_envs, dtype=bool)
-        self.task.reset(everyone, self._rngs, options)
+        for env in np.flatnonzero(mask):  # unseeded, a sub-env's generator carries on, as a single env's would
+            if seeds[env] is not None:
+                self._rngs[env] = seeding.np_random(seeds[env])[0]
+        self.task.reset(mask, self._rngs, options or None)
         self._was_reset = True
-        self._steps[:] = 0
-        return self._observations(), self._infos()
+        self._steps[mask] = 0
+        self._ended[mask] = False
+        infos = {**self.task.step_info(), **prefixed(REWARD_PREFIX, self._no_rewards())}
+        return self._observations(), with_masks(infos, mask)
+
+    def _reset_mask(self, mask: Any) -> np.ndarray:
+        if mask is None:
+            return np.ones(self.num_envs, dtype=bool)
+        mask = np.asarray(mask)
+        if mask.shape != (self.num_envs,) or mask.dtype != np.bool_ or not mask.any():
+            raise ValueError(f"options['reset_mask'] = {mask!r}: must be a bool array of shape ({self.num_envs},) "
+                             "with at least one True")
+        if not self._was_reset and not mask.all():
+            raise ResetNeeded("the first reset() must reset every sub-env: options['reset_mask'] has False entries")
+        return mask
 
     def step(self, actions: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
         if not self._was_reset:
             raise ResetNeeded("TimeGapMonitorVectorEnv.step() called before reset(): call reset() first")
+        restarting = self._ended.copy()
+        if restarting.any() and self.autoreset_mode == AutoresetMode.DISABLED:
+            raise ResetNeeded(f"sub-envs {np.flatnonzero(restarting).tolist()} ended and autoreset_mode is "
+                              "'disabled': reset them first with reset(options={'reset_mask': mask})")
         result = self.task.step(np.asarray(actions))  # checks them against the action space
         self._steps += 1
-        truncated = result.truncated | ((self._steps >= self.max_episode_steps) & ~result.terminated)
+        done = (result.terminated | result.truncated | (self._steps >= self.max_episode_steps)) & ~restarting
+        terminated, truncated = result.terminated & done, ~result.terminated & done
+        reward, terms = result.reward, result.terms
+        if restarting.any():  # next_step: their step above ran past the episode's end and is dropped
+            self.task.reset(restarting, self._rngs, None)
+            self._steps[restarting] = 0
+            reward = np.where(restarting, 0.0, reward)
+            terms = {name: np.where(restarting, 0.0, term) for name, term in terms.items()}
+        everyone = np.ones(self.num_envs, dtype=bool)
         infos: dict[str, Any] = {}
-        if self.step_diagnostics:
-            infos = self._infos()
-            infos["rewards"] = result.terms
-        done = result.terminated | truncated
-        if done.any():
-            infos["final_obs"] = np.array(list(self._observations()), dtype=object)
-            infos["_final_obs"] = done
-            infos["episode_summary"] = self.task.episode_summary()
-            infos["_episode_summary"] = done
+        if self.autoreset_mode == AutoresetMode.SAME_STEP and done.any():
+            final_info = prefixed(EPISODE_PREFIX, self.task.episode_summary())
+            if self.step_diagnostics:
+                final_info = {**self.task.step_info(), **prefixed(REWARD_PREFIX, terms), **final_info}
+            final_obs = np.full(self.num_envs, None, dtype=object)
+            for env, row in zip(np.flatnonzero(done), self._observations()[done]):
+                final_obs[env] = row
+            infos = {"final_obs": final_obs, "_final_obs": done.copy(),
+                     "final_info": with_masks(final_info, done), "_final_info": done.copy()}
             self.task.reset(done, self._rngs, None)
             self._steps[done] = 0
+            terms = {name: np.where(done, 0.0, term) for name, term in terms.items()}  # the reset's, as reset() gives
         if self.step_diagnostics:
-            infos["degradation"] = self.task.ground_truth()
-        return self._observations(), result.reward, result.terminated, truncated, infos
+            infos.update(with_masks({**self.task.step_info(), **prefixed(REWARD_PREFIX, terms)}, everyone))
+        if self.autoreset_mode != AutoresetMode.SAME_STEP:
+            if done.any():
+                infos.update(with_masks(prefixed(EPISODE_PREFIX, self.task.episode_summary()), done))
+            self._ended = done
+        return self._observations(), reward, terminated, truncated, infos
+
+    def _no_rewards(self) -> dict[str, np.ndarray]:
+        return {name: np.zeros(self.num_envs) for name in REWARD_TERMS}
 
     def _observations(self) -> np.ndarray:
         return self.task.observation().reshape(self.num_envs, -1)
-
-    def _infos(self) -> dict[str, Any]:
-        infos: dict[str, Any] = self.task.info()
-        infos["scenario"] = self.task.scenario.copy()
-        infos["degradation"] = self.task.ground_truth()
-        return infos
 
 
 __all__ = ["TimeGapMonitorVectorEnv"]

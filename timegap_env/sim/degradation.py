@@ -229,7 +229,6 @@ class DegradationTable:
         self.stable = {(degraded, up): np.zeros(shape) for degraded in (False, True) for up in (False, True)}
         # what truth() reports: fixed per episode, and the true parameters while it acts / otherwise
         self._reported = {name: np.zeros(shape) for name in ("size", "onset", "end")}
-        self._kind_names = np.full(shape, KINDS[0], dtype=object)
         self._stale = np.ones(n_envs, dtype=bool)  # envs whose ``stable`` entries are not found yet
         self._while_active, self._otherwise = np.zeros((2, len(TRUE_PARAMETERS), *shape))
         self.descriptions: list[tuple[Degradation, ...]] = [() for _ in range(n_envs)]
@@ -250,7 +249,6 @@ class DegradationTable:
         self.descriptions[env] = tuple(degradations)
         self._stale[env] = True  # its smallest stable settings are found when the ground truth is first asked for
         hit = self.kind[env] > 0
-        self._kind_names[env] = np.array(KINDS, dtype=object)[self.kind[env]]
         self._reported["size"][env] = np.nan_to_num(self.size[env])
         self._reported["onset"][env] = np.where(hit, self.start[env] * cfg.dt, np.inf)
         self._reported["end"][env] = np.where(hit & (self.end[env] < NEVER), self.end[env] * cfg.dt, np.inf)
@@ -334,7 +332,7 @@ class DegradationTable:
         n_followers) it will have, arrays (n_envs, n_followers) without NaN (so that equal episodes give equal
         infos): never in the observation.
 
-        ``kind`` (the follower's degradation, "none" if not hit), ``size`` (0 without one), ``onset`` and ``end``
+        ``kind`` (the follower's degradation, an int8 index of KINDS, 0 = "none": not hit), ``size`` (0 without one), ``onset`` and ``end``
         [s] (inf: not hit / never): the episode's schedule, what has not started included (an oracle that reads
         it sees the future; ours read ``active`` and the true parameters only); ``active`` (it acts in the next
         tick), ``v2v`` (the link is up, what the flag shows),
@@ -347,6 +345,6 @@ class DegradationTable:
         parameters = np.where(active, self._while_active, self._otherwise)
         stable = np.where(active, np.where(v2v, self.stable[True, True], self.stable[True, False]),
                           np.where(v2v, self.stable[False, True], self.stable[False, False]))
-        return {"kind": self._kind_names.copy(), **{name: value.copy() for name, value in self._reported.items()},
+        return {"kind": self.kind.copy(), **{name: value.copy() for name, value in self._reported.items()},
                 "active": active, **dict(zip(TRUE_PARAMETERS, parameters)), "v2v": v2v.copy(),
                 "smallest_stable_setting": stable}

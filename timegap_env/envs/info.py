@@ -1,0 +1,80 @@
+"""What ``info`` holds: flat, numeric, and the same keys from reset on.
+
+Every value is a NumPy array, shaped (n_followers,) per follower or () per platoon, under a
+plain string key (no nested dicts, no strings), so that gymnasium's vector envs, TorchRL's
+``auto_register_info_dict`` and RLlib batch it as it is. A single env's info holds:
+
+- the monitor and the platoon now (:meth:`~timegap_env.envs.task.PlatoonTask.info`: ``estimate``,
+  ``lcl``, ``ucl``, ``alarm``, ``actual_time_gap``, ...);
+- ``reward_<term>`` for each term of :data:`~timegap_env.envs.reward.REWARD_TERMS`, the last step's
+  (0 at reset);
+- ``truth_<name>``, the ground truth (:meth:`~timegap_env.sim.degradation.DegradationTable.truth`;
+  ``truth_kind`` is an index of :data:`KIND_NAMES`): for oracles and evaluation, never in the observation;
+- at the step that ends an episode, ``episode_<name>``, its summary
+  (:meth:`~timegap_env.envs.totals.EpisodeTotals.summary`).
+
+The native vector env's infos are what gymnasium's own vector envs make of these (arrays with a
+leading num_envs axis, a boolean ``_<key>`` mask beside each key, ``final_obs`` and ``final_info``
+at same-step autoresets). :func:`truth_of`, :func:`summary_of` and :func:`rewards_of` read the
+groups back as dicts, with the kinds as names.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+import numpy as np
+
+from timegap_env.sim.degradation import KINDS
+
+KIND_NAMES = np.array(KINDS, dtype=object)  # truth_kind -> the degradation's name ("none": not hit)
+REWARD_PREFIX, TRUTH_PREFIX, EPISODE_PREFIX = "reward_", "truth_", "episode_"
+
+
+def prefixed(prefix: str, values: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """``values`` under ``prefix + name``."""
+    return {prefix + name: value for name, value in values.items()}
+
+
+def with_masks(infos: Mapping[str, np.ndarray], mask: np.ndarray) -> dict[str, np.ndarray]:
+    """Batched ``infos`` as gymnasium's vector envs give them for the sub-envs in ``mask`` ((num_envs,) bool):
+    zero in the other rows, and a ``_<key>`` mask (a copy of ``mask``) beside each key."""
+    if mask.all():
+        return {**infos, **{"_" + key: mask.copy() for key in infos}}
+    out: dict[str, np.ndarray] = {}
+    for key, value in infos.items():
+        out[key] = np.where(mask.reshape(-1, *([1] * (value.ndim - 1))), value, np.zeros((), value.dtype))
+        out["_" + key] = mask.copy()
+    return out
+
+
+def of_env(infos: Mapping[str, np.ndarray], env: int) -> dict[str, np.ndarray]:
+    """Env ``env``'s info out of batched ``infos`` (masks left out), each value a copy."""
+    return {key: np.array(value[env]) for key, value in infos.items() if not key.startswith("_")}
+
+
+def _group(info: Mapping[str, np.ndarray], prefix: str) -> dict[str, np.ndarray]:
+    return {key[len(prefix):]: value for key, value in info.items() if key.startswith(prefix)}
+
+
+def truth_of(info: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """The ground truth in ``info`` (a single env's or batched) as ``{name: array}``, ``kind`` as names."""
+    truth = _group(info, TRUTH_PREFIX)
+    if "kind" not in truth:
+        raise KeyError(f"info has no ground truth ({TRUTH_PREFIX}* keys); its keys: {sorted(info)}")
+    truth["kind"] = KIND_NAMES[np.asarray(truth["kind"], dtype=np.intp)]
+    return truth
+
+
+def summary_of(info: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """The episode summary in ``info`` as ``{name: value}`` (empty unless an episode ended)."""
+    return _group(info, EPISODE_PREFIX)
+
+
+def rewards_of(info: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """The reward terms in ``info`` as ``{term: value}``."""
+    return _group(info, REWARD_PREFIX)
+
+
+__all__ = ["EPISODE_PREFIX", "KIND_NAMES", "REWARD_PREFIX", "TRUTH_PREFIX", "of_env", "prefixed", "rewards_of",
+           "summary_of", "truth_of", "with_masks"]
