@@ -18,7 +18,7 @@ from timegap_env.config import EnvConfig, LeaderConfig, MonitorConfig, PlatoonCo
         ({"initial_setting": float("nan")}, r"initial_setting = nan: must be finite"),
         ({"n_followers": 0}, r"n_followers = 0"),
         ({"v2v_delay": 0.15}, r"v2v_delay = 0.15: must be a multiple of dt"),
-        ({"accel_max": -1.0}, r"accel_min"),
+        ({"accel_max": -1.0}, r"PlatoonConfig.accel_max = -1.0: must be in \(0, 20\]"),
         ({"k_s": "high"}, r"k_s = 'high': must be a number"),
         ({"warp_speed": 9}, r"unknown PlatoonConfig field\(s\) \['warp_speed'\]"),
     ],

@@ -1,9 +1,19 @@
 """Default parameters of the platoon, its leader and the monitor: the one source of truth.
 
 Every config is a frozen dataclass. Its fields carry units in comments, its
-``__post_init__`` validates them, and ``with_overrides`` builds a copy from a
-dict of overrides, raising ``ValueError`` that names the field and the value
-for an unknown key or a bad value.
+``__post_init__`` validates every field (type, finiteness, lower and upper bound;
+the bounds are in the comment after each field's unit, e.g. ``[s], (0, 10]``), and
+``with_overrides`` builds a copy from a dict of overrides. A bad value or an unknown
+key raises ``ValueError`` naming the class, the field and the value. A bool is never
+a number, an integer field takes only integers, a pair only two numbers.
+
+The upper bounds are generous for research and keep one env's memory modest. With
+every memory-relevant field at its bound (``MAX_FOLLOWERS`` followers, the shortest tick
+``MIN_DT``, ``MAX_EPISODE_TICKS``, ``MAX_WINDOW_TICKS``, ``MAX_DECISION_TICKS``), one env
+holds about: leader buffers 2 x 100,001 ticks x 8 B = 1.6 MB; the monitor's window
+6,001 x 5 sums x 100 followers x 8 B = 24 MB; the chart's exceedance window
+6,000 x 100 x 8 B = 4.8 MB; a step's per-tick arrays 1,000 x 101 vehicles x 8 B = 0.8 MB
+each (tests/test_config_fields.py builds and steps that env and measures it).
 """
 
 from __future__ import annotations
@@ -24,88 +34,176 @@ DEGRADATION_KINDS = (
     "lag", "gain", "v2v_latency", "packet_loss", "v2v_outage", "radar_bias", "radar_noise", "commercial_acc",
 )
 
+# Bounds shared by several fields (each field's own are in its comment).
+MIN_DT, MAX_DT = 0.01, 1.0  # simulator and measurement tick, 100 Hz to 1 Hz [s]
+MAX_FOLLOWERS = 100  # followers in one platoon [-]
+MAX_EPISODE_TICKS = 100_000  # ticks of an episode or a synthetic leader (2.8 h at dt = 0.1 s) [-]
+MAX_WINDOW_TICKS = 6_000  # ticks in the monitor's window or the chart's exceedance window (600 s at dt = 0.1 s) [-]
+MAX_DECISION_TICKS = 1_000  # ticks in one env step (100 s at dt = 0.1 s) [-]
+MAX_SETTING_LEVELS = 100  # time gap settings on the ladder [-]
+MAX_TIME_GAP = 10.0  # largest time gap setting, actuation lag or V2V latency [s]
+MAX_SPEED = 100.0  # fastest speed anywhere (360 km/h) [m/s]
+MAX_ACCEL = 20.0  # largest magnitude of any acceleration (about 2 g) [m/s^2]
+MAX_JERK = 100.0  # largest jerk [m/s^3]
+MAX_DURATION = 3600.0  # longest phase, interval, pause or time constant [s]
+MAX_WEIGHT = 1e6  # largest reward, scenario or degradation weight [-]
+MAX_WIDTH = 1e6  # largest chart limit, allowance or decision interval, in baseline sigmas (train/detection_benchmark.py
+# searches up to 1e5 of its statistic's small in-control sigma) [-]
+
+
+def _is_real(value: Any) -> bool:
+    """A real number (Python's or NumPy's int or float), never a bool."""
+    return isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, (bool, np.bool_))
+
+
+def _is_integer(value: Any) -> bool:
+    """An integer (Python's or NumPy's), never a bool."""
+    return isinstance(value, (int, np.integer)) and not isinstance(value, (bool, np.bool_))
+
+
+def _is_finite(value: Any) -> bool:
+    """A real number that is not NaN or infinite (an integer of any size is finite)."""
+    return _is_integer(value) or math.isfinite(value)
+
+
+def _items(value: Any) -> tuple[Any, ...] | None:
+    """The items of a tuple, list or array (arrays as nested lists of Python numbers), else None."""
+    if isinstance(value, np.ndarray):
+        value = value.tolist()
+    return tuple(value) if isinstance(value, (tuple, list)) else None
+
+
+def _interval(low: float, high: float, open_low: bool = False, open_high: bool = False) -> str:
+    """``[low, high]`` with round brackets at open ends."""
+    return f"{'(' if open_low else '['}{low:g}, {high:g}{')' if open_high else ']'}"
+
+
+def _within(value: float, low: float, high: float, open_low: bool = False, open_high: bool = False) -> bool:
+    """``value`` lies in the interval ``[low, high]``, without an end that is open."""
+    return (low < value if open_low else low <= value) and (value < high if open_high else value <= high)
+
 
 class ConfigMixin:
     """``with_overrides`` and field checks shared by the config dataclasses."""
 
     def with_overrides(self, overrides: Mapping[str, Any] | None = None) -> Self:
         """Copy of this config with ``overrides`` applied; unknown keys raise ``ValueError``."""
+        name = type(self).__name__
+        if overrides is not None and not isinstance(overrides, Mapping):
+            raise ValueError(f"{name} overrides = {overrides!r}: must be a dict of {name} fields")
         overrides = dict(overrides or {})
         known = {f.name for f in dataclasses.fields(self)}  # type: ignore[arg-type]
-        unknown = sorted(set(overrides) - known)
+        unknown = sorted(set(overrides) - known, key=repr)
         if unknown:
-            raise ValueError(
-                f"unknown {type(self).__name__} field(s) {unknown}; known fields: {sorted(known)}"
-            )
+            raise ValueError(f"unknown {name} field(s) {unknown}; known fields: {sorted(known)}")
         return dataclasses.replace(self, **overrides)  # type: ignore[type-var]
 
     def _fail(self, field: str, value: Any, rule: str) -> None:
         raise ValueError(f"{type(self).__name__}.{field} = {value!r}: {rule}")
 
-    def _finite(self, field: str) -> float:
+    def _number(self, field: str, low: float, high: float, *, open_low: bool = False, open_high: bool = False,
+                integer: bool = False) -> float:
+        """The field's value as a float, checked: a number (an integer if ``integer``), finite, in the interval."""
         value = getattr(self, field)
-        if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)):
-            self._fail(field, value, "must be a number")
-        if not math.isfinite(value):
+        if not (_is_integer(value) if integer else _is_real(value)):
+            self._fail(field, value, "must be an integer" if integer else "must be a number")
+        if not _is_finite(value):
             self._fail(field, value, "must be finite")
+        if not _within(value, low, high, open_low, open_high):
+            self._fail(field, value, f"must be in {_interval(low, high, open_low, open_high)}")
         return float(value)
 
-    def _positive(self, *fields: str) -> None:
-        for field in fields:
-            if self._finite(field) <= 0:
-                self._fail(field, getattr(self, field), "must be > 0")
+    def _flag(self, field: str) -> None:
+        if not isinstance(getattr(self, field), (bool, np.bool_)):
+            self._fail(field, getattr(self, field), "must be True or False")
 
-    def _band(self, field: str, low_min: float = 0.0) -> None:
-        band = getattr(self, field)
-        try:
-            low, high = (float(b) for b in band)
-        except (TypeError, ValueError):
-            self._fail(field, band, "must be a pair (low, high)")
-        if not (math.isfinite(low) and math.isfinite(high)):
-            self._fail(field, band, "must be finite")
-        if low < low_min:
-            self._fail(field, band, f"low end must be >= {low_min}")
-        if low >= high:
-            self._fail(field, band, "must satisfy low < high (the band is reversed or empty)")
+    def _choice(self, field: str, options: tuple[str, ...]) -> None:
+        value = getattr(self, field)
+        if not isinstance(value, str) or value not in options:
+            self._fail(field, value, f"must be one of {options}")
+
+    def _pair(self, field: str, low: float, high: float, *, open_low: bool = False, open_high: bool = False,
+              strict: bool = True, integer: bool = False) -> tuple[float, float]:
+        """The field's (low, high) as floats, checked: two numbers (integers if ``integer``), finite, both in the
+        interval, low < high (low <= high unless ``strict``)."""
+        value = getattr(self, field)
+        pair = _items(value)
+        is_number = _is_integer if integer else _is_real
+        if pair is None or len(pair) != 2 or not all(is_number(end) for end in pair):
+            self._fail(field, value, f"must be a pair (low, high) of {'integers' if integer else 'numbers'}")
+        if not all(_is_finite(end) for end in pair):
+            self._fail(field, value, "must be finite")
+        if not all(_within(end, low, high, open_low, open_high) for end in pair):
+            self._fail(field, value, f"both ends must lie in {_interval(low, high, open_low, open_high)}")
+        if pair[0] > pair[1] or (strict and pair[0] == pair[1]):
+            self._fail(field, value, "must satisfy low < high (the band is reversed or empty)" if strict
+                       else "must satisfy low <= high")
+        return float(pair[0]), float(pair[1])
+
+    def _weights(self, field: str, what: str, known: tuple[str, ...] | None = None) -> None:
+        """A non-empty dict ``what`` -> weight, keys strings (of ``known`` if given), weights in [0, MAX_WEIGHT],
+        not all 0."""
+        value = getattr(self, field)
+        if not isinstance(value, Mapping) or not value or not all(isinstance(key, str) for key in value):
+            self._fail(field, value, f"must be a non-empty dict {what} (a string) -> weight"
+                       + (f", {what}s {known}" if known else ""))
+        unknown = sorted(set(value) - set(known)) if known else []
+        if unknown:
+            self._fail(field, value, f"unknown {what}s {unknown}; known: {list(known)}")
+        weights = list(value.values())
+        if not all(_is_real(w) and _is_finite(w) and 0 <= w <= MAX_WEIGHT for w in weights) or sum(weights) <= 0:
+            self._fail(field, value, f"weights must be finite numbers in [0, {MAX_WEIGHT:g}], not all 0")
+
+    def _ticks(self, field: str, dt: float, max_ticks: int, dt_name: str = "dt") -> int:
+        """The field's value [s] in ticks of ``dt`` [s], checked: a whole number of ticks, 1 to ``max_ticks``."""
+        value = getattr(self, field)
+        ticks = value / dt
+        if ticks < 1 - 1e-9 or abs(ticks - round(ticks)) > 1e-9:
+            self._fail(field, value, f"must be a positive multiple of {dt_name} = {dt}")
+        if round(ticks) > max_ticks:
+            self._fail(field, value, f"must span at most {max_ticks} ticks of {dt_name} = {dt} s "
+                       f"(<= {max_ticks * dt:g} s), which bounds the memory it takes")
+        return int(round(ticks))
 
 
 @dataclasses.dataclass(frozen=True)
 class PlatoonConfig(ConfigMixin):
     """A human leader and ``n_followers`` automated followers (GLVD + CTH controller)."""
 
-    n_followers: int = 5  # automated followers behind the leader [-]
-    dt: float = 0.1  # simulator tick [s] (10 Hz)
-    actuation_lag: float | tuple[float, ...] = 0.45  # GLVD lag T, one value or one per follower [s]
-    actuation_gain: float | tuple[float, ...] = 1.0  # GLVD gain K, one value or one per follower [-]
-    initial_setting: float = 1.6  # time gap setting tau* at reset [s]
-    setting_ramp_rate: float = 0.2  # rate at which the applied setting follows a new setting [s/s]
-    standstill_spacing: float = 5.0  # s0 of the CTH policy [m]
-    vehicle_length: float = 5.0  # bumper to bumper length of every vehicle [m]
-    k_s: float = 0.2  # gain on the spacing error [1/s^2]
-    k_v: float = 0.7  # gain on the speed difference to the predecessor [1/s]
-    k_a: float = -0.3  # gain on own acceleration [-]
-    k_f: float = 0.6  # feed-forward gain on the predecessor's acceleration over V2V [-]
-    v2v_delay: float = 0.1  # V2V delay theta of the feed-forward, a multiple of dt [s]
-    max_v2v_latency: float = 1.0  # longest extra V2V delay a degradation may add; sizes the message buffer [s]
+    n_followers: int = 5  # automated followers behind the leader [-], 1 to MAX_FOLLOWERS
+    dt: float = 0.1  # simulator tick [s] (10 Hz), [MIN_DT, MAX_DT]
+    actuation_lag: float | tuple[float, ...] = 0.45  # GLVD lag T, one value or one per follower [s], each (0, 10]
+    actuation_gain: float | tuple[float, ...] = 1.0  # GLVD gain K, one value or one per follower [-], each (0, 10]
+    initial_setting: float = 1.6  # time gap setting tau* at reset [s], (0, MAX_TIME_GAP]
+    setting_ramp_rate: float = 0.2  # rate at which the applied setting follows a new setting [s/s], (0, 100]
+    standstill_spacing: float = 5.0  # s0 of the CTH policy [m], [0, 100]
+    vehicle_length: float = 5.0  # bumper to bumper length of every vehicle [m], (0, 50]
+    k_s: float = 0.2  # gain on the spacing error [1/s^2], [0, 10]
+    k_v: float = 0.7  # gain on the speed difference to the predecessor [1/s], [0, 10]
+    k_a: float = -0.3  # gain on own acceleration [-], [-10, 10]
+    k_f: float = 0.6  # feed-forward gain on the predecessor's acceleration over V2V [-], [0, 10]
+    v2v_delay: float = 0.1  # V2V delay theta of the feed-forward, a multiple of dt [s], [0, 5]
+    max_v2v_latency: float = 1.0  # longest extra V2V delay a degradation may add; sizes the message buffer [s],
+    # a multiple of dt in [0, MAX_TIME_GAP]
     v2v: bool = True  # followers start in CACC (True) or ACC, k_f = 0 (False)
-    accel_min: float = -8.0  # lowest commanded acceleration (hard braking, ~0.8 g) [m/s^2]
-    accel_max: float = 4.0  # highest commanded acceleration [m/s^2]
+    accel_min: float = -8.0  # lowest commanded acceleration (hard braking, ~0.8 g) [m/s^2], [-MAX_ACCEL, 0)
+    accel_max: float = 4.0  # highest commanded acceleration [m/s^2], (0, MAX_ACCEL]
 
     def __post_init__(self) -> None:
-        if isinstance(self.n_followers, bool) or not isinstance(self.n_followers, (int, np.integer)):
-            self._fail("n_followers", self.n_followers, "must be an integer")
-        if self.n_followers < 1:
-            self._fail("n_followers", self.n_followers, "must be >= 1")
-        self._positive("dt", "initial_setting", "setting_ramp_rate", "vehicle_length")
-        for field in ("standstill_spacing", "v2v_delay", "max_v2v_latency"):
-            if self._finite(field) < 0:
-                self._fail(field, getattr(self, field), "must be >= 0")
-        for field in ("k_s", "k_v", "k_a", "k_f", "accel_min", "accel_max"):
-            self._finite(field)
-        if not self.accel_min < 0 < self.accel_max:
-            self._fail("accel_min", (self.accel_min, self.accel_max), "need accel_min < 0 < accel_max")
-        if not isinstance(self.v2v, (bool, np.bool_)):
-            self._fail("v2v", self.v2v, "must be True or False")
+        self._number("n_followers", 1, MAX_FOLLOWERS, integer=True)
+        self._number("dt", MIN_DT, MAX_DT)
+        self._number("initial_setting", 0.0, MAX_TIME_GAP, open_low=True)
+        self._number("setting_ramp_rate", 0.0, 100.0, open_low=True)
+        self._number("standstill_spacing", 0.0, 100.0)
+        self._number("vehicle_length", 0.0, 50.0, open_low=True)
+        for field in ("k_s", "k_v", "k_f"):
+            self._number(field, 0.0, 10.0)
+        self._number("k_a", -10.0, 10.0)
+        self._number("v2v_delay", 0.0, 5.0)
+        self._number("max_v2v_latency", 0.0, MAX_TIME_GAP)
+        self._flag("v2v")
+        self._number("accel_min", -MAX_ACCEL, 0.0, open_high=True)
+        self._number("accel_max", 0.0, MAX_ACCEL, open_low=True)
         for field in ("v2v_delay", "max_v2v_latency"):
             delay_ticks = getattr(self, field) / self.dt
             if abs(delay_ticks - round(delay_ticks)) > 1e-9:
@@ -126,29 +224,33 @@ class PlatoonConfig(ConfigMixin):
     def per_follower(self, field: str) -> np.ndarray:
         """``actuation_lag`` or ``actuation_gain`` as an array of shape (n_followers,), validated."""
         raw = getattr(self, field)
-        values = np.atleast_1d(np.asarray(raw, dtype=float))
-        if values.ndim != 1 or values.size not in (1, self.n_followers):
+        values = (raw,) if _is_real(raw) else _items(raw)
+        if values is None or len(values) not in (1, self.n_followers) or not all(_is_real(v) for v in values):
             self._fail(field, raw, f"must be one number or {self.n_followers} numbers (one per follower)")
-        if not np.all(np.isfinite(values)) or np.any(values <= 0):
-            self._fail(field, raw, "every value must be finite and > 0")
-        return np.broadcast_to(values, (self.n_followers,)).copy()
+        array = np.asarray(values, dtype=float)
+        if not np.all(np.isfinite(array)) or np.any(array <= 0) or np.any(array > 10.0):
+            self._fail(field, raw, "every value must be finite and in (0, 10]")
+        return np.broadcast_to(array, (self.n_followers,)).copy()
 
 
 @dataclasses.dataclass(frozen=True)
 class LeaderConfig(ConfigMixin):
     """What every leader profile shares: its tick, length and speed band."""
 
-    dt: float = PlatoonConfig.dt  # sample period of the profile [s]
-    duration: float = 250.0  # length of a synthetic profile [s]; in the env it is EnvConfig.episode_duration
-    speed_band: tuple[float, float] = (20 * MPH, 80 * MPH)  # speeds a profile is kept within [m/s]
-    initial_speed: float = 22.0  # speed at t = 0 of an integrated profile [m/s]
-    min_recorded_duration: float = 30.0  # shortest recorded leader (NGSIM vehicle, OpenACC lead car) drawn [s]
+    dt: float = PlatoonConfig.dt  # sample period of the profile [s], [MIN_DT, MAX_DT]
+    duration: float = 250.0  # length of a synthetic profile [s], at most MAX_EPISODE_TICKS ticks; in the env it is
+    # EnvConfig.episode_duration
+    speed_band: tuple[float, float] = (20 * MPH, 80 * MPH)  # speeds a profile is kept within [m/s], in [0, MAX_SPEED]
+    initial_speed: float = 22.0  # speed at t = 0 of an integrated profile [m/s], within speed_band
+    min_recorded_duration: float = 30.0  # shortest recorded leader (NGSIM vehicle, OpenACC lead car) drawn [s],
+    # (0, MAX_DURATION]
 
     def __post_init__(self) -> None:
-        self._positive("dt", "duration", "min_recorded_duration")
-        self._band("speed_band")
-        speed = self._finite("initial_speed")
-        low, high = self.speed_band
+        self._number("dt", MIN_DT, MAX_DT)
+        self._number("duration", 0.0, MAX_EPISODE_TICKS * self.dt, open_low=True)
+        self._number("min_recorded_duration", 0.0, MAX_DURATION, open_low=True)
+        low, high = self._pair("speed_band", 0.0, MAX_SPEED)
+        speed = self._number("initial_speed", 0.0, MAX_SPEED)
         if not low <= speed <= high:
             self._fail("initial_speed", speed, f"must lie in speed_band {self.speed_band}")
 
@@ -162,90 +264,93 @@ class LeaderConfig(ConfigMixin):
 class AggressiveCyclesConfig(ConfigMixin):
     """The paper's leader: alternating hard acceleration and deceleration phases."""
 
-    accel_range: tuple[float, float] = (1.5, 3.5)  # magnitude of each phase's acceleration [m/s^2]
-    phase_duration_range: tuple[float, float] = (3.0, 9.0)  # length of each phase [s]
-    cruise_probability: float = 0.25  # chance that a phase is a cruise (a = 0) instead [-]
-    max_jerk: float = 10.0  # how fast the leader moves between phase accelerations; aggressive drivers reach ~10 [m/s^3]
+    accel_range: tuple[float, float] = (1.5, 3.5)  # magnitude of each phase's acceleration [m/s^2], in (0, MAX_ACCEL]
+    phase_duration_range: tuple[float, float] = (3.0, 9.0)  # length of each phase [s], in (0, MAX_DURATION]
+    cruise_probability: float = 0.25  # chance that a phase is a cruise (a = 0) instead [-], [0, 1)
+    max_jerk: float = 10.0  # how fast the leader moves between phase accelerations; aggressive drivers reach ~10
+    # [m/s^3], (0, MAX_JERK]
 
     def __post_init__(self) -> None:
-        self._band("accel_range", low_min=1e-9)
-        self._band("phase_duration_range", low_min=1e-9)
-        self._positive("max_jerk")
-        if not 0 <= self._finite("cruise_probability") < 1:
-            self._fail("cruise_probability", self.cruise_probability, "must be in [0, 1)")
+        self._pair("accel_range", 0.0, MAX_ACCEL, open_low=True)
+        self._pair("phase_duration_range", 0.0, MAX_DURATION, open_low=True)
+        self._number("cruise_probability", 0.0, 1.0, open_high=True)
+        self._number("max_jerk", 0.0, MAX_JERK, open_low=True)
 
 
 @dataclasses.dataclass(frozen=True)
 class SinusoidConfig(ConfigMixin):
     """Speed oscillation v = mean + amplitude sin(2 pi t / period + phase), all drawn per seed."""
 
-    amplitude_range: tuple[float, float] = (2.0, 6.0)  # speed amplitude [m/s]
-    period_range: tuple[float, float] = (10.0, 40.0)  # oscillation period [s]
+    amplitude_range: tuple[float, float] = (2.0, 6.0)  # speed amplitude [m/s], in (0, MAX_SPEED / 2]
+    period_range: tuple[float, float] = (10.0, 40.0)  # oscillation period [s], in [1, MAX_DURATION]
 
     def __post_init__(self) -> None:
-        self._band("amplitude_range", low_min=1e-9)
-        self._band("period_range", low_min=1e-9)
+        self._pair("amplitude_range", 0.0, MAX_SPEED / 2, open_low=True)
+        self._pair("period_range", 1.0, MAX_DURATION)
 
 
 @dataclasses.dataclass(frozen=True)
 class HardBrakingConfig(ConfigMixin):
     """Cruising interrupted by hard braking events, each followed by a gentler recovery."""
 
-    n_events: int = 3  # braking events per profile [-]
-    decel_range: tuple[float, float] = (4.0, 7.0)  # magnitude of the braking deceleration [m/s^2]
-    speed_drop_range: tuple[float, float] = (5.0, 12.0)  # speed lost in one event [m/s]
-    recovery_accel: float = 1.5  # acceleration back to the cruise speed [m/s^2]
+    n_events: int = 3  # braking events per profile [-], 1 to 100
+    decel_range: tuple[float, float] = (4.0, 7.0)  # magnitude of the braking deceleration [m/s^2], in (0, MAX_ACCEL]
+    speed_drop_range: tuple[float, float] = (5.0, 12.0)  # speed lost in one event [m/s], in (0, MAX_SPEED]
+    recovery_accel: float = 1.5  # acceleration back to the cruise speed [m/s^2], (0, MAX_ACCEL]
 
     def __post_init__(self) -> None:
-        if isinstance(self.n_events, bool) or not isinstance(self.n_events, (int, np.integer)) or self.n_events < 1:
-            self._fail("n_events", self.n_events, "must be an integer >= 1")
-        self._band("decel_range", low_min=1e-9)
-        self._band("speed_drop_range", low_min=1e-9)
-        self._positive("recovery_accel")
+        self._number("n_events", 1, 100, integer=True)
+        self._pair("decel_range", 0.0, MAX_ACCEL, open_low=True)
+        self._pair("speed_drop_range", 0.0, MAX_SPEED, open_low=True)
+        self._number("recovery_accel", 0.0, MAX_ACCEL, open_low=True)
 
 
 @dataclasses.dataclass(frozen=True)
 class StochasticHumanConfig(ConfigMixin):
     """Human-like speed: acceleration is an Ornstein-Uhlenbeck process pulled to a wandering target speed."""
 
-    accel_std: float = 0.6  # stationary std of the acceleration noise [m/s^2]
-    accel_correlation_time: float = 2.0  # correlation time of the acceleration noise [s]
-    speed_gain: float = 0.1  # pull of the speed towards the target speed [1/s]
-    target_change_interval: float = 30.0  # mean time between changes of the target speed [s]
+    accel_std: float = 0.6  # stationary std of the acceleration noise [m/s^2], (0, MAX_ACCEL]
+    accel_correlation_time: float = 2.0  # correlation time of the acceleration noise [s], (0, MAX_DURATION]
+    speed_gain: float = 0.1  # pull of the speed towards the target speed [1/s], (0, 10]
+    target_change_interval: float = 30.0  # mean time between changes of the target speed [s], (0, MAX_DURATION]
 
     def __post_init__(self) -> None:
-        self._positive("accel_std", "accel_correlation_time", "speed_gain", "target_change_interval")
+        self._number("accel_std", 0.0, MAX_ACCEL, open_low=True)
+        self._number("accel_correlation_time", 0.0, MAX_DURATION, open_low=True)
+        self._number("speed_gain", 0.0, 10.0, open_low=True)
+        self._number("target_change_interval", 0.0, MAX_DURATION, open_low=True)
 
 
 @dataclasses.dataclass(frozen=True)
 class HumanLeaderConfig(ConfigMixin):
     """highway-env's IDM driver as a human leader behind a scripted disturbance (``timegap_env.leaders.idm``)."""
 
-    desired_speed_factor: float = 1.2  # driver's desired speed over the disturbance's top speed [-]
-    time_wanted_range: tuple[float, float] = (1.0, 2.0)  # desired time gap of a seeded driver (highway-env: 1.5) [s]
-    comfort_accel_range: tuple[float, float] = (2.0, 4.0)  # desired acceleration of a seeded driver (highway-env: 3) [m/s^2]
-    max_initial_gap: float = 500.0  # longest accepted initial bumper-to-bumper gap [m]
+    desired_speed_factor: float = 1.2  # driver's desired speed over the disturbance's top speed [-], (0, 10]
+    time_wanted_range: tuple[float, float] = (1.0, 2.0)  # desired time gap of a seeded driver (highway-env: 1.5) [s],
+    # in (0, MAX_TIME_GAP]
+    comfort_accel_range: tuple[float, float] = (2.0, 4.0)  # desired acceleration of a seeded driver (highway-env: 3)
+    # [m/s^2], in (0, MAX_ACCEL]
+    max_initial_gap: float = 500.0  # longest accepted initial bumper-to-bumper gap [m], (0, 10000]
 
     def __post_init__(self) -> None:
-        self._positive("desired_speed_factor", "max_initial_gap")
-        self._band("time_wanted_range", low_min=1e-9)
-        self._band("comfort_accel_range", low_min=1e-9)
+        self._number("desired_speed_factor", 0.0, 10.0, open_low=True)
+        self._pair("time_wanted_range", 0.0, MAX_TIME_GAP, open_low=True)
+        self._pair("comfort_accel_range", 0.0, MAX_ACCEL, open_low=True)
+        self._number("max_initial_gap", 0.0, 10_000.0, open_low=True)
 
 
 @dataclasses.dataclass(frozen=True)
 class SensorConfig(ConfigMixin):
     """What each follower measures of its own spacing and speed, once per tick."""
 
-    spacing_noise_std: float = 0.1  # radar range noise; matches the spacing model's sigma^2 = 0.01 m^2 [m]
-    speed_noise_std: float = 0.1  # own-speed noise [m/s]
-    dropout_probability: float = 0.0  # chance that a tick's measurement of a follower is missing (NaN) [-]
+    spacing_noise_std: float = 0.1  # radar range noise; matches the spacing model's sigma^2 = 0.01 m^2 [m], [0, 100]
+    speed_noise_std: float = 0.1  # own-speed noise [m/s], [0, MAX_SPEED]
+    dropout_probability: float = 0.0  # chance that a tick's measurement of a follower is missing (NaN) [-], [0, 1)
 
     def __post_init__(self) -> None:
-        for field in ("spacing_noise_std", "speed_noise_std"):
-            if self._finite(field) < 0:
-                self._fail(field, getattr(self, field), "must be >= 0")
-        if not 0 <= self._finite("dropout_probability") < 1:
-            self._fail("dropout_probability", self.dropout_probability, "must be in [0, 1)")
+        self._number("spacing_noise_std", 0.0, 100.0)
+        self._number("speed_noise_std", 0.0, MAX_SPEED)
+        self._number("dropout_probability", 0.0, 1.0, open_high=True)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -259,29 +364,38 @@ class MonitorConfig(ConfigMixin):
     ``window`` seconds of time.
     """
 
-    noise_variance: float = 0.01  # sigma^2 of the spacing model S = s0 + tau V + eps [m^2]
-    prior_standstill_spacing: float = PlatoonConfig.standstill_spacing  # prior mean of s0 [m]; tau's is the setting
-    prior_cov: tuple[tuple[float, float], tuple[float, float]] = ((1e-4, -1e-5), (-1e-5, 0.125))  # Sigma_b of [s0 [m], tau [s]]
-    window: float | None = 2.0  # sliding window, a multiple of dt; chosen by train/choose_window.py [s]; None keeps all
-    forgetting: float = 1.0  # exponential forgetting factor per tick, 1 = none [-]
-    dt: float = PlatoonConfig.dt  # measurement period [s]
-    max_speed: float = 100.0  # speeds above this are implausible and skipped [m/s]
-    max_spacing: float = 1000.0  # spacings above this are implausible and skipped [m]
+    noise_variance: float = 0.01  # sigma^2 of the spacing model S = s0 + tau V + eps [m^2], (0, 1e4]
+    prior_standstill_spacing: float = PlatoonConfig.standstill_spacing  # prior mean of s0 [m], [0, 100]; tau's is
+    # the setting
+    prior_cov: tuple[tuple[float, float], tuple[float, float]] = ((1e-4, -1e-5), (-1e-5, 0.125))  # Sigma_b of
+    # [s0 [m], tau [s]], symmetric positive definite, entries within [-1e6, 1e6]
+    window: float | None = 2.0  # sliding window, a multiple of dt; chosen by train/choose_window.py [s]; None keeps
+    # all; at most MAX_WINDOW_TICKS ticks
+    forgetting: float = 1.0  # exponential forgetting factor per tick, 1 = none [-], (0, 1]
+    dt: float = PlatoonConfig.dt  # measurement period [s], [MIN_DT, MAX_DT]
+    max_speed: float = 100.0  # speeds above this are implausible and skipped [m/s], (0, 1000]
+    max_spacing: float = 1000.0  # spacings above this are implausible and skipped [m], (0, 1e5]
 
     def __post_init__(self) -> None:
-        self._positive("noise_variance", "dt", "max_speed", "max_spacing")
-        self._finite("prior_standstill_spacing")
-        cov = np.asarray(self.prior_cov, dtype=float)
-        if cov.shape != (2, 2) or not np.all(np.isfinite(cov)):
-            self._fail("prior_cov", self.prior_cov, "must be a finite 2x2 matrix")
+        self._number("noise_variance", 0.0, 1e4, open_low=True)
+        self._number("prior_standstill_spacing", 0.0, 100.0)
+        self._number("forgetting", 0.0, 1.0, open_low=True)
+        self._number("dt", MIN_DT, MAX_DT)
+        self._number("max_speed", 0.0, 1000.0, open_low=True)
+        self._number("max_spacing", 0.0, 1e5, open_low=True)
+        rows = _items(self.prior_cov)
+        matrix = None if rows is None or len(rows) != 2 else tuple(_items(row) for row in rows)
+        if (matrix is None or any(row is None or len(row) != 2 for row in matrix)
+                or not all(_is_real(x) for row in matrix for x in row)):
+            self._fail("prior_cov", self.prior_cov, "must be a 2x2 matrix of numbers")
+        cov = np.asarray(matrix, dtype=float)
+        if not np.all(np.isfinite(cov)) or np.any(np.abs(cov) > 1e6):
+            self._fail("prior_cov", self.prior_cov, "entries must be finite and within [-1e6, 1e6]")
         if not np.allclose(cov, cov.T) or np.any(np.linalg.eigvalsh(cov) <= 0):
             self._fail("prior_cov", self.prior_cov, "must be symmetric positive definite")
         if self.window is not None:
-            ticks = self._finite("window") / self.dt
-            if ticks < 1 - 1e-9 or abs(ticks - round(ticks)) > 1e-9:
-                self._fail("window", self.window, f"must be None or a positive multiple of dt = {self.dt}")
-        if not 0 < self._finite("forgetting") <= 1:
-            self._fail("forgetting", self.forgetting, "must be in (0, 1]")
+            self._number("window", 0.0, math.inf, open_low=True)
+            self._ticks("window", self.dt, MAX_WINDOW_TICKS)
 
     @property
     def window_ticks(self) -> int | None:
@@ -294,33 +408,35 @@ class ChartConfig(ConfigMixin):
     """Control chart on the posterior mean of tau (Shewhart, EWMA or CUSUM), and the paper's switching rule."""
 
     kind: str = "shewhart"  # chart used by make_chart, one of CHART_KINDS
-    baseline_std: float = 0.125  # sigma_desired of the baseline N(tau*, sigma_desired^2) [s]
-    limit_width: float = 2.0  # L: Shewhart limits at tau* -/+ L sigma_desired [-]
-    ewma_lambda: float = 0.2  # EWMA weight of the newest estimate [-]
-    ewma_width: float = 3.0  # EWMA limits at tau* -/+ width sigma_desired sqrt(lambda / (2 - lambda)) [-]
-    cusum_k: float = 0.5  # CUSUM reference value (allowance) [sigma_desired]
-    cusum_h: float = 5.0  # CUSUM decision interval [sigma_desired]
-    exceedance_window: float = 35.0  # trailing window in which exceedances are counted, a multiple of dt [s]
-    switch_exceedances: int = 3  # paper's rule: this many exceedances within the window ... [-]
-    switch_to: float = 1.0  # ... switch the setting to this time gap [s]
+    baseline_std: float = 0.125  # sigma_desired of the baseline N(tau*, sigma_desired^2) [s], (0, MAX_TIME_GAP]
+    limit_width: float = 2.0  # L: Shewhart limits at tau* -/+ L sigma_desired [-], (0, MAX_WIDTH]
+    ewma_lambda: float = 0.2  # EWMA weight of the newest estimate [-], (0, 1]
+    ewma_width: float = 3.0  # EWMA limits at tau* -/+ width sigma_desired sqrt(lambda / (2 - lambda)) [-],
+    # (0, MAX_WIDTH]
+    cusum_k: float = 0.5  # CUSUM reference value (allowance) [sigma_desired], [0, MAX_WIDTH]
+    cusum_h: float = 5.0  # CUSUM decision interval [sigma_desired], (0, MAX_WIDTH]
+    exceedance_window: float = 35.0  # trailing window in which exceedances are counted, a multiple of dt [s],
+    # at most MAX_WINDOW_TICKS ticks
+    switch_exceedances: int = 3  # paper's rule: this many exceedances within the window ... [-], 1 to the window's
+    # ticks (more can never happen)
+    switch_to: float = 1.0  # ... switch the setting to this time gap [s], (0, MAX_TIME_GAP]
     settle_time: float = 8.0  # alarms wait this long after a commanded change has ramped in; long enough
-    # for the slowest change of the default ladder, 0.6 -> 2.2 s (tests/monitoring/test_loop.py) [s]
-    dt: float = PlatoonConfig.dt  # chart tick, one estimate per tick [s]
+    # for the slowest change of the default ladder, 0.6 -> 2.2 s (tests/monitoring/test_loop.py) [s], [0, MAX_DURATION]
+    dt: float = PlatoonConfig.dt  # chart tick, one estimate per tick [s], [MIN_DT, MAX_DT]
 
     def __post_init__(self) -> None:
-        if self.kind not in CHART_KINDS:
-            self._fail("kind", self.kind, f"must be one of {CHART_KINDS}")
-        self._positive("baseline_std", "limit_width", "ewma_width", "cusum_h", "exceedance_window", "switch_to", "dt")
-        if not 0 < self._finite("ewma_lambda") <= 1:
-            self._fail("ewma_lambda", self.ewma_lambda, "must be in (0, 1]")
-        for field in ("cusum_k", "settle_time"):
-            if self._finite(field) < 0:
-                self._fail(field, getattr(self, field), "must be >= 0")
-        ticks = self.exceedance_window / self.dt
-        if ticks < 1 - 1e-9 or abs(ticks - round(ticks)) > 1e-9:
-            self._fail("exceedance_window", self.exceedance_window, f"must be a positive multiple of dt = {self.dt}")
-        if isinstance(self.switch_exceedances, bool) or not isinstance(self.switch_exceedances, (int, np.integer)) or self.switch_exceedances < 1:
-            self._fail("switch_exceedances", self.switch_exceedances, "must be an integer >= 1")
+        self._choice("kind", CHART_KINDS)
+        self._number("baseline_std", 0.0, MAX_TIME_GAP, open_low=True)
+        self._number("ewma_lambda", 0.0, 1.0, open_low=True)
+        for field in ("limit_width", "ewma_width", "cusum_h"):
+            self._number(field, 0.0, MAX_WIDTH, open_low=True)
+        self._number("cusum_k", 0.0, MAX_WIDTH)
+        self._number("switch_to", 0.0, MAX_TIME_GAP, open_low=True)
+        self._number("settle_time", 0.0, MAX_DURATION)
+        self._number("dt", MIN_DT, MAX_DT)
+        self._number("exceedance_window", 0.0, math.inf, open_low=True)
+        ticks = self._ticks("exceedance_window", self.dt, MAX_WINDOW_TICKS)
+        self._number("switch_exceedances", 1, ticks, integer=True)
 
     @property
     def exceedance_window_ticks(self) -> int:
@@ -349,6 +465,7 @@ class RewardWeights(ConfigMixin):
 
     The terms themselves (each <= 0, about -1 at its worst) and the reasons for these weights are in
     :mod:`timegap_env.envs.reward`, whose ``RewardTerms`` takes its field names from this class.
+    Every weight lies in [0, MAX_WEIGHT].
     """
 
     tracking: float = 1.0  # [-]
@@ -362,8 +479,7 @@ class RewardWeights(ConfigMixin):
 
     def __post_init__(self) -> None:
         for field in dataclasses.fields(self):
-            if self._finite(field.name) < 0:
-                self._fail(field.name, getattr(self, field.name), "must be >= 0")
+            self._number(field.name, 0.0, MAX_WEIGHT)
 
 
 SIZE_RANGE_FIELDS = {  # each sized degradation kind and the DegradationConfig field holding its range
@@ -390,41 +506,33 @@ class DegradationConfig(ConfigMixin):
     ``v2v_outage_duration_range``); a commercial ACC car is what it is from start to end.
     """
 
-    kind_weights: dict[str, float] = dataclasses.field(default_factory=_default_degradation_weights)  # kind -> weight
-    lag_factor_range: tuple[float, float] = (1.5, 2.5)  # actuation lag T multiplied by [-]
-    gain_range: tuple[float, float] = (0.6, 0.85)  # actuation gain K [-]
-    v2v_latency_range: tuple[float, float] = (0.2, 0.6)  # V2V delay added, a multiple of dt when drawn [s]
-    packet_loss_range: tuple[float, float] = (0.3, 0.9)  # chance per tick that a V2V message is lost [-]
-    v2v_outage_duration_range: tuple[float, float] = (20.0, 80.0)  # how long the V2V link is down [s]
-    radar_bias_range: tuple[float, float] = (1.0, 4.0)  # |bias| of the radar's spacing, sign drawn [m]
-    radar_noise_range: tuple[float, float] = (0.3, 1.0)  # std of the radar's spacing noise while degraded [m]
-    follower_probability: float = 1.0  # chance each follower is hit; at least one is [-]
-    midway_onset_probability: float = 0.5  # chance the degradation starts mid-episode rather than at 0 [-]
-    recovery_probability: float = 0.3  # chance it ends before the episode does [-]
+    kind_weights: dict[str, float] = dataclasses.field(default_factory=_default_degradation_weights)  # kind -> weight,
+    # kinds "none" and DEGRADATION_KINDS, weights in [0, MAX_WEIGHT], not all 0
+    lag_factor_range: tuple[float, float] = (1.5, 2.5)  # actuation lag T multiplied by [-], in [1, 10]
+    gain_range: tuple[float, float] = (0.6, 0.85)  # actuation gain K [-], in (0, 1]
+    v2v_latency_range: tuple[float, float] = (0.2, 0.6)  # V2V delay added, a multiple of dt when drawn [s], in
+    # [0, MAX_TIME_GAP] (and within PlatoonConfig.max_v2v_latency)
+    packet_loss_range: tuple[float, float] = (0.3, 0.9)  # chance per tick that a V2V message is lost [-], in [0, 1)
+    v2v_outage_duration_range: tuple[float, float] = (20.0, 80.0)  # how long the V2V link is down [s], in
+    # [0, MAX_DURATION]
+    radar_bias_range: tuple[float, float] = (1.0, 4.0)  # |bias| of the radar's spacing, sign drawn [m], in [0, 100]
+    radar_noise_range: tuple[float, float] = (0.3, 1.0)  # std of the radar's spacing noise while degraded [m], in
+    # [0, 100]
+    follower_probability: float = 1.0  # chance each follower is hit; at least one is [-], [0, 1]
+    midway_onset_probability: float = 0.5  # chance the degradation starts mid-episode rather than at 0 [-], [0, 1]
+    recovery_probability: float = 0.3  # chance it ends before the episode does [-], [0, 1]
 
     def __post_init__(self) -> None:
-        known = ("none", *DEGRADATION_KINDS)
-        if not isinstance(self.kind_weights, Mapping) or not self.kind_weights:
-            self._fail("kind_weights", self.kind_weights, f"must be a non-empty dict kind -> weight, kinds {known}")
-        unknown = sorted(set(self.kind_weights) - set(known))
-        if unknown:
-            self._fail("kind_weights", self.kind_weights, f"unknown kinds {unknown}; known: {list(known)}")
-        weights = list(self.kind_weights.values())
-        if (not all(isinstance(w, (int, float)) and not isinstance(w, bool) and math.isfinite(w) and w >= 0 for w in weights)
-                or sum(weights) <= 0):
-            self._fail("kind_weights", self.kind_weights, "weights must be finite numbers >= 0, not all 0")
-        for field in ("lag_factor_range", "gain_range", "v2v_latency_range", "packet_loss_range",
-                      "v2v_outage_duration_range", "radar_bias_range", "radar_noise_range"):
-            self._band(field)
-        if self.lag_factor_range[0] < 1:
-            self._fail("lag_factor_range", self.lag_factor_range, "a degraded lag is at least the nominal one (>= 1)")
-        if not (0 < self.gain_range[0] and self.gain_range[1] <= 1):
-            self._fail("gain_range", self.gain_range, "a degraded gain lies in (0, 1]")
-        if self.packet_loss_range[1] >= 1:
-            self._fail("packet_loss_range", self.packet_loss_range, "a loss probability must stay below 1")
+        self._weights("kind_weights", "kind", ("none", *DEGRADATION_KINDS))
+        self._pair("lag_factor_range", 1.0, 10.0)
+        self._pair("gain_range", 0.0, 1.0, open_low=True)
+        self._pair("v2v_latency_range", 0.0, MAX_TIME_GAP)
+        self._pair("packet_loss_range", 0.0, 1.0, open_high=True)
+        self._pair("v2v_outage_duration_range", 0.0, MAX_DURATION)
+        self._pair("radar_bias_range", 0.0, 100.0)
+        self._pair("radar_noise_range", 0.0, 100.0)
         for field in ("follower_probability", "midway_onset_probability", "recovery_probability"):
-            if not 0 <= self._finite(field) <= 1:
-                self._fail(field, getattr(self, field), "must be in [0, 1]")
+            self._number(field, 0.0, 1.0)
 
     def size_range(self, kind: str) -> tuple[float, float]:
         """The range a sized ``kind``'s size is drawn from (for radar_bias, its magnitude); ``KeyError`` otherwise."""
@@ -433,6 +541,12 @@ class DegradationConfig(ConfigMixin):
 
 def _default_scenario_weights() -> dict[str, float]:
     return {"aggressive_cycles": 1.0, "sinusoid": 1.0, "hard_braking": 1.0, "stochastic_human": 1.0}
+
+
+NESTED_CONFIGS: dict[str, type[ConfigMixin]] = {  # EnvConfig's nested configs, each given as a dict of its fields
+    "platoon": PlatoonConfig, "leader": LeaderConfig, "sensors": SensorConfig, "monitor": MonitorConfig,
+    "chart": ChartConfig, "reward_weights": RewardWeights, "degradation": DegradationConfig,
+}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -450,78 +564,92 @@ class EnvConfig(ConfigMixin):
     monitor: MonitorConfig = MonitorConfig()
     chart: ChartConfig = ChartConfig()
     reward_weights: RewardWeights = RewardWeights()
-    decision_interval: float = 1.0  # time between two actions, a multiple of platoon.dt [s]
-    episode_duration: float = 250.0  # [s]
+    decision_interval: float = 1.0  # time between two actions, a multiple of platoon.dt [s], at most
+    # MAX_DECISION_TICKS ticks and episode_duration
+    episode_duration: float = 250.0  # [s], a multiple of platoon.dt, at most MAX_EPISODE_TICKS ticks
     action_mode: str = "platoon"  # one of ACTION_MODES: one setting for all followers, one each, or a relative step
     random_initial_setting: bool = False  # each episode starts at a ladder level drawn from the seed, not at
     # platoon.initial_setting (for training: a relative policy then learns to reach a setting, not only to keep one)
-    setting_levels: tuple[float, ...] = (0.6, 0.8, 1.0, 1.2, 1.4, 1.6, 1.8, 2.0, 2.2)  # settings to choose from [s]
-    preferred_setting: float = 1.6  # the setting the driver chose [s]
-    scenario_weights: dict[str, float] = dataclasses.field(default_factory=_default_scenario_weights)  # family -> weight
+    setting_levels: tuple[float, ...] = (0.6, 0.8, 1.0, 1.2, 1.4, 1.6, 1.8, 2.0, 2.2)  # settings to choose from [s],
+    # 2 to MAX_SETTING_LEVELS increasing values in (0, MAX_TIME_GAP]
+    preferred_setting: float = 1.6  # the setting the driver chose [s], within the ladder [setting_levels[0],
+    # setting_levels[-1]] (so the preference term stays in [-1, 0])
+    scenario_weights: dict[str, float] = dataclasses.field(default_factory=_default_scenario_weights)  # family ->
+    # weight in [0, MAX_WEIGHT], not all 0; the families are checked against SCENARIOS when the env is built
     degradation: DegradationConfig = DegradationConfig()  # what can go wrong with the followers, drawn per episode
-    dropout_probability_range: tuple[float, float] = (0.0, 0.05)  # per-episode sensor dropout rate drawn from [-]
-    ttc_threshold: float = 4.0  # time-to-collision below which safety is penalised [s]
-    jerk_reference: float = 2.0  # jerk that costs one comfort unit [m/s^3]
-    tracking_reference: float = 0.25  # a tick's |actual time gap - setting| costing one tracking unit [s]
-    tracking_cap: float = 0.5  # a tick's |actual time gap - setting| counts up to this in the tracking term [s]
-    accel_growth_reference: float = 1.0  # growth of the peak acceleration down the platoon costing one unit [m/s^2]
-    accel_envelope_time: float = 5.0  # time constant of the decaying peak acceleration the growth compares [s]
+    dropout_probability_range: tuple[float, float] = (0.0, 0.05)  # per-episode sensor dropout rate drawn from [-],
+    # 0 <= low <= high < 1
+    ttc_threshold: float = 4.0  # time-to-collision below which safety is penalised [s], (0, 60]
+    jerk_reference: float = 2.0  # jerk that costs one comfort unit [m/s^3], (0, MAX_JERK]
+    tracking_reference: float = 0.25  # a tick's |actual time gap - setting| costing one tracking unit [s],
+    # (0, MAX_TIME_GAP]
+    tracking_cap: float = 0.5  # a tick's |actual time gap - setting| counts up to this in the tracking term [s],
+    # (0, MAX_TIME_GAP]
+    accel_growth_reference: float = 1.0  # growth of the peak acceleration down the platoon costing one unit [m/s^2],
+    # (0, MAX_ACCEL]
+    accel_envelope_time: float = 5.0  # time constant of the decaying peak acceleration the growth compares [s],
+    # (0, MAX_DURATION]
 
     def __post_init__(self) -> None:
-        nested = {"platoon": PlatoonConfig, "leader": LeaderConfig, "sensors": SensorConfig, "monitor": MonitorConfig,
-                  "chart": ChartConfig, "reward_weights": RewardWeights, "degradation": DegradationConfig}
-        for field, kind in nested.items():
+        for field, kind in NESTED_CONFIGS.items():
             if not isinstance(getattr(self, field), kind):
                 self._fail(field, getattr(self, field), f"must be a {kind.__name__} (or a dict of its fields)")
-        self._positive("decision_interval", "episode_duration", "preferred_setting", "ttc_threshold", "jerk_reference",
-                       "tracking_reference", "tracking_cap", "accel_growth_reference", "accel_envelope_time")
         dt = self.platoon.dt
+        for name, config in (("monitor", self.monitor), ("chart", self.chart), ("leader", self.leader)):
+            if not math.isclose(config.dt, dt):
+                self._fail(f"{name}.dt", config.dt, f"must equal platoon.dt = {dt}")
         for field in ("decision_interval", "episode_duration"):
-            ticks = getattr(self, field) / dt
-            if abs(ticks - round(ticks)) > 1e-9:
-                self._fail(field, getattr(self, field), f"must be a multiple of platoon.dt = {dt}")
+            self._number(field, 0.0, math.inf, open_low=True)
+        self._ticks("episode_duration", dt, MAX_EPISODE_TICKS, "platoon.dt")
+        self._ticks("decision_interval", dt, MAX_DECISION_TICKS, "platoon.dt")
+        if self.decision_interval > self.episode_duration:
+            self._fail("decision_interval", self.decision_interval,
+                       f"must be at most episode_duration = {self.episode_duration} s")
         if not math.isclose(self.leader.duration, self.episode_duration):
             if self.leader.duration != LeaderConfig.duration:
                 self._fail("leader.duration", self.leader.duration,
                            f"a synthetic leader lasts the episode: leave it out or make it episode_duration = "
                            f"{self.episode_duration}")
             object.__setattr__(self, "leader", self.leader.with_overrides({"duration": float(self.episode_duration)}))
-        for name, config in (("monitor", self.monitor), ("chart", self.chart), ("leader", self.leader)):
-            if not math.isclose(config.dt, dt):
-                self._fail(f"{name}.dt", config.dt, f"must equal platoon.dt = {dt}")
-        if not isinstance(self.random_initial_setting, (bool, np.bool_)):
-            self._fail("random_initial_setting", self.random_initial_setting, "must be True or False")
-        if self.action_mode not in ACTION_MODES:
-            self._fail("action_mode", self.action_mode, f"must be one of {ACTION_MODES}")
-        levels = np.asarray(self.setting_levels, dtype=float)
-        if levels.ndim != 1 or levels.size < 2 or not np.all(np.isfinite(levels)) or np.any(levels <= 0):
-            self._fail("setting_levels", self.setting_levels, "must be at least two finite settings > 0")
-        if np.any(np.diff(levels) <= 0):
+        self._choice("action_mode", ACTION_MODES)
+        self._flag("random_initial_setting")
+        levels = _items(self.setting_levels)
+        if (levels is None or not 2 <= len(levels) <= MAX_SETTING_LEVELS or not all(_is_real(x) for x in levels)
+                or not all(_is_finite(x) and 0 < x <= MAX_TIME_GAP for x in levels)):
+            self._fail("setting_levels", self.setting_levels,
+                       f"must be 2 to {MAX_SETTING_LEVELS} finite settings in (0, {MAX_TIME_GAP:g}]")
+        if np.any(np.diff(np.asarray(levels, dtype=float)) <= 0):
             self._fail("setting_levels", self.setting_levels, "must increase strictly")
         if not np.any(np.isclose(levels, self.platoon.initial_setting)):
             self._fail("platoon.initial_setting", self.platoon.initial_setting, f"must be one of {self.setting_levels}")
-        if not isinstance(self.scenario_weights, Mapping) or not self.scenario_weights:
-            self._fail("scenario_weights", self.scenario_weights, "must be a non-empty dict family -> weight")
-        weights = list(self.scenario_weights.values())
-        if not all(isinstance(w, (int, float)) and math.isfinite(w) and w >= 0 for w in weights) or sum(weights) <= 0:
-            self._fail("scenario_weights", self.scenario_weights, "weights must be finite, >= 0, not all 0")
+        self._number("preferred_setting", levels[0], levels[-1])
+        self._weights("scenario_weights", "family")
         if self.degradation.v2v_latency_range[1] > self.platoon.max_v2v_latency + 1e-9:
             self._fail("degradation.v2v_latency_range", self.degradation.v2v_latency_range,
                        f"must stay within platoon.max_v2v_latency = {self.platoon.max_v2v_latency} s")
-        low, high = self.dropout_probability_range
-        if not 0 <= low <= high < 1:
-            self._fail("dropout_probability_range", self.dropout_probability_range, "need 0 <= low <= high < 1")
+        self._pair("dropout_probability_range", 0.0, 1.0, open_high=True, strict=False)
+        self._number("ttc_threshold", 0.0, 60.0, open_low=True)
+        self._number("jerk_reference", 0.0, MAX_JERK, open_low=True)
+        for field in ("tracking_reference", "tracking_cap"):
+            self._number(field, 0.0, MAX_TIME_GAP, open_low=True)
+        self._number("accel_growth_reference", 0.0, MAX_ACCEL, open_low=True)
+        self._number("accel_envelope_time", 0.0, MAX_DURATION, open_low=True)
 
     @classmethod
     def from_dict(cls, overrides: Mapping[str, Any] | None = None) -> EnvConfig:
         """The default config with ``overrides``; nested configs take dicts of their own fields."""
+        if overrides is not None and not isinstance(overrides, Mapping):
+            raise ValueError(f"EnvConfig config = {overrides!r}: must be a dict of EnvConfig fields "
+                             f"(nested configs as dicts) or None")
         overrides = dict(overrides or {})
         default = cls()
-        for field in dataclasses.fields(cls):
-            value = overrides.get(field.name)
-            if isinstance(value, Mapping) and isinstance(getattr(default, field.name), ConfigMixin):
-                overrides[field.name] = getattr(default, field.name).with_overrides(value)
-        if "setting_levels" in overrides:
+        for field in NESTED_CONFIGS:
+            if isinstance(overrides.get(field), Mapping):
+                try:
+                    overrides[field] = getattr(default, field).with_overrides(overrides[field])
+                except ValueError as error:
+                    raise ValueError(f"EnvConfig.{field}: {error}") from error
+        if isinstance(overrides.get("setting_levels"), (list, np.ndarray)):
             overrides["setting_levels"] = tuple(overrides["setting_levels"])
         return default.with_overrides(overrides)
 

@@ -29,6 +29,10 @@ import numba
 import numpy as np
 
 from timegap_env.config import (
+    MAX_ACCEL,
+    MAX_DURATION,
+    MAX_JERK,
+    MAX_SPEED,
     AggressiveCyclesConfig,
     ConfigMixin,
     HardBrakingConfig,
@@ -114,20 +118,26 @@ def hard_braking(
 class StopAndGoConfig(ConfigMixin):
     """Congestion waves: cruise, brake hard to a crawl, crawl, accelerate back to the cruise speed, repeat."""
 
-    cruise_speed_range: tuple[float, float] = (15.0, 25.0)  # speed between the waves, one per seed [m/s]
-    crawl_speed_range: tuple[float, float] = (0.0, 5.0)  # speed at the bottom of a wave, one per wave [m/s]
-    decel_range: tuple[float, float] = (2.0, 4.0)  # magnitude of a wave's braking [m/s^2]
-    accel_range: tuple[float, float] = (1.0, 2.5)  # acceleration out of a wave (and to the first cruise) [m/s^2]
-    crawl_duration_range: tuple[float, float] = (2.0, 10.0)  # time at the crawl speed [s]
-    cruise_duration_range: tuple[float, float] = (10.0, 40.0)  # time at the cruise speed before each wave [s]
-    max_jerk: float = 5.0  # largest rate of change of the acceleration, a brisk human driver [m/s^3]
+    cruise_speed_range: tuple[float, float] = (15.0, 25.0)  # speed between the waves, one per seed [m/s], in
+    # (0, MAX_SPEED]
+    crawl_speed_range: tuple[float, float] = (0.0, 5.0)  # speed at the bottom of a wave, one per wave [m/s], in
+    # [0, MAX_SPEED], below cruise_speed_range
+    decel_range: tuple[float, float] = (2.0, 4.0)  # magnitude of a wave's braking [m/s^2], in (0, MAX_ACCEL]
+    accel_range: tuple[float, float] = (1.0, 2.5)  # acceleration out of a wave (and to the first cruise) [m/s^2], in
+    # (0, MAX_ACCEL]
+    crawl_duration_range: tuple[float, float] = (2.0, 10.0)  # time at the crawl speed [s], in (0, MAX_DURATION]
+    cruise_duration_range: tuple[float, float] = (10.0, 40.0)  # time at the cruise speed before each wave [s], in
+    # (0, MAX_DURATION]
+    max_jerk: float = 5.0  # largest rate of change of the acceleration, a brisk human driver [m/s^3], (0, MAX_JERK]
 
     def __post_init__(self) -> None:
-        self._band("cruise_speed_range", low_min=1e-9)
-        self._band("crawl_speed_range")
-        for field in ("decel_range", "accel_range", "crawl_duration_range", "cruise_duration_range"):
-            self._band(field, low_min=1e-9)
-        self._positive("max_jerk")
+        self._pair("cruise_speed_range", 0.0, MAX_SPEED, open_low=True)
+        self._pair("crawl_speed_range", 0.0, MAX_SPEED)
+        for field in ("decel_range", "accel_range"):
+            self._pair(field, 0.0, MAX_ACCEL, open_low=True)
+        for field in ("crawl_duration_range", "cruise_duration_range"):
+            self._pair(field, 0.0, MAX_DURATION, open_low=True)
+        self._number("max_jerk", 0.0, MAX_JERK, open_low=True)
         if self.crawl_speed_range[1] >= self.cruise_speed_range[0]:
             self._fail("crawl_speed_range", self.crawl_speed_range,
                        f"must lie below cruise_speed_range {self.cruise_speed_range}")
@@ -137,27 +147,33 @@ class StopAndGoConfig(ConfigMixin):
 class EmergencyBrakingConfig(ConfigMixin):
     """Highway cruising with emergency stops: near-full braking to a low speed or standstill, a pause, recovery."""
 
-    cruise_speed_range: tuple[float, float] = (25.0, 33.0)  # highway speed (56-74 mph), one per seed [m/s]
-    n_events_range: tuple[int, int] = (1, 3)  # emergency stops per profile, both ends included [-]
-    decel_range: tuple[float, float] = (6.0, 7.5)  # braking: near a car's ~8-9, below the followers' 8 [m/s^2]
-    standstill_probability: float = 0.5  # chance that a stop ends at standstill, not at a low speed [-]
-    low_speed_range: tuple[float, float] = (1.0, 5.0)  # speed a stop ends at when not at standstill [m/s]
-    pause_duration_range: tuple[float, float] = (2.0, 8.0)  # time at the low speed or standstill [s]
-    recovery_accel_range: tuple[float, float] = (1.5, 3.0)  # re-acceleration to the cruise speed [m/s^2]
-    min_cruise_duration: float = 10.0  # least cruising before each stop [s]
-    max_jerk: float = 15.0  # largest rate of change of the acceleration; full braking builds up in 0.4-0.5 s [m/s^3]
+    cruise_speed_range: tuple[float, float] = (25.0, 33.0)  # highway speed (56-74 mph), one per seed [m/s], in
+    # (0, MAX_SPEED]
+    n_events_range: tuple[int, int] = (1, 3)  # emergency stops per profile, both ends included [-], integers
+    # 1 <= low <= high <= 100
+    decel_range: tuple[float, float] = (6.0, 7.5)  # braking: near a car's ~8-9, below the followers' 8 [m/s^2], in
+    # (0, MAX_ACCEL]
+    standstill_probability: float = 0.5  # chance that a stop ends at standstill, not at a low speed [-], [0, 1]
+    low_speed_range: tuple[float, float] = (1.0, 5.0)  # speed a stop ends at when not at standstill [m/s], in
+    # (0, MAX_SPEED], below cruise_speed_range
+    pause_duration_range: tuple[float, float] = (2.0, 8.0)  # time at the low speed or standstill [s], in
+    # (0, MAX_DURATION]
+    recovery_accel_range: tuple[float, float] = (1.5, 3.0)  # re-acceleration to the cruise speed [m/s^2], in
+    # (0, MAX_ACCEL]
+    min_cruise_duration: float = 10.0  # least cruising before each stop [s], (0, MAX_DURATION]
+    max_jerk: float = 15.0  # largest rate of change of the acceleration; full braking builds up in 0.4-0.5 s
+    # [m/s^3], (0, MAX_JERK]
 
     def __post_init__(self) -> None:
-        low, high = self.n_events_range
-        integers = all(isinstance(n, (int, np.integer)) and not isinstance(n, bool) for n in (low, high))
-        if not integers or not 1 <= low <= high:
-            self._fail("n_events_range", self.n_events_range, "must be integers 1 <= low <= high")
-        for field in ("cruise_speed_range", "decel_range", "low_speed_range", "pause_duration_range",
-                      "recovery_accel_range"):
-            self._band(field, low_min=1e-9)
-        self._positive("min_cruise_duration", "max_jerk")
-        if not 0 <= self._finite("standstill_probability") <= 1:
-            self._fail("standstill_probability", self.standstill_probability, "must be in [0, 1]")
+        self._pair("n_events_range", 1, 100, strict=False, integer=True)
+        for field in ("cruise_speed_range", "low_speed_range"):
+            self._pair(field, 0.0, MAX_SPEED, open_low=True)
+        for field in ("decel_range", "recovery_accel_range"):
+            self._pair(field, 0.0, MAX_ACCEL, open_low=True)
+        self._pair("pause_duration_range", 0.0, MAX_DURATION, open_low=True)
+        self._number("standstill_probability", 0.0, 1.0)
+        self._number("min_cruise_duration", 0.0, MAX_DURATION, open_low=True)
+        self._number("max_jerk", 0.0, MAX_JERK, open_low=True)
         if self.low_speed_range[1] >= self.cruise_speed_range[0]:
             self._fail("low_speed_range", self.low_speed_range,
                        f"must lie below cruise_speed_range {self.cruise_speed_range}")
