@@ -7,7 +7,8 @@ A model trained inside ``VecNormalize`` expects normalised observations. ``VecNo
 needs a venv; instead :class:`ObservationNormalizer` reads the pickle's running mean and
 variance (``obs_rms``), ``clip_obs`` and ``epsilon`` and applies SB3's formula
 clip((obs - mean) / sqrt(var + epsilon), -clip_obs, clip_obs). Without a pickle the
-observations go to the model unchanged.
+observations go to the model unchanged. A run's file that cannot be used (not a model zip, not a
+``VecNormalize`` pickle, observations of another shape) raises :class:`RunFileError` naming it.
 """
 
 from __future__ import annotations
@@ -27,6 +28,37 @@ from stable_baselines3.common.vec_env import VecNormalize
 from agents.protocol import ENV_FILE, MODEL_FILE, VECNORMALIZE_FILE
 
 
+class RunFileError(ValueError):
+    """A run's file (model zip, ``VecNormalize`` pickle, ``env.json``) that cannot be used; the message names it."""
+
+
+def load_model(path: str | Path, algorithm: type[BaseAlgorithm] = PPO, **kwargs: Any) -> BaseAlgorithm:
+    """``algorithm.load(path, **kwargs)``; a file it cannot read (truncated, not a zip) raises RunFileError."""
+    if not Path(path).is_file():
+        raise FileNotFoundError(f"model = {str(path)!r}: no such file")
+    try:
+        return algorithm.load(path, **kwargs)
+    except Exception as error:  # SB3 raises ValueError, AssertionError, KeyError, pickle's errors... for a bad zip
+        raise RunFileError(f"model = {str(path)!r}: not a readable {algorithm.__name__} model zip "
+                           f"({type(error).__name__}: {error})") from error
+
+
+def load_vecnormalize(path: str | Path) -> VecNormalize:
+    """The ``VecNormalize`` in a ``VecNormalize.save`` pickle, without a venv (``set_venv`` gives it one);
+    a file that is not one raises RunFileError."""
+    if not Path(path).is_file():
+        raise FileNotFoundError(f"vecnormalize = {str(path)!r}: no such file")
+    try:
+        with open(path, "rb") as file:
+            saved = pickle.load(file)
+    except Exception as error:  # UnpicklingError, EOFError, or whatever the garbage's opcodes lead to
+        raise RunFileError(f"vecnormalize = {str(path)!r}: not a readable pickle "
+                           f"({type(error).__name__}: {error})") from error
+    if not isinstance(saved, VecNormalize):
+        raise RunFileError(f"vecnormalize = {str(path)!r}: holds a {type(saved).__name__}, not a VecNormalize")
+    return saved
+
+
 @dataclasses.dataclass(frozen=True)
 class ObservationNormalizer:
     """SB3 ``VecNormalize``'s observation scaling, frozen (no more updates)."""
@@ -39,11 +71,7 @@ class ObservationNormalizer:
     @classmethod
     def from_vecnormalize(cls, path: str | Path) -> ObservationNormalizer | None:
         """The statistics in a ``VecNormalize.save`` pickle; None if it was saved with ``norm_obs=False``."""
-        with open(path, "rb") as file:
-            saved = pickle.load(file)
-        if not isinstance(saved, VecNormalize):
-            raise ValueError(f"vecnormalize = {str(path)!r}: holds a {type(saved).__name__}, not a VecNormalize")
-        return cls.of(saved, str(path))
+        return cls.of(load_vecnormalize(path), str(path))
 
     @classmethod
     def of(cls, saved: VecNormalize, where: str = "the VecNormalize") -> ObservationNormalizer | None:
@@ -51,7 +79,7 @@ class ObservationNormalizer:
         if not saved.norm_obs:
             return None
         if isinstance(saved.obs_rms, dict):
-            raise ValueError(f"vecnormalize = {where!r}: normalises dict observations; TimeGapMonitor's are a Box")
+            raise RunFileError(f"vecnormalize = {where!r}: normalises dict observations; TimeGapMonitor's are a Box")
         return cls(
             mean=np.asarray(saved.obs_rms.mean, dtype=np.float64),
             var=np.asarray(saved.obs_rms.var, dtype=np.float64),
@@ -84,6 +112,9 @@ class LearnedPolicy:
             raise ValueError(f"action_mode = {action_mode!r}: does not fit model.action_space = {model.action_space}")
         if isinstance(frame_stack, bool) or not isinstance(frame_stack, int) or frame_stack < 1:
             raise ValueError(f"frame_stack = {frame_stack!r}: must be an integer >= 1")
+        if model.observation_space.shape[-1] % frame_stack:
+            raise ValueError(f"frame_stack = {frame_stack}: does not divide the model's observation width "
+                             f"{model.observation_space.shape[-1]}")
         self.action_mode = action_mode
         self.frame_stack = frame_stack
         self.model = model
@@ -102,19 +133,18 @@ class LearnedPolicy:
 
         ``vecnormalize``: the ``VecNormalize`` pickle; by default ``vecnormalize.pkl`` beside the
         model if it exists, else no normalisation. An explicit path that does not exist is an error.
-        The action mode comes from ``env.json`` beside the model if it exists.
+        The action mode comes from ``env.json`` beside the model if it exists. A missing file raises
+        FileNotFoundError; one that cannot be read, or statistics of another observation shape than the
+        model's, RunFileError naming it.
         """
         path = Path(path)
         model_path = path / MODEL_FILE if path.is_dir() else path
         if not model_path.is_file():
             raise FileNotFoundError(f"path = {str(path)!r}: no model zip found at {model_path}")
-        if vecnormalize is None:
-            stats_path = model_path.parent / VECNORMALIZE_FILE
-            normalizer = ObservationNormalizer.from_vecnormalize(stats_path) if stats_path.is_file() else None
-        else:
-            if not Path(vecnormalize).is_file():
-                raise FileNotFoundError(f"vecnormalize = {str(vecnormalize)!r}: no such file")
-            normalizer = ObservationNormalizer.from_vecnormalize(vecnormalize)
+        stats_path = Path(vecnormalize) if vecnormalize is not None else model_path.parent / VECNORMALIZE_FILE
+        normalizer = None
+        if vecnormalize is not None or stats_path.is_file():
+            normalizer = ObservationNormalizer.from_vecnormalize(stats_path)
         env_path = model_path.parent / ENV_FILE
         action_mode, frame_stack = None, 1
         if env_path.is_file():
@@ -122,15 +152,24 @@ class LearnedPolicy:
                 run = json.loads(env_path.read_text())
                 action_mode = run["env_kwargs"].get("config", {}).get("action_mode", "platoon")
                 frame_stack = run["frame_stack"]
-            except (json.JSONDecodeError, AttributeError, KeyError, TypeError) as error:
-                raise ValueError(f"{env_path}: not a JSON object with env_kwargs (gym.make's) and frame_stack "
-                                 f"({error!r})") from error
-        return cls(algorithm.load(model_path, device="cpu"), normalizer, name, action_mode, frame_stack)
+            except (UnicodeDecodeError, json.JSONDecodeError, AttributeError, KeyError, TypeError) as error:
+                raise RunFileError(f"{env_path}: not a JSON object with env_kwargs (gym.make's) and frame_stack "
+                                   f"({error!r})") from error
+        model = load_model(model_path, algorithm, device="cpu")
+        try:
+            policy = cls(model, normalizer, name, action_mode, frame_stack)
+        except ValueError as error:  # env.json's action mode or frame stack does not fit the model
+            raise RunFileError(f"{env_path} does not fit the model {model_path}: {error}") from error
+        if normalizer is not None and normalizer.mean.shape != policy.observation_shape:
+            raise RunFileError(f"vecnormalize = {str(stats_path)!r}: normalises observations of shape "
+                               f"{normalizer.mean.shape}, the model {model_path} takes {policy.observation_shape}")
+        return policy
 
     @property
     def observation_shape(self) -> tuple[int, ...]:
-        """Shape of one observation the model takes."""
-        return tuple(self.model.observation_space.shape)
+        """Shape of one observation the policy takes (with frame stacking, the model reads frame_stack of them)."""
+        *batch, width = self.model.observation_space.shape
+        return (*batch, width // self.frame_stack)
 
     def predict(
         self,

@@ -174,8 +174,10 @@ def plan_episodes(episodes: int, groups: Sequence[str]) -> list[Episode]:
 
 
 def build_policies(names: Sequence[str] | None, model: Path) -> dict[str, NamedPolicy | TruthPolicy]:
-    """Policies by CLI name; ``names=None`` is the default set (PPO only if ``model`` exists). The oracle's lookup
-    is measured on training seeds and the oracle chosen on selection seeds (``train.value_of_information``)."""
+    """Policies by CLI name; ``names=None`` is the default set (PPO only if ``model``, a zip or a run directory,
+    exists). The oracle's lookup is measured on training seeds and the oracle chosen on selection seeds
+    (``train.value_of_information``)."""
+    model = model / MODEL_FILE if model.is_dir() else model
     config = EnvConfig()  # the default, whose action mode is one setting for the platoon
     policies: dict[str, Any] = {
         "rule_platoon": PaperRulePolicy(config),
@@ -519,8 +521,9 @@ def main(argv: Sequence[str] | None = None) -> None:
     parser.add_argument("--policies", nargs="+", metavar="NAME",
                         help="rule_platoon rule_per_vehicle chart_step fixed_<level> (e.g. fixed_1.6) v2v_aware oracle "
                              "ppo (default: all, ppo if --model exists)")
-    parser.add_argument("--model", type=Path, default=DEFAULT_MODEL,
-                        help=f"SB3 PPO zip, vecnormalize.pkl beside it is used if present (default {DEFAULT_MODEL})")
+    parser.add_argument("--model", type=Path,
+                        help="SB3 PPO zip or a run directory holding model.zip; vecnormalize.pkl and env.json beside "
+                             f"it are used if present (default {DEFAULT_MODEL}, skipped if absent)")
     parser.add_argument("--reference", default=DEFAULT_REFERENCE,
                         help=f"policy the paired return differences are taken against (default {DEFAULT_REFERENCE})")
     parser.add_argument("--profile-group", default="training_mix",
@@ -528,13 +531,19 @@ def main(argv: Sequence[str] | None = None) -> None:
                              "starting midway (default training_mix)")
     parser.add_argument("--out", type=Path, default=DEFAULT_OUT, help=f"output directory (default {DEFAULT_OUT})")
     args = parser.parse_args(argv)
+    if args.model is not None and not (args.model.is_file() or (args.model / MODEL_FILE).is_file()):
+        parser.error(f"--model {args.model}: no such model zip")
+    args.model = args.model or DEFAULT_MODEL
 
     start = time.perf_counter()
     groups, data_note = available_groups()
     plan = plan_episodes(args.episodes, groups)
     planned_groups = list(dict.fromkeys(episode.group for episode in plan))
     profile_group = args.profile_group if args.profile_group in planned_groups else planned_groups[0]
-    policies = build_policies(args.policies, args.model)
+    try:
+        policies = build_policies(args.policies, args.model)
+    except (ValueError, FileNotFoundError) as error:  # unknown names, a model that cannot be used: no traceback
+        parser.error(str(error))
     reference = args.reference if args.reference in policies else None
     if reference is None:
         print(f"note: --reference {args.reference} is not among the policies; no paired differences")

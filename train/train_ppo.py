@@ -1,16 +1,18 @@
 """Train PPO (Stable-Baselines3) on ``TimeGapMonitor-v0``, every platoon in one native vector env.
 
     python -m train.train_ppo                                    # the committed model in results/ppo/
-    python -m train.train_ppo --timesteps 20000 --out /tmp/ppo   # a short run elsewhere
+    python -m train.train_ppo --timesteps 20000 --out /tmp/ppo   # a short run elsewhere (no warm-up: see below)
     python -m train.train_ppo --resume --timesteps 3000000       # continue results/ppo/ to 3 M steps in all
     python -m train.train_ppo --env-config '{"action_mode": "platoon"}' --frame-stack 4 --out /tmp/ppo  # a variant
 
-Hyperparameters come from ``hyperparams/ppo.yml`` (rl-zoo3's layout: the env id, then
-``n_envs``, ``n_timesteps``, ``policy``, ``normalize``, ``frame_stack``, ``env_kwargs`` and PPO's own
-arguments); ``--timesteps`` and ``--n-envs`` override them. An optional ``warmup``
-(``n_timesteps``, ``env_kwargs``) trains the first steps in another env config (the
-default: a decision every 5 s), then the run switches to ``env_kwargs``, keeping the
-normalisation statistics. The run directory ``--out`` holds exactly:
+Hyperparameters come from ``hyperparams/ppo.yml`` (rl-zoo3's layout, which rl-zoo3 trains from as it
+is: the env id, then ``n_envs``, ``n_timesteps``, ``policy``, ``normalize``, ``frame_stack``,
+``env_kwargs`` and PPO's own arguments); ``--timesteps`` and ``--n-envs`` override them. The warm-up,
+a project setting rl-zoo3 does not know, comes from ``--warmup`` (default ``hyperparams/ppo_warmup.yml``,
+keyed by env id: ``n_timesteps``, ``env_kwargs``): the first ``n_timesteps`` steps of the run train in
+that env (a decision every 5 s), then the run switches to ``env_kwargs``, keeping the normalisation
+statistics. A run of no more steps than the warm-up (such as ``--timesteps 20000``) trains without
+it, and says so; ``--no-warmup`` leaves it out. The run directory ``--out`` holds exactly:
 
 - ``model.zip``: the PPO model, also the checkpoint (replaced every ``--checkpoint-freq``
   steps and at the end; it stores the timestep count, so ``--resume`` continues from it);
@@ -26,6 +28,8 @@ normalisation statistics. The run directory ``--out`` holds exactly:
 Sub-env i of phase k's env is seeded ``--seed + k * n_envs + i``; all training seeds stay below
 ``agents.protocol.EVAL_SEED_START`` (10 000), where the evaluation's seeds begin. The check episodes of
 the learning curve are ``EVAL_EPISODES`` episodes seeded ``EVAL_SEED + i``, also below 10 000. TensorBoard logs go to ``--tensorboard-log``.
+A ``--resume`` from a checkpoint or statistics that cannot be read, or that take observations of
+another shape than the env's, stops with a message naming the file.
 """
 
 from __future__ import annotations
@@ -54,11 +58,13 @@ from stable_baselines3 import PPO
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.vec_env import VecEnv, VecFrameStack, VecNormalize
 
-from agents.learned import LearnedPolicy, ObservationNormalizer
+from agents.learned import LearnedPolicy, ObservationNormalizer, RunFileError, load_model, load_vecnormalize
 from agents.policies import seconds
 from agents.protocol import ENV_FILE, EVAL_SEED_START, MODEL_FILE, VECNORMALIZE_FILE
 from timegap_env import ENV_ID
 from timegap_env.config import EnvConfig
+from timegap_env.envs.info import summary_of, truth_of
+from timegap_env.envs.observation import observation_space
 from timegap_env.envs.sb3 import TimeGapVecEnv
 from train.value_of_information import DEFAULT_TRAIN_EPISODES, all_oracles, choose_oracle, constants, measure_lookup, run
 
@@ -66,7 +72,8 @@ REPORT_FILE = "training.md"
 CURVE_FILE, CURVE_FIGURE = "curve.csv", "curve.png"
 EVAL_SEED = 9_000  # first seed of the end-of-training check, below EVAL_SEED_START [-]
 EVAL_EPISODES = 32  # episodes of the end-of-training check [-]
-RUN_KEYS = {"n_envs", "n_timesteps", "policy", "normalize", "frame_stack", "env_kwargs", "warmup"}  # the rest: PPO's
+RUN_KEYS = {"n_envs", "n_timesteps", "policy", "normalize", "frame_stack", "env_kwargs"}  # rl-zoo3's; the rest: PPO's
+WARMUP_KEYS = {"n_timesteps", "env_kwargs"}  # of the warm-up file's env section
 SUMMARY_KEYS = {"collision", "mean_setting", "switches", "time_out_of_control"}  # logged per episode
 STRING_KWARGS = ("policy_kwargs", "normalize")  # may be Python expressions as in rl-zoo3: "dict(net_arch=[64])"
 
@@ -86,6 +93,10 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                         help="observations the policy reads at once (default: frame_stack of the yml, else 1)")
     parser.add_argument("--hyperparams", type=Path, default=Path("hyperparams/ppo.yml"),
                         help="rl-zoo3-style yml keyed by env id (default: %(default)s)")
+    parser.add_argument("--warmup", type=Path, default=Path("hyperparams/ppo_warmup.yml"),
+                        help="yml keyed by env id: the warm-up's n_timesteps and env_kwargs (default: %(default)s)")
+    parser.add_argument("--no-warmup", dest="warmup", action="store_const", const=None,
+                        help="train in env_kwargs from the start")
     parser.add_argument("--out", type=Path, default=Path("results/ppo"),
                         help="run directory: model.zip, vecnormalize.pkl, training.md (default: %(default)s)")
     parser.add_argument("--resume", action="store_true",
@@ -123,6 +134,23 @@ def load_hyperparams(path: Path) -> dict[str, Any]:
     return hyperparams
 
 
+def load_warmup(path: Path) -> tuple[int, dict[str, Any]]:
+    """The warm-up in ``path``'s ``ENV_ID`` section: its steps and its env's gym.make keyword arguments."""
+    with open(path) as file:
+        document = yaml.safe_load(file)
+    if not isinstance(document, dict) or not isinstance(document.get(ENV_ID), dict):
+        raise ValueError(f"warmup = {str(path)!r}: needs a top-level key {ENV_ID!r} holding {sorted(WARMUP_KEYS)}")
+    warmup = document[ENV_ID]
+    if set(warmup) != WARMUP_KEYS:
+        raise ValueError(f"warmup {ENV_ID} = {warmup!r} in {path}: needs exactly the keys {sorted(WARMUP_KEYS)}")
+    steps, env_kwargs = warmup["n_timesteps"], warmup["env_kwargs"]
+    if isinstance(steps, bool) or not isinstance(steps, (int, float)) or steps != int(steps) or steps < 1:
+        raise ValueError(f"warmup {ENV_ID}.n_timesteps = {steps!r} in {path}: must be an integer >= 1")
+    if not isinstance(env_kwargs, dict):
+        raise ValueError(f"warmup {ENV_ID}.env_kwargs = {env_kwargs!r} in {path}: must be a mapping")
+    return int(steps), env_kwargs
+
+
 def with_env_config(env_kwargs: dict[str, Any], overrides: dict[str, Any]) -> dict[str, Any]:
     """``env_kwargs`` (gym.make's) with ``overrides`` merged into its ``config``."""
     return {**env_kwargs, "config": {**(env_kwargs.get("config") or {}), **overrides}} if overrides else env_kwargs
@@ -156,12 +184,14 @@ class Checkpoint(BaseCallback):
 
 
 class EpisodeSummaries(BaseCallback):
-    """Log the ``episode_summary`` of finished episodes to TensorBoard (``episode/...``, mean per rollout)."""
+    """Log the summaries of finished episodes (``episode_<name>`` in their info) to TensorBoard (``episode/<name>``,
+    mean per rollout)."""
 
     def _on_step(self) -> bool:
         for info in self.locals["infos"]:
-            for name in SUMMARY_KEYS & info.get("episode_summary", {}).keys():
-                self.logger.record_mean(f"episode/{name}", float(info["episode_summary"][name]))
+            summary = summary_of(info)
+            for name in SUMMARY_KEYS & summary.keys():
+                self.logger.record_mean(f"episode/{name}", float(summary[name]))
         return True
 
 
@@ -184,7 +214,7 @@ class CurveReference:
         fixed = constants(platoon, seeds)["return"].mean(axis=0)
         table, _ = measure_lookup(platoon, DEFAULT_TRAIN_EPISODES)
         oracle = choose_oracle(platoon, all_oracles(platoon, table))
-        oracle_return = run(platoon, seeds, lambda obs, infos: oracle.act(infos["degradation"]))["return"].mean()
+        oracle_return = run(platoon, seeds, lambda obs, infos: oracle.act(truth_of(infos)))["return"].mean()
         best = int(np.argmax(fixed))
         return cls(seeds, float(platoon.setting_levels[best]), float(fixed[best]), oracle.name, float(oracle_return))
 
@@ -270,13 +300,13 @@ def main(argv: list[str] | None = None) -> None:
     normalize = hyperparams.pop("normalize", False)
     frame_stack = hyperparams.pop("frame_stack", 1) if args.frame_stack is None else args.frame_stack
     env_kwargs = with_env_config(hyperparams.pop("env_kwargs", None) or {}, args.env_config)
-    warmup = hyperparams.pop("warmup", None)
-    if warmup is not None and (not isinstance(warmup, dict) or set(warmup) != {"n_timesteps", "env_kwargs"}
-                               or not 0 < int(warmup["n_timesteps"]) < total_timesteps):
-        raise ValueError(f"hyperparams {ENV_ID}.warmup = {warmup!r}: needs env_kwargs and n_timesteps "
-                         f"in (0, timesteps = {total_timesteps})")
+    warmup = load_warmup(args.warmup) if args.warmup is not None else None
+    if warmup is not None and warmup[0] >= total_timesteps:
+        print(f"note: timesteps = {total_timesteps} is no more than the warm-up's {warmup[0]} ({args.warmup}): "
+              "the run trains without a warm-up")
+        warmup = None
     # Phases (end [total steps], env_kwargs): the warm-up's coarser decisions, then the env as evaluated.
-    phases = [(int(warmup["n_timesteps"]), with_env_config(warmup["env_kwargs"], args.env_config))] if warmup else []
+    phases = [(warmup[0], with_env_config(warmup[1], args.env_config))] if warmup else []
     phases.append((total_timesteps, env_kwargs))
     if n_envs < 1:
         raise ValueError(f"n_envs = {n_envs}: must be >= 1")
@@ -296,32 +326,42 @@ def main(argv: list[str] | None = None) -> None:
                          "must be true, false or a dict of VecNormalize arguments")
     # One thread: the network is tiny, the 2 cores are better left to the env (two threads measured 7x slower).
     torch.set_num_threads(1)
-    args.out.mkdir(parents=True, exist_ok=True)
-    (args.out / ENV_FILE).write_text(json.dumps({"env_kwargs": env_kwargs, "frame_stack": frame_stack}, indent=1,
-                                                sort_keys=True) + "\n")
     evaluated = EnvConfig.from_dict(env_kwargs.get("config"))
-    reference = CurveReference.measure(evaluated)
-    curve: list[tuple[int, float]] = []
-    if args.resume and (args.out / CURVE_FILE).is_file():
-        with open(args.out / CURVE_FILE) as file:
-            curve = [(int(row["timesteps"]), float(row["mean_return"])) for row in csv.DictReader(file)]
 
     # ---------------------------------------------------------------- model
     model_path, stats_path = args.out / MODEL_FILE, args.out / VECNORMALIZE_FILE
     model: PPO | None = None
-    if args.resume:
+    saved_statistics: VecNormalize | None = None  # --resume's, given the first phase's env below
+    if args.resume:  # every file checked before anything is written
         if not model_path.is_file():
             raise FileNotFoundError(f"--resume: no checkpoint {model_path}")
         if normalize and not stats_path.is_file():
             raise FileNotFoundError(f"--resume with normalize = {normalize!r}: no statistics {stats_path}")
-        model = PPO.load(model_path, device="cpu", tensorboard_log=str(args.tensorboard_log))
+        model = load_model(model_path, PPO, device="cpu", tensorboard_log=str(args.tensorboard_log))
         model.set_random_seed(args.seed)
         if model.num_timesteps >= total_timesteps:
             raise ValueError(f"--resume: {model_path} has trained {model.num_timesteps} steps, "
                              f"already >= timesteps = {total_timesteps}")
         if model.n_envs != n_envs:
             raise ValueError(f"--resume: n_envs = {n_envs}, but {model_path} was trained with {model.n_envs}")
-    else:
+        *batch, width = observation_space(evaluated).shape
+        if model.observation_space.shape != (*batch, width * frame_stack):
+            raise RunFileError(f"--resume: {model_path} takes observations of shape {model.observation_space.shape}, "
+                               f"the env gives {(*batch, width)} with frame_stack = {frame_stack}")
+        if normalize:
+            saved_statistics = load_vecnormalize(stats_path)
+            if saved_statistics.observation_space.shape != (*batch, width):
+                raise RunFileError(f"--resume: {stats_path} normalises observations of shape "
+                                   f"{saved_statistics.observation_space.shape}, the env gives {(*batch, width)}")
+    args.out.mkdir(parents=True, exist_ok=True)
+    (args.out / ENV_FILE).write_text(json.dumps({"env_kwargs": env_kwargs, "frame_stack": frame_stack}, indent=1,
+                                                sort_keys=True) + "\n")
+    reference = CurveReference.measure(evaluated)
+    curve: list[tuple[int, float]] = []
+    if args.resume and (args.out / CURVE_FILE).is_file():
+        with open(args.out / CURVE_FILE) as file:
+            curve = [(int(row["timesteps"]), float(row["mean_return"])) for row in csv.DictReader(file)]
+    if not args.resume:
         (args.out / REPORT_FILE).unlink(missing_ok=True)  # rewritten when this run ends
         stats_path.unlink(missing_ok=True)  # a stale one would mislead the evaluation
         (args.out / CURVE_FILE).unlink(missing_ok=True)
@@ -335,8 +375,9 @@ def main(argv: list[str] | None = None) -> None:
         if model is not None and model.num_timesteps >= phase_end:
             continue
         phase_env: VecEnv = TimeGapVecEnv(n_envs, **phase_env_kwargs)
-        if normalize and env is None and args.resume:
-            phase_env = VecNormalize.load(str(stats_path), phase_env)
+        if saved_statistics is not None and env is None:
+            saved_statistics.set_venv(phase_env)
+            phase_env = saved_statistics
         elif normalize:
             phase_env = VecNormalize(phase_env, gamma=model.gamma if model else hyperparams.get("gamma", 0.99),
                                      **({} if normalize is True else normalize))
@@ -387,7 +428,7 @@ Command: `{command}` ({f"resumed from a checkpoint at {steps_before:,} steps" if
 |---|---|
 | timesteps, this command / total | {model.num_timesteps - steps_before:,} / {model.num_timesteps:,} |
 | platoons (n_envs), seed | {n_envs}, {args.seed} (phase k, sub-env i: seed + k n_envs + i) |
-| hyperparameters | `{args.hyperparams}` |
+| hyperparameters, warm-up | `{args.hyperparams}`, {f"`{args.warmup}`" if warmup else "none"} |
 | wall time, whole command after imports | {time.perf_counter() - started:.0f} s |
 {phase_rows}
 | final mean episode return, last {len(episodes)} training episodes (stochastic policy) | {final_return} |
@@ -404,4 +445,7 @@ Files: {files}, this report; TensorBoard logs in `{args.tensorboard_log}/`.
 
 
 if __name__ == "__main__":
-    main()
+    try:
+        main()
+    except (RunFileError, FileNotFoundError) as error:  # a file to fix, not a bug: its message, no traceback
+        sys.exit(f"python -m train.train_ppo: error: {error}")

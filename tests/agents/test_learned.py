@@ -1,13 +1,16 @@
 """A trained SB3 model as a policy: loaded with or without its VecNormalize statistics, errors that name the file."""
 
+import json
+import pickle
+
 import gymnasium as gym
 import numpy as np
 import pytest
 from stable_baselines3 import PPO
-from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
+from stable_baselines3.common.vec_env import DummyVecEnv, VecFrameStack, VecNormalize
 
 import timegap_env
-from agents.learned import LearnedPolicy
+from agents.learned import LearnedPolicy, RunFileError
 from timegap_env.envs.observation import FEATURES
 
 
@@ -69,3 +72,48 @@ def test_learned_policy_load_errors(tmp_path):
     tiny_ppo(gym.make(timegap_env.ENV_ID)).save(tmp_path / "model.zip")
     with pytest.raises(FileNotFoundError, match="vecnormalize = "):
         LearnedPolicy.load(tmp_path, vecnormalize=tmp_path / "missing.pkl")
+
+
+def test_unusable_run_files_are_errors_that_name_the_file(tmp_path):
+    venv = VecNormalize(DummyVecEnv([lambda: gym.make(timegap_env.ENV_ID)]))
+    model = tiny_ppo(venv)
+    model.save(tmp_path / "model.zip")
+    venv.save(tmp_path / "vecnormalize.pkl")
+    saved = (tmp_path / "model.zip").read_bytes()
+    for corrupted in (saved[:len(saved) // 2], b"", b"not a zip"):
+        (tmp_path / "model.zip").write_bytes(corrupted)
+        with pytest.raises(RunFileError, match=r"model.zip'?: not a readable PPO model zip"):
+            LearnedPolicy.load(tmp_path)
+    (tmp_path / "model.zip").write_bytes(saved)
+    stats = tmp_path / "vecnormalize.pkl"
+    for corrupted, message in ((b"garbage", "not a readable pickle"), (b"", "not a readable pickle"),
+                               (pickle.dumps([1.0, 2.0]), "holds a list, not a VecNormalize")):
+        stats.write_bytes(corrupted)
+        with pytest.raises(RunFileError, match=f"vecnormalize.pkl'?: {message}"):
+            LearnedPolicy.load(tmp_path)
+    smaller = {"platoon": {"n_followers": 4}}
+    VecNormalize(DummyVecEnv([lambda: gym.make(timegap_env.ENV_ID, config=smaller)])).save(stats)
+    with pytest.raises(RunFileError, match=r"vecnormalize.pkl'?: normalises observations of shape \(36,\), the model "
+                                           r".*model.zip takes \(45,\)"):
+        LearnedPolicy.load(tmp_path)
+    stats.unlink()
+    (tmp_path / "env.json").write_bytes(b"\xff\xfe")
+    with pytest.raises(RunFileError, match="env.json: not a JSON object"):
+        LearnedPolicy.load(tmp_path)
+    (tmp_path / "env.json").write_text(json.dumps({"env_kwargs": {"config": {"action_mode": "per_vehicle"}},
+                                                   "frame_stack": 1}))
+    with pytest.raises(RunFileError, match="env.json does not fit the model .*action_mode = 'per_vehicle'"):
+        LearnedPolicy.load(tmp_path)
+
+
+def test_a_frame_stacked_policy_takes_observations_of_the_env_shape(tmp_path):
+    venv = VecNormalize(DummyVecEnv([lambda: gym.make(timegap_env.ENV_ID)]))
+    tiny_ppo(VecFrameStack(venv, 2)).save(tmp_path / "model.zip")
+    venv.save(tmp_path / "vecnormalize.pkl")
+    (tmp_path / "env.json").write_text(json.dumps({"env_kwargs": {}, "frame_stack": 2}))
+    policy = LearnedPolicy.load(tmp_path)
+    assert policy.observation_shape == real_observation().shape == (45,)
+    assert policy.model.observation_space.shape == (90,)
+    (tmp_path / "env.json").write_text(json.dumps({"env_kwargs": {}, "frame_stack": 4}))
+    with pytest.raises(RunFileError, match="frame_stack = 4: does not divide the model's observation width 90"):
+        LearnedPolicy.load(tmp_path)

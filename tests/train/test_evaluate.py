@@ -1,11 +1,13 @@
 """``train.evaluate``: held-out plan, identical scenarios for every policy, statistics, outputs."""
 
 import csv
+import json
 
 import gymnasium as gym
 import numpy as np
 import pytest
 from stable_baselines3 import PPO
+from stable_baselines3.common.vec_env import DummyVecEnv, VecFrameStack, VecNormalize
 
 import timegap_env
 from timegap_env.leaders.scenarios import HELD_OUT_FAMILIES
@@ -116,3 +118,33 @@ def test_two_episodes_write_tables_and_figures(tmp_path, monkeypatch):
     assert float(reference["return_vs_reference_mean"]) == 0.0
     table = (out / "table.md").read_text()
     assert "paper rule (per vehicle)" in table and "PPO" in table and "Wilson" in table
+
+
+def test_a_frame_stacked_run_directory_is_evaluated(tmp_path):
+    venv = VecNormalize(DummyVecEnv([lambda: gym.make(timegap_env.ENV_ID)]))
+    model = PPO("MlpPolicy", VecFrameStack(venv, 3), n_steps=64, batch_size=32, n_epochs=1, seed=0, device="cpu")
+    model.learn(64).save(tmp_path / "model.zip")
+    venv.save(tmp_path / "vecnormalize.pkl")
+    (tmp_path / "env.json").write_text(json.dumps({"env_kwargs": {}, "frame_stack": 3}))
+    policies = evaluate.build_policies(["ppo"], tmp_path)  # a directory, as LearnedPolicy.load takes
+    assert policies["ppo"].frame_stack == 3  # it used to be refused: "takes observations of shape (135,)"
+    obs, _ = gym.make(timegap_env.ENV_ID).reset(seed=evaluate.EVAL_SEED_START)
+    action, stack = policies["ppo"].predict(obs)
+    assert gym.make(timegap_env.ENV_ID).action_space.contains(action) and stack.shape == (3 * obs.size,)
+
+
+def test_a_missing_or_corrupted_model_is_named_without_a_traceback(tmp_path, capsys):
+    with pytest.raises(SystemExit):
+        evaluate.main(["--episodes", "1", "--policies", "ppo", "--model", str(tmp_path / "absent.zip")])
+    assert f"--model {tmp_path / 'absent.zip'}: no such model zip" in capsys.readouterr().err
+    with pytest.raises(SystemExit):  # explicitly asked for, even with the default policies
+        evaluate.main(["--episodes", "1", "--model", str(tmp_path / "absent.zip")])
+    (tmp_path / "model.zip").write_bytes(b"garbage")
+    with pytest.raises(SystemExit):
+        evaluate.main(["--episodes", "1", "--policies", "ppo", "--model", str(tmp_path / "model.zip")])
+    assert f"model = '{tmp_path / 'model.zip'}': not a readable PPO model zip" in capsys.readouterr().err
+    PPO("MlpPolicy", gym.make(timegap_env.ENV_ID), device="cpu").save(tmp_path / "model.zip")
+    (tmp_path / "vecnormalize.pkl").write_bytes(b"garbage")
+    with pytest.raises(SystemExit):
+        evaluate.main(["--episodes", "1", "--policies", "ppo", "--model", str(tmp_path)])
+    assert f"vecnormalize = '{tmp_path / 'vecnormalize.pkl'}': not a readable pickle" in capsys.readouterr().err

@@ -2,19 +2,24 @@
 
 from __future__ import annotations
 
+import inspect
 import json
 import pickle
+import subprocess
+import sys
 from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
 
 import pytest
+import torch
 import yaml
 from stable_baselines3 import PPO
+from stable_baselines3.common.logger import configure
 from stable_baselines3.common.vec_env import VecNormalize
 
-from agents.learned import LearnedPolicy
+from agents.learned import LearnedPolicy, RunFileError
 from agents.protocol import EVAL_SEED_START
 from timegap_env import ENV_ID
 from timegap_env.envs.sb3 import TimeGapVecEnv
@@ -37,6 +42,40 @@ def test_hyperparams_have_rl_zoo3_layout() -> None:
     assert isinstance(loaded["policy_kwargs"], dict)
 
 
+# What rl-zoo3 (2.9, ExperimentManager._preprocess_hyperparams) takes out of a hyperparameter entry before passing
+# the rest to the algorithm; it passes env, seed, tensorboard_log, verbose and device itself.
+RL_ZOO3_RUN_KEYS = {"n_envs", "n_timesteps", "policy", "normalize", "frame_stack", "env_wrapper", "vec_env_wrapper",
+                    "callback", "env_kwargs", "monitor_kwargs"}
+RL_ZOO3_SETS = {"self", "env", "seed", "tensorboard_log", "verbose", "device"}
+
+
+def test_rl_zoo3_understands_every_key_of_the_hyperparams() -> None:
+    with open(ROOT / "hyperparams" / "ppo.yml") as file:
+        hyperparams = yaml.safe_load(file)[ENV_ID]
+    ppo_arguments = set(inspect.signature(PPO.__init__).parameters) - RL_ZOO3_SETS
+    unknown = set(hyperparams) - RL_ZOO3_RUN_KEYS - ppo_arguments
+    assert not unknown, f"keys rl-zoo3 would pass to PPO.__init__, which does not take them: {sorted(unknown)}"
+    # rl-zoo3 evaluates a string policy_kwargs in a module that imported torch's nn
+    assert isinstance(eval(hyperparams["policy_kwargs"], {"nn": torch.nn}), dict)
+    assert train_ppo.RUN_KEYS <= RL_ZOO3_RUN_KEYS
+
+
+def test_the_shipped_warmup_is_the_one_the_committed_model_was_trained_with() -> None:
+    steps, env_kwargs = train_ppo.load_warmup(ROOT / "hyperparams" / "ppo_warmup.yml")
+    assert steps == 150_000  # results/ppo/training.md: warm-up 151,552 steps (whole rollouts of 4096)
+    assert env_kwargs == {"config": {"decision_interval": 5.0, "action_mode": "relative", "random_initial_setting": True}}
+
+
+def test_warmup_errors_name_the_file(tmp_path: Path) -> None:
+    path = tmp_path / "warmup.yml"
+    path.write_text(yaml.safe_dump({ENV_ID: {"n_timesteps": 0, "env_kwargs": {}}}))
+    with pytest.raises(ValueError, match="n_timesteps = 0 in .*warmup.yml"):
+        train_ppo.load_warmup(path)
+    path.write_text(yaml.safe_dump({ENV_ID: {"n_timesteps": 10}}))
+    with pytest.raises(ValueError, match="warmup.yml: needs exactly the keys"):
+        train_ppo.load_warmup(path)
+
+
 def test_hyperparams_errors_name_the_field(tmp_path: Path) -> None:
     path = tmp_path / "bad.yml"
     path.write_text(yaml.safe_dump({ENV_ID: {"n_envs": 2, "n_timesteps": 10, "policy": "MlpPolicy", "n_stpes": 8}}))
@@ -52,11 +91,13 @@ def test_tiny_training_run_saves_loads_and_resumes(tmp_path: Path) -> None:
     hyperparams.write_text(yaml.safe_dump({ENV_ID: {
         "n_envs": 4, "n_timesteps": 128, "policy": "MlpPolicy", "normalize": True, "n_steps": 16, "batch_size": 32,
         "n_epochs": 1, "policy_kwargs": "dict(net_arch=[16])", "env_kwargs": {"config": {"episode_duration": 10.0}},
-        "warmup": {"n_timesteps": 64, "env_kwargs": {"config": {"episode_duration": 10.0, "decision_interval": 5.0}}},
     }}))
+    warmup = tmp_path / "warmup.yml"
+    warmup.write_text(yaml.safe_dump({ENV_ID: {
+        "n_timesteps": 64, "env_kwargs": {"config": {"episode_duration": 10.0, "decision_interval": 5.0}}}}))
     out = tmp_path / "run"
-    common = ["--hyperparams", str(hyperparams), "--out", str(out), "--tensorboard-log", str(tmp_path / "runs"),
-              "--no-progress-bar", "--checkpoint-freq", "32"]
+    common = ["--hyperparams", str(hyperparams), "--warmup", str(warmup), "--out", str(out), "--tensorboard-log",
+              str(tmp_path / "runs"), "--no-progress-bar", "--checkpoint-freq", "32"]
     train_ppo.main(common)
     assert sorted(p.name for p in out.iterdir()) == ["curve.csv", "curve.png", "env.json", "model.zip", "training.md",
                                                      "vecnormalize.pkl"]
@@ -82,7 +123,7 @@ def test_tiny_training_run_saves_loads_and_resumes(tmp_path: Path) -> None:
     with open(out / "vecnormalize.pkl", "rb") as file:
         assert pickle.load(file).obs_rms.count > count + 63  # continued the saved statistics
     report = (out / "training.md").read_text()
-    assert "| timesteps, this command / total | 64 / 192 |" in report and "warm-up" not in report
+    assert "| timesteps, this command / total | 64 / 192 |" in report and "| warm-up, {" not in report
     curve = (out / "curve.csv").read_text().splitlines()
     assert curve[0] == "timesteps,mean_return,share_of_oracle_gap" and [row.split(",")[0] for row in curve[1:]][-2:] == [
         "128", "192"]  # the first run's end, then the resumed run's end
@@ -114,6 +155,21 @@ def test_a_relative_frame_stacked_run_is_loaded_as_it_was_trained(tmp_path: Path
     assert stack[0, obs.shape[1]:2 * obs.shape[1]].any() and not stack[1, :-obs.shape[1]].any()
 
 
+def test_episode_summaries_reach_the_logger() -> None:
+    venv = TimeGapVecEnv(2, {"episode_duration": 3.0})
+    model = PPO("MlpPolicy", venv, n_steps=8, batch_size=16, device="cpu")
+    model.set_logger(configure(None, []))
+    callback = train_ppo.EpisodeSummaries()
+    callback.init_callback(model)
+    venv.reset()
+    dones = np.zeros(2, dtype=bool)
+    while not dones.any():
+        _, _, dones, infos = venv.step(np.ones(2, dtype=np.int64))
+    callback.update_locals({"infos": infos})
+    callback.on_step()
+    assert {f"episode/{name}" for name in train_ppo.SUMMARY_KEYS} <= set(model.logger.name_to_value)
+
+
 def test_env_config_overrides_merge_into_a_phase_config() -> None:
     kwargs = {"config": {"action_mode": "relative", "decision_interval": 5.0}, "max_episode_steps": 9}
     assert train_ppo.with_env_config(kwargs, {"action_mode": "platoon"}) == {
@@ -126,3 +182,67 @@ def test_training_seeds_stay_below_evaluation_seeds(tmp_path: Path) -> None:
     seed = EVAL_SEED_START - 10
     with pytest.raises(ValueError, match=f"seed = {seed}"):
         train_ppo.main(["--seed", str(seed), "--n-envs", "16", "--out", str(tmp_path)])
+
+
+def tiny_run(tmp_path: Path) -> list[str]:
+    """Arguments of a tiny run in ``tmp_path`` (2 platoons, 5 s episodes, normalised), with the shipped warm-up."""
+    hyperparams = tmp_path / "ppo.yml"
+    hyperparams.write_text(yaml.safe_dump({ENV_ID: {
+        "n_envs": 2, "n_timesteps": 32, "policy": "MlpPolicy", "normalize": True, "n_steps": 16, "batch_size": 32,
+        "n_epochs": 1, "env_kwargs": {"config": {"episode_duration": 5.0}},
+    }}))
+    return ["--hyperparams", str(hyperparams), "--warmup", str(ROOT / "hyperparams" / "ppo_warmup.yml"),
+            "--out", str(tmp_path / "run"), "--tensorboard-log", str(tmp_path / "runs"), "--no-progress-bar"]
+
+
+def test_a_run_shorter_than_the_warmup_trains_without_it_and_resumes_only_from_usable_files(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    # the docstring's short run: --timesteps 20000 with the shipped warm-up of 150 000 steps
+    common = tiny_run(tmp_path)
+    out = tmp_path / "run"
+    train_ppo.main([*common, "--timesteps", "32"])
+    assert "timesteps = 32 is no more than the warm-up's 150000" in capsys.readouterr().out
+    report = (out / "training.md").read_text()
+    assert "| timesteps, this command / total | 32 / 32 |" in report and "| warm-up, {" not in report
+    assert "| hyperparameters, warm-up | " in report and "`, none |" in report
+
+    model, stats = (out / "model.zip").read_bytes(), (out / "vecnormalize.pkl").read_bytes()
+    resume = [*common, "--resume", "--timesteps", "64"]
+    (out / "model.zip").write_bytes(model[:len(model) // 2])
+    with pytest.raises(RunFileError, match="model.zip'?: not a readable PPO model zip"):
+        train_ppo.main(resume)
+    (out / "model.zip").write_bytes(b"garbage")
+    with pytest.raises(RunFileError, match="model.zip'?: not a readable PPO model zip"):
+        train_ppo.main(resume)
+    (out / "model.zip").write_bytes(model)
+    (out / "vecnormalize.pkl").write_bytes(b"garbage")
+    with pytest.raises(RunFileError, match="vecnormalize.pkl'?: not a readable pickle"):
+        train_ppo.main(resume)
+    (out / "vecnormalize.pkl").write_bytes(pickle.dumps({"obs_rms": None}))
+    with pytest.raises(RunFileError, match="vecnormalize.pkl'?: holds a dict"):
+        train_ppo.main(resume)
+    VecNormalize(TimeGapVecEnv(2, {"episode_duration": 5.0, "platoon": {"n_followers": 4}})).save(
+        out / "vecnormalize.pkl")
+    with pytest.raises(RunFileError, match=r"vecnormalize.pkl normalises observations of shape \(36,\), the env "
+                                           r"gives \(45,\)"):
+        train_ppo.main(resume)
+    with pytest.raises(RunFileError, match=r"model.zip takes observations of shape \(45,\), the env gives \(36,\)"):
+        train_ppo.main([*resume, "--env-config", '{"platoon": {"n_followers": 4}}'])
+    (out / "vecnormalize.pkl").unlink()
+    with pytest.raises(FileNotFoundError, match="no statistics .*vecnormalize.pkl"):
+        train_ppo.main(resume)
+    (out / "vecnormalize.pkl").write_bytes(stats)
+    train_ppo.main(resume)  # the files restored: the run continues
+    assert PPO.load(out / "model.zip", device="cpu").num_timesteps == 64
+
+
+def test_the_command_line_names_a_corrupted_checkpoint_without_a_traceback(tmp_path: Path) -> None:
+    common = tiny_run(tmp_path)
+    (tmp_path / "run").mkdir()
+    (tmp_path / "run" / "model.zip").write_bytes(b"garbage")
+    (tmp_path / "run" / "vecnormalize.pkl").write_bytes(b"garbage")
+    done = subprocess.run([sys.executable, "-m", "train.train_ppo", *common, "--resume"], cwd=ROOT,
+                          capture_output=True, text=True, timeout=120)
+    assert done.returncode == 1
+    assert "Traceback" not in done.stderr and f"{tmp_path / 'run' / 'model.zip'}" in done.stderr
+    assert "not a readable PPO model zip" in done.stderr
