@@ -35,6 +35,8 @@ DEGRADATION_KINDS = (
 )
 
 # Bounds shared by several fields (each field's own are in its comment).
+TIME_GAP_MIN_SPEED = 1.0  # below this speed (s - s0) / v says nothing of the time gap: the monitor skips such
+# measurements, the tracking reward ignores them and the actual time gap is reported as inf [m/s]
 MIN_DT, MAX_DT = 0.01, 1.0  # simulator and measurement tick, 100 Hz to 1 Hz [s]
 MAX_FOLLOWERS = 100  # followers in one platoon [-]
 MAX_EPISODE_TICKS = 100_000  # ticks of an episode or a synthetic leader (2.8 h at dt = 0.1 s) [-]
@@ -375,9 +377,12 @@ class MonitorConfig(ConfigMixin):
     dt: float = PlatoonConfig.dt  # measurement period [s], [MIN_DT, MAX_DT]
     max_speed: float = 100.0  # speeds above this are implausible and skipped [m/s], (0, 1000]
     max_spacing: float = 1000.0  # spacings above this are implausible and skipped [m], (0, 1e5]
+    min_speed: float = TIME_GAP_MIN_SPEED  # measurements below this speed carry no evidence on tau and are left
+    # out (not counted as skipped): at a standstill the posterior returns to the prior, the setting [m/s], [0, 10]
 
     def __post_init__(self) -> None:
         self._number("noise_variance", 0.0, 1e4, open_low=True)
+        self._number("min_speed", 0.0, 10.0)
         self._number("prior_standstill_spacing", 0.0, 100.0)
         self._number("forgetting", 0.0, 1.0, open_low=True)
         self._number("dt", MIN_DT, MAX_DT)

@@ -55,7 +55,7 @@ from timegap_env.monitoring.detectors import RecursiveLeastSquares, raw_time_gap
 from timegap_env.monitoring.estimate import estimate_time_gap
 from timegap_env.monitoring.loop import MonitoredPlatoon
 from timegap_env.sim.degradation import parse_degradations, round_to_tick
-from timegap_env.sim.trajectory import TIME_GAP_MIN_SPEED
+from timegap_env.config import TIME_GAP_MIN_SPEED
 
 SETTINGS = (1.0, 1.6)  # settings held [s]: the best in nominal episodes and the env's initial one
 DURATION = 250.0  # episode length [s]

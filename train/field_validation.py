@@ -53,7 +53,7 @@ from timegap_env.monitoring.charts import ChartState, ShewhartChart
 from timegap_env.monitoring.estimate import estimate_time_gap
 from timegap_env.monitoring.sensors import Readings, Sensors
 from timegap_env.sim.platoon import actual_time_gap
-from timegap_env.sim.trajectory import TIME_GAP_MIN_SPEED
+from timegap_env.config import TIME_GAP_MIN_SPEED
 from train.choose_window import FAMILIES, NOISY, SEEDS, WINDOWS
 
 REPO = Path(__file__).resolve().parents[1]

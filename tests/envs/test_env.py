@@ -329,3 +329,28 @@ def test_reset_with_a_seed_gives_the_same_bits_whatever_ran_before(monitor):
     for (obs, reward, info), (obs2, reward2, info2) in zip(first, episode(env), strict=True):
         assert obs.tobytes() == obs2.tobytes() and reward == reward2
         assert all(info[key].tobytes() == info2[key].tobytes() for key in info)
+
+
+def test_a_standing_platoon_has_no_nan_and_no_alarms():
+    """Below TIME_GAP_MIN_SPEED (s - s0) / v says nothing of the time gap: the monitor leaves such measurements
+    out, so its estimate returns to the setting and the chart stays quiet; the actual time gap is inf, never NaN."""
+    env = gym.make("TimeGapMonitor-v0", config={"degradation": {"kind_weights": {"none": 1.0}}, "episode_duration": 30.0,
+                                                "dropout_probability_range": (0.0, 0.0)})
+    _, infos = run_episode(env, lambda obs: level_index(1.4), seed=0, options={"leader_speed": np.zeros(400)})
+    assert not any(np.isnan(value).any() for info in infos for value in info.values())
+    assert not any(info["alarm"].any() for info in infos)
+    assert np.isinf(infos[-1]["actual_time_gap"]).all() and np.allclose(infos[-1]["estimate"], 1.4)
+    assert infos[-1]["skipped_measurements"].sum() == 0  # not sensor faults
+
+
+@pytest.mark.parametrize("scenario", ["stop_and_go", "emergency_braking", "hard_braking"])
+def test_stopping_leaders_give_no_nan(scenario):
+    env = gym.make("TimeGapMonitor-v0", config={"episode_duration": 120.0})
+    for seed in range(3):
+        obs, info = env.reset(seed=seed, options={"scenario": scenario})
+        while True:
+            assert not np.isnan(obs).any() and not any(np.isnan(value).any() for value in info.values())
+            obs, reward, terminated, truncated, info = env.step(level_index(1.6))
+            assert np.isfinite(reward)
+            if terminated or truncated:
+                break

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from timegap_env.monitoring.detectors import RecursiveLeastSquares, raw_time_gap
-from timegap_env.sim.trajectory import TIME_GAP_MIN_SPEED
+from timegap_env.config import TIME_GAP_MIN_SPEED
 
 S0, TAU = 5.0, 1.6  # standstill spacing [m], time gap [s]
 

@@ -134,7 +134,7 @@ def test_invalid_measurements_are_skipped_per_vehicle():
         monitor.update(*synthetic(rng, (1, 6)))
     mean, cov = monitor.mean.copy(), monitor.cov.copy()
     speed, spacing = synthetic(rng, (1, 6))
-    speed[0, :4] = [np.nan, np.inf, -0.5, 1e3]  # dropout, inf, negative, implausible
+    speed[0, :4] = [np.nan, np.inf, -1e3, 1e3]  # dropout, inf, implausible either way
     spacing[0, 4] = -1.0
     used = monitor.update(speed, spacing)
     np.testing.assert_array_equal(used, [[False] * 5 + [True]])
@@ -143,6 +143,17 @@ def test_invalid_measurements_are_skipped_per_vehicle():
     np.testing.assert_array_equal(monitor.cov[0, :5], cov[0, :5])
     assert not np.array_equal(monitor.mean[0, 5], mean[0, 5])
     assert np.all(np.isfinite(monitor.mean)) and np.all(np.isfinite(monitor.cov))
+
+
+def test_measurements_below_the_minimum_speed_are_left_out_but_not_skipped():
+    """At a crawl (s - s0) / v says nothing of tau; a noisy negative reading about a standstill is no fault."""
+    monitor = TimeGapMonitor(1, 4, setting=1.6, config=MonitorConfig(window=2.0))
+    slow = np.array([[0.0, -0.3, 0.99 * MonitorConfig.min_speed, MonitorConfig.min_speed]])
+    for _ in range(40):
+        used = monitor.update(slow, np.full((1, 4), 2.5))
+    np.testing.assert_array_equal(used, [[False, False, False, True]])
+    np.testing.assert_array_equal(monitor.skipped, [[0, 0, 0, 0]])
+    np.testing.assert_array_equal(monitor.tau_mean[0, :3], [1.6, 1.6, 1.6])  # back at the prior: the setting
 
 
 def test_a_long_dropout_empties_the_window_back_to_the_prior():

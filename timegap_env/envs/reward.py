@@ -52,7 +52,7 @@ import numba
 import numpy as np
 
 from timegap_env.config import EnvConfig, RewardWeights
-from timegap_env.sim.trajectory import TIME_GAP_MIN_SPEED
+from timegap_env.config import TIME_GAP_MIN_SPEED
 
 RewardTerms = collections.namedtuple("RewardTerms", [field.name for field in dataclasses.fields(RewardWeights)])
 RewardTerms.__doc__ = """The reward terms, one field per field of RewardWeights: (n_envs,) arrays, or the weights themselves."""

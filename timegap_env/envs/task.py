@@ -17,7 +17,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from timegap_env.config import EnvConfig
+from timegap_env.config import TIME_GAP_MIN_SPEED, EnvConfig
 from timegap_env.envs.action import SettingLadder
 from timegap_env.envs.episodes import Episodes, check_reset_options
 from timegap_env.envs.info import TRUTH_PREFIX, prefixed
@@ -161,7 +161,8 @@ class PlatoonTask:
         monitor, chart, platoon = self.loop.monitor, self.loop.chart, self.loop.platoon
         half_width = self._scales.half_width
         return {
-            "actual_time_gap": platoon.actual_time_gap,  # (s - s0) / v [s], inf at standstill
+            # (s - s0) / v [s]; inf below TIME_GAP_MIN_SPEED, where it is not defined (never NaN)
+            "actual_time_gap": np.where(platoon.v[:, 1:] >= TIME_GAP_MIN_SPEED, platoon.actual_time_gap, np.inf),
             "estimate": monitor.tau_mean,  # posterior mean of tau [s]
             "estimate_std": monitor.tau_std,  # [s]
             "setting": platoon.setting.copy(),  # tau* asked for [s]

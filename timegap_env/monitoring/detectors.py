@@ -24,7 +24,7 @@ from numpy.typing import ArrayLike
 from timegap_env.config import PlatoonConfig
 from timegap_env.monitoring.batch import batch_array, batch_shape, env_mask, setting_array
 from timegap_env.sim.platoon import actual_time_gap
-from timegap_env.sim.trajectory import TIME_GAP_MIN_SPEED
+from timegap_env.config import TIME_GAP_MIN_SPEED
 
 __all__ = ["RecursiveLeastSquares", "RlsMemory", "raw_time_gap"]
 

@@ -47,6 +47,7 @@ class WindowRule(NamedTuple):
 
     max_speed: float  # speeds above this are skipped [m/s]
     max_spacing: float  # spacings above this are skipped [m]
+    min_speed: float  # measurements below this speed are left out, not skipped [m/s]
     forgetting: float  # exponential forgetting factor per tick [-]
     suffix_weight: np.ndarray  # (W,) weight of suffix slot p + 1 seen from slot p [-]
     age_weight: np.ndarray  # (W,) weight of slot m when its block is full [-]
@@ -67,13 +68,20 @@ class TimeGapMonitor:
     exponential factor ``config.forgetting`` per tick (a measurement a ticks old has
     weight forgetting^a), or both; ``window=None, forgetting=1`` keeps everything.
 
-    Skipped measurements. A NaN, infinite, negative or implausibly large speed or spacing
-    (``config.max_speed``, ``config.max_spacing``) is skipped for that vehicle only and
-    counted in ``skipped``. No data are added, so nothing NaN ever comes out; but the tick
+    Skipped measurements. A NaN or infinite speed or spacing, a negative spacing, or an
+    implausibly large one or speed of either sign (``config.max_spacing``, ``config.max_speed``)
+    is skipped for that vehicle only and counted in ``skipped``. No data are added, so nothing NaN ever comes out; but the tick
     still passes: it occupies a window slot as an empty measurement and ages the data by one
     tick, so the window always spans W seconds of time. With a window (or forgetting) the
     posterior therefore drifts back towards the prior during a long dropout: no recent
     evidence, no confident estimate. Without either, a skipped tick leaves it unchanged.
+
+    Low speeds. Below ``config.min_speed`` the spacing model s = s0 + tau v says (almost)
+    nothing of tau, and a small spacing error becomes a huge one in (s - s0) / v: such
+    measurements, noisy negative readings about a standstill included, are left out as skipped
+    ones are (an empty slot that ages the data), but not counted in ``skipped``, which is
+    sensor health. A standing platoon's posterior
+    therefore returns to the prior, whose mean is the setting: the chart sees no deviation.
 
     Drift guard. The window sums are never updated by subtracting the outgoing measurement
     (which would accumulate round-off over a long run). The ring buffer is filled in blocks of
@@ -103,6 +111,7 @@ class TimeGapMonitor:
         self._rule = WindowRule(
             max_speed=float(config.max_speed),
             max_spacing=float(config.max_spacing),
+            min_speed=float(config.min_speed),
             forgetting=decay,
             suffix_weight=decay ** np.arange(1, W + 1),
             age_weight=decay ** np.arange(W - 1, -1, -1.0),
@@ -271,10 +280,12 @@ def _update_kernel(speed, spacing, memory, slot, rule, prior, out, out_moments):
             p = slot[e]
             for i in range(n_vehicles):
                 v, s = speed[k, e, i], spacing[k, e, i]
-                used = 0.0 <= v <= rule.max_speed and 0.0 <= s <= rule.max_spacing  # NaN -> False
+                valid = -rule.max_speed <= v <= rule.max_speed and 0.0 <= s <= rule.max_spacing  # NaN -> False
+                used = valid and v >= rule.min_speed
                 out.used[k, e, i] = used
-                if not used:
+                if not valid:
                     memory.skipped[e, i] += 1
+                if not used:
                     v = s = 0.0
                 x[0], x[1], x[2], x[3], x[4] = (1.0 if used else 0.0), v, v * v, s, v * s
                 for c in range(N_SUMS):

@@ -6,14 +6,13 @@ import dataclasses
 
 import numpy as np
 
-from timegap_env.config import PlatoonConfig
+from timegap_env.config import TIME_GAP_MIN_SPEED, PlatoonConfig
 from timegap_env.leaders.profile import LeaderProfile
 from timegap_env.leaders.scenarios import make_leader
 from timegap_env.sim.degradation import Degradation, DegradationTable, parse_degradations
 from timegap_env.sim.platoon import Platoon, actual_time_gap
 
 # Below this speed the time gap (s - s0) / v is not meaningful and is reported as NaN [m/s].
-TIME_GAP_MIN_SPEED = 1.0
 
 
 @dataclasses.dataclass(frozen=True)
