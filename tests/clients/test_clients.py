@@ -219,9 +219,6 @@ def test_cleanrl_style_loop_reads_final_obs_and_info_masks(mode: str) -> None:
         real_next_obs = next_obs.copy()
         if done.any():
             assert np.array_equal(infos["_final_obs"], done)
-            if mode == "vector_entry_point":
-                assert isinstance(infos["final_obs"], np.ndarray) and infos["final_obs"].dtype == np.float32
-                assert infos["final_obs"].shape == (n, *space.shape)
             for i in np.flatnonzero(done):
                 row = infos["final_obs"][i]
                 assert isinstance(row, np.ndarray) and row.dtype == np.float32 and row.shape == space.shape, \
@@ -236,6 +233,22 @@ def test_cleanrl_style_loop_reads_final_obs_and_info_masks(mode: str) -> None:
         obs = next_obs
     assert finished == [EPISODE_STEPS] * (2 * n)
     envs.close()
+
+
+def test_native_vector_env_final_obs_is_one_float32_array() -> None:
+    """``infos["final_obs"]`` of the native vector env as one float32 (num_envs, obs_dim) array, rows of the
+    sub-envs that did not finish included, so a learner can ``np.where(infos["_final_obs"][:, None], ...)``.
+    SyncVectorEnv gives an object array of rows (None where no episode ended) instead."""
+    n = 3
+    envs = gym.make_vec(ENV_ID, num_envs=n, vectorization_mode="vector_entry_point", config=SHORT)
+    envs.reset(seed=0)
+    for _ in range(EPISODE_STEPS):
+        _, _, terminated, truncated, infos = envs.step(np.full(n, KEEP_1_6_S))
+    assert np.all(terminated | truncated)
+    final_obs = infos["final_obs"]
+    assert isinstance(final_obs, np.ndarray) and final_obs.dtype == np.float32, \
+        f"infos['final_obs'] has dtype {final_obs.dtype}: must be float32"
+    assert final_obs.shape == (n, *envs.single_observation_space.shape)
 
 
 # --- TorchRL ------------------------------------------------------------------------------------------------------
