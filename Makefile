@@ -1,4 +1,5 @@
 # Every target creates .venv with python3 if it is missing and installs the project into it.
+SHELL := /bin/bash
 PYTHON ?= python3
 VENV := .venv
 PY := $(VENV)/bin/python
@@ -9,10 +10,12 @@ STAMP := $(VENV)/.installed
 install: $(STAMP)
 
 $(STAMP): pyproject.toml
+	@echo "==> Setting up $(VENV) with timegap_env and its dependencies (1-2 minutes, once; pip's progress follows)"
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -e '.[dev]'
+	$(PY) -m pip install -e '.[dev]' | grep -E '^(Collecting|Successfully)'; test $${PIPESTATUS[0]} -eq 0
 	touch $(STAMP)
+	@echo "==> $(VENV) is ready"
 
 demo: $(STAMP)
 	MPLBACKEND=Agg $(PY) -m train.demo

@@ -1,5 +1,6 @@
 """The package as users meet it: registration, the episode length, what the top level exports."""
 
+import os
 import subprocess
 import sys
 
@@ -51,3 +52,15 @@ def test_agents_are_installed_with_the_package():
     code = "import agents.policies, agents.protocol; print(agents.policies.__file__)"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd="/").stdout
     assert "agents" in out
+
+
+def test_the_first_import_says_the_kernels_will_compile_once(tmp_path):
+    """A new user's first step waits on numba; the import says why, and only while nothing is cached."""
+    code = "import timegap_env"
+    empty = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
+                           env={**os.environ, "NUMBA_CACHE_DIR": str(tmp_path)})
+    assert "compiles the simulator's kernels" in empty.stderr
+    (tmp_path / "kernel.nbi").write_bytes(b"")
+    cached = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
+                            env={**os.environ, "NUMBA_CACHE_DIR": str(tmp_path)})
+    assert "compiles" not in cached.stderr

@@ -12,7 +12,23 @@ The package follows the data flow, one folder a stage:
 What users call is importable from here.
 """
 
+import os
+import sys
+from pathlib import Path
+
 from gymnasium.envs.registration import register, registry
+
+
+def _say_when_compiling() -> None:
+    """numba compiles the kernels at their first call and caches them (``__pycache__``, or ``NUMBA_CACHE_DIR``):
+    say so when no cache is there yet, so that the first run's wait is not a mystery."""
+    cache = Path(os.environ.get("NUMBA_CACHE_DIR") or Path(__file__).parent)
+    if not any(cache.rglob("*.nbi")):
+        print("timegap_env: the first run compiles the simulator's kernels (about 15 CPU-seconds, "
+              "cached for every later run)", file=sys.stderr)
+
+
+_say_when_compiling()  # before the imports below, some of which compile a kernel
 
 from timegap_env.config import (
     MONITOR_PRESETS, AggressiveCyclesConfig, ChartConfig, EnvConfig, HardBrakingConfig, HumanLeaderConfig,
@@ -29,6 +45,7 @@ from timegap_env.sim import (
 )
 
 ENV_ID = "TimeGapMonitor-v0"
+
 
 if ENV_ID not in registry:
     register(  # no max_episode_steps: the env truncates itself at EnvConfig.episode_duration

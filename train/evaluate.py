@@ -62,6 +62,7 @@ from agents.oracles import TruthPolicy
 from agents.policies import ChartStepPolicy, NamedPolicy, PaperRulePolicy, V2VAwarePolicy, fixed_policies, seconds
 from agents.protocol import EVAL_SEED_START, MODEL_FILE
 from timegap_env.config import EnvConfig
+from timegap_env.envs.info import summary_of, truth_of
 from timegap_env.envs.observation import observation_space
 from timegap_env.leaders import default_ngsim_path, default_openacc_dir, openacc_paths
 from train.value_of_information import DEFAULT_TRAIN_EPISODES, all_oracles, choose_oracle, measure_lookup
@@ -112,7 +113,7 @@ WILSON_Z = 1.959963984540054  # standard normal quantile of 0.975
 TTC_CAP = 30.0  # min TTCs above this are all safe; averaged as this [s]
 PROFILE_FOLLOWER = 0  # the follower drawn bold in profiles.png (vehicle 1)
 
-METRICS: dict[str, str] = {  # column -> label; "return" is the undiscounted sum of rewards, the rest episode_summary
+METRICS: dict[str, str] = {  # column -> label; "return" is the undiscounted sum of rewards, the rest the episode summary
     "return": "return",
     "time_out_of_control": "time out of control [s / follower]",
     "exceedances": "exceedances [all followers]",
@@ -223,15 +224,15 @@ def run_batch(
     obs, infos = venv.reset(seed=seeds, options=GROUPS[group].options)
     task, config = venv.unwrapped.task, venv.unwrapped.config
     prints = [task.fingerprint(env) for env in range(n)]
-    scenarios = list(infos["scenario"])
-    truth0 = {name: value[0] for name, value in infos["degradation"].items()}  # env 0's schedule, for the profile
+    scenarios = list(venv.unwrapped.scenario)
+    truth0 = {name: value[0] for name, value in truth_of(infos).items()}  # env 0's schedule, for the profile
     trace = task.start_trace() if record_profile else None  # env 0 at every tick
     returns, steps, below = np.zeros(n), np.zeros(n, dtype=np.int64), np.zeros(n)
     active = np.ones(n, dtype=bool)
     summaries: list[dict[str, float]] = [{} for _ in range(n)]
     state = None  # a policy's memory (a learned policy's frame stack), carried from step to step
     while active.any():
-        truth = infos["degradation"]
+        truth = truth_of(infos)
         if isinstance(policy, TruthPolicy):
             action = policy.act(truth)
         else:
@@ -243,7 +244,7 @@ def run_batch(
         below += np.where(active, unstable.mean(axis=1) * config.decision_interval, 0.0)
         ended = (terminated | truncated) & active
         for env in np.flatnonzero(ended):
-            summaries[env] = {name: float(value[env]) for name, value in infos["episode_summary"].items()}
+            summaries[env] = {name: float(value[env]) for name, value in summary_of(infos["final_info"]).items()}
         active &= ~ended
     venv.close()
     records = [
@@ -312,7 +313,7 @@ def profile_first(group: str, seeds: list[int]) -> list[int]:
                         config=GROUPS[group].config)
     _, infos = venv.reset(seed=seeds, options=GROUPS[group].options)
     venv.close()
-    truth = infos["degradation"]
+    truth = truth_of(infos)
     midway = ((truth["kind"] != "none") & (truth["kind"] != "v2v_outage") & (truth["onset"] > 0)
               & np.isfinite(truth["onset"])).any(axis=1)
     if not midway.any():

@@ -10,6 +10,7 @@ from stable_baselines3 import PPO
 from stable_baselines3.common.vec_env import DummyVecEnv, VecFrameStack, VecNormalize
 
 import timegap_env
+from timegap_env.envs.info import truth_of
 from timegap_env.leaders.scenarios import HELD_OUT_FAMILIES
 from agents.policies import FixedPolicy, PaperRulePolicy
 from train import evaluate, value_of_information
@@ -52,7 +53,7 @@ def test_the_profile_episode_is_one_degraded_midway():
     assert sorted(ordered) == seeds
     venv = gym.make_vec(timegap_env.ENV_ID, num_envs=1, vectorization_mode="vector_entry_point")
     _, infos = venv.reset(seed=ordered[:1])
-    truth = infos["degradation"]
+    truth = truth_of(infos)
     assert ((truth["kind"] != "none") & (truth["onset"] > 0) & np.isfinite(truth["onset"])).any()
 
 

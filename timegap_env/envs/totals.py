@@ -1,4 +1,4 @@
-"""What an episode adds up, step by step, and the episode summary made of it (``info["episode_summary"]``)."""
+"""What an episode adds up, step by step, and the episode summary made of it (``info["episode_<name>"]``)."""
 
 from __future__ import annotations
 
