@@ -5,7 +5,7 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: install demo test train bench calibrate degradation clean
+.PHONY: install demo test clients train bench calibrate degradation clean
 
 install: $(STAMP)
 
@@ -28,6 +28,9 @@ demo: $(STAMP)
 
 test: $(STAMP)
 	MPLBACKEND=Agg $(PY) -m pytest -q
+
+clients:  # the env through SB3, sb3-contrib, rl-zoo3, RLlib, TorchRL, Tianshou, gymnasium's wrappers (own venv)
+	bash .ci/clients
 
 train: $(STAMP)
 	$(PY) -m train.train_ppo

@@ -206,7 +206,7 @@ def test_cleanrl_style_loop_reads_final_obs_and_info_masks(mode: str) -> None:
     envs = gym.make_vec(ENV_ID, num_envs=n, vectorization_mode=mode, vector_kwargs=vector_kwargs, config=SHORT)
     assert envs.metadata["autoreset_mode"] == AutoresetMode.SAME_STEP
     space = envs.single_observation_space
-    obs, infos = envs.reset(seed=0)
+    _, infos = envs.reset(seed=0)
     _assert_info_masks(infos, n)
     envs.action_space.seed(0)
     lengths, finished = np.zeros(n, dtype=np.int64), []
@@ -230,25 +230,8 @@ def test_cleanrl_style_loop_reads_final_obs_and_info_masks(mode: str) -> None:
         else:
             assert "final_obs" not in infos
         assert np.all(np.isfinite(real_next_obs)) and np.all(np.isfinite(rewards))
-        obs = next_obs
     assert finished == [EPISODE_STEPS] * (2 * n)
     envs.close()
-
-
-def test_native_vector_env_final_obs_is_one_float32_array() -> None:
-    """``infos["final_obs"]`` of the native vector env as one float32 (num_envs, obs_dim) array, rows of the
-    sub-envs that did not finish included, so a learner can ``np.where(infos["_final_obs"][:, None], ...)``.
-    SyncVectorEnv gives an object array of rows (None where no episode ended) instead."""
-    n = 3
-    envs = gym.make_vec(ENV_ID, num_envs=n, vectorization_mode="vector_entry_point", config=SHORT)
-    envs.reset(seed=0)
-    for _ in range(EPISODE_STEPS):
-        _, _, terminated, truncated, infos = envs.step(np.full(n, KEEP_1_6_S))
-    assert np.all(terminated | truncated)
-    final_obs = infos["final_obs"]
-    assert isinstance(final_obs, np.ndarray) and final_obs.dtype == np.float32, \
-        f"infos['final_obs'] has dtype {final_obs.dtype}: must be float32"
-    assert final_obs.shape == (n, *envs.single_observation_space.shape)
 
 
 # --- TorchRL ------------------------------------------------------------------------------------------------------
