@@ -64,3 +64,14 @@ def test_the_first_import_says_the_kernels_will_compile_once(tmp_path):
     cached = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
                             env={**os.environ, "NUMBA_CACHE_DIR": str(tmp_path)})
     assert "compiles" not in cached.stderr
+
+
+def test_a_reset_that_raised_leaves_the_env_usable():
+    env = gym.make(timegap_env.ENV_ID)
+    with pytest.raises(ValueError, match="weather"):
+        env.reset(options={"weather": "rain"})
+    with pytest.raises(gym.error.ResetNeeded):
+        env.step(4)
+    env.reset(seed=0)
+    _, reward, *_ = env.step(4)
+    assert np.isfinite(reward)
