@@ -158,8 +158,9 @@ class LearnedPolicy:
         model = load_model(model_path, algorithm, device="cpu")
         try:
             policy = cls(model, normalizer, name, action_mode, frame_stack)
-        except ValueError as error:  # env.json's action mode or frame stack does not fit the model
-            raise RunFileError(f"{env_path} does not fit the model {model_path}: {error}") from error
+        except ValueError as error:  # the action mode or frame stack (env.json's, or the defaults) does not fit the model
+            source = env_path if env_path.is_file() else f"the defaults (no {env_path})"
+            raise RunFileError(f"{source} does not fit the model {model_path}: {error}") from error
         if normalizer is not None and normalizer.mean.shape != policy.observation_shape:
             raise RunFileError(f"vecnormalize = {str(stats_path)!r}: normalises observations of shape "
                                f"{normalizer.mean.shape}, the model {model_path} takes {policy.observation_shape}")

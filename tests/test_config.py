@@ -64,3 +64,8 @@ def test_derived_quantities_come_from_their_fields():
     config = EnvConfig.from_dict({"chart": {"limit_width": 3.0}, "setting_levels": (0.8, 1.6, 2.0)})
     assert config.chart.half_width == 3.0 * config.chart.baseline_std
     assert config.setting_span == pytest.approx(1.2, rel=1e-15)
+
+
+def test_the_monitors_speed_band_cannot_be_empty():
+    with pytest.raises(ValueError, match=r"MonitorConfig.min_speed = 6.0: must be below max_speed = 5.0"):
+        MonitorConfig(min_speed=6.0, max_speed=5.0)

@@ -10,7 +10,7 @@ a number, an integer field takes only integers, a pair only two numbers.
 The upper bounds are generous for research and keep one env's memory modest. With
 every memory-relevant field at its bound (``MAX_FOLLOWERS`` followers, the shortest tick
 ``MIN_DT``, ``MAX_EPISODE_TICKS``, ``MAX_WINDOW_TICKS``, ``MAX_DECISION_TICKS``), one env
-holds about: leader buffers 2 x 100,001 ticks x 8 B = 1.6 MB; the monitor's window
+holds about: leader buffers 2 x 1,000,001 ticks x 8 B = 16 MB; the monitor's window
 6,001 x 5 sums x 100 followers x 8 B = 24 MB; the chart's exceedance window
 6,000 x 100 x 8 B = 4.8 MB; a step's per-tick arrays 1,000 x 101 vehicles x 8 B = 0.8 MB
 each (tests/test_config_fields.py builds and steps that env and measures it).
@@ -35,11 +35,12 @@ DEGRADATION_KINDS = (
 )
 
 # Bounds shared by several fields (each field's own are in its comment).
-TIME_GAP_MIN_SPEED = 1.0  # below this speed (s - s0) / v says nothing of the time gap: the monitor skips such
-# measurements, the tracking reward ignores them and the actual time gap is reported as inf [m/s]
+TIME_GAP_MIN_SPEED = 1.0  # below this speed (s - s0) / v says nothing of the time gap: the monitor leaves such
+# measurements out (MonitorConfig.min_speed), the tracking reward ignores them, the env's info reports the actual
+# time gap as inf and a Trajectory (an analysis array) as NaN [m/s]
 MIN_DT, MAX_DT = 0.01, 1.0  # simulator and measurement tick, 100 Hz to 1 Hz [s]
 MAX_FOLLOWERS = 100  # followers in one platoon [-]
-MAX_EPISODE_TICKS = 100_000  # ticks of an episode or a synthetic leader (2.8 h at dt = 0.1 s) [-]
+MAX_EPISODE_TICKS = 1_000_000  # ticks of an episode or a synthetic leader (28 h at dt = 0.1 s, 16 MB of leader per env) [-]
 MAX_WINDOW_TICKS = 6_000  # ticks in the monitor's window or the chart's exceedance window (600 s at dt = 0.1 s) [-]
 MAX_DECISION_TICKS = 1_000  # ticks in one env step (100 s at dt = 0.1 s) [-]
 MAX_SETTING_LEVELS = 100  # time gap settings on the ladder [-]
@@ -382,12 +383,14 @@ class MonitorConfig(ConfigMixin):
 
     def __post_init__(self) -> None:
         self._number("noise_variance", 0.0, 1e4, open_low=True)
-        self._number("min_speed", 0.0, 10.0)
         self._number("prior_standstill_spacing", 0.0, 100.0)
         self._number("forgetting", 0.0, 1.0, open_low=True)
         self._number("dt", MIN_DT, MAX_DT)
         self._number("max_speed", 0.0, 1000.0, open_low=True)
         self._number("max_spacing", 0.0, 1e5, open_low=True)
+        self._number("min_speed", 0.0, 10.0)
+        if self.min_speed >= self.max_speed:
+            self._fail("min_speed", self.min_speed, f"must be below max_speed = {self.max_speed}")
         rows = _items(self.prior_cov)
         matrix = None if rows is None or len(rows) != 2 else tuple(_items(row) for row in rows)
         if (matrix is None or any(row is None or len(row) != 2 for row in matrix)

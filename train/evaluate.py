@@ -174,6 +174,10 @@ def plan_episodes(episodes: int, groups: Sequence[str]) -> list[Episode]:
     return plan
 
 
+class PolicyChoiceError(ValueError):
+    """A policy name or a model that ``--policies`` / ``--model`` cannot use."""
+
+
 def build_policies(names: Sequence[str] | None, model: Path) -> dict[str, NamedPolicy | TruthPolicy]:
     """Policies by CLI name; ``names=None`` is the default set (PPO only if ``model``, a zip or a run directory,
     exists). The oracle's lookup is measured on training seeds and the oracle chosen on selection seeds
@@ -190,19 +194,22 @@ def build_policies(names: Sequence[str] | None, model: Path) -> dict[str, NamedP
     wanted = list(policies) + [ORACLE, "ppo"] if names is None else list(names)
     unknown = sorted(set(wanted) - set(policies) - {ORACLE, "ppo"})
     if unknown:
-        raise ValueError(f"--policies {unknown}: unknown; known: {sorted(policies) + [ORACLE, 'ppo']}")
+        raise PolicyChoiceError(f"--policies {unknown}: unknown; known: {sorted(policies) + [ORACLE, 'ppo']}")
     if ORACLE in wanted:
         table, _ = measure_lookup(config, DEFAULT_TRAIN_EPISODES)
         policies[ORACLE] = choose_oracle(config, all_oracles(config, table))
     if "ppo" in wanted:
         if model.is_file():
-            from agents.learned import LearnedPolicy  # torch is slow to import; only when needed
+            from agents.learned import LearnedPolicy, RunFileError  # torch is slow to import; only when needed
 
-            policies["ppo"] = LearnedPolicy.load(model)
+            try:
+                policies["ppo"] = LearnedPolicy.load(model)
+            except RunFileError as error:
+                raise PolicyChoiceError(str(error)) from error
             expected = observation_space(config).shape
             if policies["ppo"].observation_shape != expected:
-                raise ValueError(f"--model {model}: takes observations of shape {policies['ppo'].observation_shape}, "
-                                 f"the env gives {expected}")
+                raise PolicyChoiceError(f"--model {model}: takes observations of shape "
+                                        f"{policies['ppo'].observation_shape}, the env gives {expected}")
         elif names is None:
             print(f"note: no trained model at {model}; PPO skipped")
             wanted.remove("ppo")
@@ -240,7 +247,10 @@ def run_batch(
         obs, reward, terminated, truncated, infos = venv.step(action)
         returns += np.where(active, reward, 0.0)
         steps += active
-        unstable = infos["setting"] < truth["smallest_stable_setting"] - 1e-9  # (n, N), the step's end vs its start
+        done = terminated | truncated  # those envs were reset: the step's own setting is in final_info
+        setting = np.where(done[:, None], infos["final_info"]["setting"], infos["setting"]) if done.any() \
+            else infos["setting"]
+        unstable = setting < truth["smallest_stable_setting"] - 1e-9  # (n, N), the step's end vs its start
         below += np.where(active, unstable.mean(axis=1) * config.decision_interval, 0.0)
         ended = (terminated | truncated) & active
         for env in np.flatnonzero(ended):
@@ -543,7 +553,7 @@ def main(argv: Sequence[str] | None = None) -> None:
     profile_group = args.profile_group if args.profile_group in planned_groups else planned_groups[0]
     try:
         policies = build_policies(args.policies, args.model)
-    except (ValueError, FileNotFoundError) as error:  # unknown names, a model that cannot be used: no traceback
+    except (PolicyChoiceError, FileNotFoundError) as error:  # unknown names, a model that cannot be used: no traceback
         parser.error(str(error))
     reference = args.reference if args.reference in policies else None
     if reference is None:

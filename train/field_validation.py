@@ -757,7 +757,8 @@ def main() -> None:
         "",
         f"- **Driving**: a record counts when its speed is at least {DRIVING_SPEED:g} m/s (`TIME_GAP_MIN_SPEED`) and its "
         f"spacing is positive: GNSS puts cars into each other ({negative} records with negative spacing at "
-        f">= {DRIVING_SPEED:g} m/s), and the monitor skips those. The monitor sees every record, as in a car; medians, "
+        f">= {DRIVING_SPEED:g} m/s), and the monitor skips those. The monitor is fed every record, as in a car (it "
+        "leaves out those below its own `min_speed`, the same 1 m/s, itself); medians, "
         "exposure hours, charts and errors use driving records only.",
         "- **Halves**: the unit is the run (followers of a run are not independent). Within each setting runs alternate "
         "A, B, A, ... in name order: "

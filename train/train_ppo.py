@@ -144,7 +144,8 @@ def load_warmup(path: Path) -> tuple[int, dict[str, Any]]:
     if set(warmup) != WARMUP_KEYS:
         raise ValueError(f"warmup {ENV_ID} = {warmup!r} in {path}: needs exactly the keys {sorted(WARMUP_KEYS)}")
     steps, env_kwargs = warmup["n_timesteps"], warmup["env_kwargs"]
-    if isinstance(steps, bool) or not isinstance(steps, (int, float)) or steps != int(steps) or steps < 1:
+    if (isinstance(steps, bool) or not isinstance(steps, (int, float)) or not math.isfinite(steps) or steps != int(steps)
+            or steps < 1):
         raise ValueError(f"warmup {ENV_ID}.n_timesteps = {steps!r} in {path}: must be an integer >= 1")
     if not isinstance(env_kwargs, dict):
         raise ValueError(f"warmup {ENV_ID}.env_kwargs = {env_kwargs!r} in {path}: must be a mapping")

@@ -29,7 +29,7 @@ from agents.oracles import NOMINAL
 from agents.policies import ChartStepPolicy, FixedPolicy, NamedPolicy, PaperRulePolicy, seconds
 from agents.protocol import EVAL_SEED_START
 from timegap_env.config import EnvConfig
-from timegap_env.envs.info import truth_of
+from timegap_env.envs.info import summary_of, truth_of
 from train.value_of_information import SELECTION_SEED_START, kind_groups
 
 DEFAULT_EPISODES = 256
@@ -60,7 +60,7 @@ def run(seeds: Sequence[int], policies: Sequence[NamedPolicy]) -> dict[str, np.n
         ended = (terminated | truncated) & active
         if ended.any():
             for name in SUMMARY:
-                summary[name][ended] = infos["final_info"]["episode_" + name][ended]
+                summary[name][ended] = summary_of(infos["final_info"])[name][ended]
         active &= ~ended
     venv.close()
     return {"return": returns.reshape(m, n), **{name: value.reshape(m, n) for name, value in summary.items()},

@@ -11,10 +11,9 @@ import numpy as np
 
 from timegap_env.config import EnvConfig
 from timegap_env.envs.action import action_space
-from timegap_env.envs.info import EPISODE_PREFIX, REWARD_PREFIX, of_env, prefixed
+from timegap_env.envs.info import EPISODE_PREFIX, REWARD_PREFIX, no_rewards, of_env, prefixed
 from timegap_env.envs.observation import observation_space
 from timegap_env.envs.rendering import DEFAULT_TIME_WINDOW
-from timegap_env.envs.reward import REWARD_TERMS
 from timegap_env.envs.task import PlatoonTask
 
 
@@ -139,8 +138,7 @@ class TimeGapMonitorEnv(gym.Env):
         self._needs_reset = False
         if self.task.trace is not None:
             self.task.trace.clear()
-        no_rewards = {REWARD_PREFIX + name: np.zeros(()) for name in REWARD_TERMS}  # the same keys as step()'s
-        return self.task.observation()[0].ravel(), {**self._info(), **no_rewards}
+        return self.task.observation()[0].ravel(), {**self._info(), **of_env(no_rewards(1), 0)}
 
     def __getstate__(self) -> dict[str, Any]:
         """For copy and pickle: everything but the renderer (pygame surfaces and fonts do not pickle), which the next

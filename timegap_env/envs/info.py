@@ -4,7 +4,7 @@ Every value is a NumPy array, shaped (n_followers,) per follower or () per plato
 plain string key (no nested dicts, no strings), so that gymnasium's vector envs, TorchRL's
 ``auto_register_info_dict`` and RLlib batch it as it is. A single env's info holds:
 
-- the monitor and the platoon now (:meth:`~timegap_env.envs.task.PlatoonTask.info`: ``estimate``,
+- the monitor and the platoon now (:meth:`~timegap_env.envs.task.PlatoonTask.monitor_info`: ``estimate``,
   ``lcl``, ``ucl``, ``alarm``, ``actual_time_gap``, ...);
 - ``reward_<term>`` for each term of :data:`~timegap_env.envs.reward.REWARD_TERMS`, the last step's
   (0 at reset);
@@ -25,6 +25,7 @@ from collections.abc import Mapping
 
 import numpy as np
 
+from timegap_env.envs.reward import REWARD_TERMS
 from timegap_env.sim.degradation import KINDS
 
 KIND_NAMES = np.array(KINDS, dtype=object)  # truth_kind -> the degradation's name ("none": not hit)
@@ -34,6 +35,11 @@ REWARD_PREFIX, TRUTH_PREFIX, EPISODE_PREFIX = "reward_", "truth_", "episode_"
 def prefixed(prefix: str, values: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
     """``values`` under ``prefix + name``."""
     return {prefix + name: value for name, value in values.items()}
+
+
+def no_rewards(n_envs: int) -> dict[str, np.ndarray]:
+    """``reward_<term>`` = 0 for each term, (n_envs,): what reset's info holds, so that step's keys are there too."""
+    return {REWARD_PREFIX + name: np.zeros(n_envs) for name in REWARD_TERMS}
 
 
 def with_masks(infos: Mapping[str, np.ndarray], mask: np.ndarray) -> dict[str, np.ndarray]:
@@ -76,5 +82,5 @@ def rewards_of(info: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
     return _group(info, REWARD_PREFIX)
 
 
-__all__ = ["EPISODE_PREFIX", "KIND_NAMES", "REWARD_PREFIX", "TRUTH_PREFIX", "of_env", "prefixed", "rewards_of",
+__all__ = ["EPISODE_PREFIX", "KIND_NAMES", "REWARD_PREFIX", "TRUTH_PREFIX", "no_rewards", "of_env", "prefixed", "rewards_of",
            "summary_of", "truth_of", "with_masks"]

@@ -51,8 +51,7 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
-from timegap_env.config import EnvConfig, RewardWeights
-from timegap_env.config import TIME_GAP_MIN_SPEED
+from timegap_env.config import TIME_GAP_MIN_SPEED, EnvConfig, RewardWeights
 
 RewardTerms = collections.namedtuple("RewardTerms", [field.name for field in dataclasses.fields(RewardWeights)])
 RewardTerms.__doc__ = """The reward terms, one field per field of RewardWeights: (n_envs,) arrays, or the weights themselves."""

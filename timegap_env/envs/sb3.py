@@ -11,8 +11,8 @@ N Python envs in a ``DummyVecEnv``, and follows SB3's conventions:
   already reset (``obs[i]`` is the new episode's) and ``infos[i]`` holds
   ``terminal_observation``, ``TimeLimit.truncated``, ``episode`` =
   ``{"r": return, "l": length [steps], "t": time since creation [s]}`` (as
-  ``Monitor`` writes it) and the env's summary ``episode_<name>`` (0-d arrays, as the
-  single env gives them). The native env's per-step diagnostics (reward terms, estimates,
+  ``Monitor`` writes it) and the env's summary ``episode_<name>`` (Python numbers, so
+  that loggers can write them). The native env's per-step diagnostics (reward terms, estimates,
   ...) are not passed on.
 
 Sub-env i seeded with ``s + i`` equals ``gym.make("TimeGapMonitor-v0")`` seeded
@@ -91,7 +91,7 @@ class TimeGapVecEnv(VecEnv):
                     "terminal_observation": np.asarray(info["final_obs"][i], dtype=np.float32),
                     "TimeLimit.truncated": bool(truncated[i] and not terminated[i]),
                     "episode": {"r": round(float(self._returns[i]), 6), "l": int(self._lengths[i]), "t": elapsed},
-                    **of_env(info["final_info"], i),
+                    **{key: value.item() for key, value in of_env(info["final_info"], i).items()},
                 }
             self._returns[dones] = 0.0
             self._lengths[dones] = 0

@@ -156,7 +156,7 @@ class PlatoonTask:
         )
         return observe(state, self._scales)
 
-    def info(self) -> dict[str, np.ndarray]:
+    def monitor_info(self) -> dict[str, np.ndarray]:
         """Per-step diagnostics, each (n_envs, n_followers) unless noted."""
         monitor, chart, platoon = self.loop.monitor, self.loop.chart, self.loop.platoon
         half_width = self._scales.half_width
@@ -177,9 +177,9 @@ class PlatoonTask:
         }
 
     def step_info(self) -> dict[str, np.ndarray]:
-        """Every env's info now, flat (:mod:`~timegap_env.envs.info`): :meth:`info` and the ground truth as
+        """Every env's info now, flat (:mod:`~timegap_env.envs.info`): :meth:`monitor_info` and the ground truth as
         ``truth_<name>``, each array with a leading n_envs axis."""
-        return {**self.info(), **prefixed(TRUTH_PREFIX, self.ground_truth())}
+        return {**self.monitor_info(), **prefixed(TRUTH_PREFIX, self.ground_truth())}
 
     def ground_truth(self) -> dict[str, np.ndarray]:
         """Each follower's degradation now, its true parameters and the smallest string-stable setting for them,

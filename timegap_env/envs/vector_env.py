@@ -19,9 +19,8 @@ from gymnasium.vector.utils import batch_space
 
 from timegap_env.config import EnvConfig
 from timegap_env.envs.action import action_space
-from timegap_env.envs.info import EPISODE_PREFIX, REWARD_PREFIX, prefixed, with_masks
+from timegap_env.envs.info import EPISODE_PREFIX, REWARD_PREFIX, no_rewards, prefixed, with_masks
 from timegap_env.envs.observation import observation_space
-from timegap_env.envs.reward import REWARD_TERMS
 from timegap_env.envs.task import PlatoonTask
 
 
@@ -111,7 +110,7 @@ class TimeGapMonitorVectorEnv(VectorEnv):
         self._was_reset = True
         self._steps[mask] = 0
         self._ended[mask] = False
-        infos = {**self.task.step_info(), **prefixed(REWARD_PREFIX, self._no_rewards())}
+        infos = {**self.task.step_info(), **no_rewards(self.num_envs)}
         return self._observations(), with_masks(infos, mask)
 
     def _reset_mask(self, mask: Any) -> np.ndarray:
@@ -163,9 +162,6 @@ class TimeGapMonitorVectorEnv(VectorEnv):
                 infos.update(with_masks(prefixed(EPISODE_PREFIX, self.task.episode_summary()), done))
             self._ended = done
         return self._observations(), reward, terminated, truncated, infos
-
-    def _no_rewards(self) -> dict[str, np.ndarray]:
-        return {name: np.zeros(self.num_envs) for name in REWARD_TERMS}
 
     def _observations(self) -> np.ndarray:
         return self.task.observation().reshape(self.num_envs, -1)

@@ -80,8 +80,9 @@ class TimeGapMonitor:
     nothing of tau, and a small spacing error becomes a huge one in (s - s0) / v: such
     measurements, noisy negative readings about a standstill included, are left out as skipped
     ones are (an empty slot that ages the data), but not counted in ``skipped``, which is
-    sensor health. A standing platoon's posterior
-    therefore returns to the prior, whose mean is the setting: the chart sees no deviation.
+    sensor health. With a window (or forgetting), a standing platoon's posterior therefore
+    returns to the prior, whose mean is the setting: the chart sees no deviation; without
+    either, it holds the estimate it had when the platoon slowed down.
 
     Drift guard. The window sums are never updated by subtracting the outgoing measurement
     (which would accumulate round-off over a long run). The ring buffer is filled in blocks of

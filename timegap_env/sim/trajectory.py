@@ -12,8 +12,6 @@ from timegap_env.leaders.scenarios import make_leader
 from timegap_env.sim.degradation import Degradation, DegradationTable, parse_degradations
 from timegap_env.sim.platoon import Platoon, actual_time_gap
 
-# Below this speed the time gap (s - s0) / v is not meaningful and is reported as NaN [m/s].
-
 
 @dataclasses.dataclass(frozen=True)
 class Collision:
