@@ -20,10 +20,18 @@ from gymnasium.envs.registration import register, registry
 
 
 def _say_when_compiling() -> None:
-    """numba compiles the kernels at their first call and caches them (``__pycache__``, or ``NUMBA_CACHE_DIR``):
-    say so when no cache is there yet, so that the first run's wait is not a mystery."""
-    cache = Path(os.environ.get("NUMBA_CACHE_DIR") or Path(__file__).parent)
-    if not any(cache.rglob("*.nbi")):
+    """numba compiles the kernels at their first call and caches them where its locators say (``NUMBA_CACHE_DIR``;
+    else ``__pycache__`` beside the sources, or numba's user-wide cache where those are read-only): say so while
+    the monitor's kernel is cached in none of them, so that the first run's wait is not a mystery."""
+    kernel = "monitor._update_kernel-*.nbi"
+    if os.environ.get("NUMBA_CACHE_DIR"):
+        cached = Path(os.environ["NUMBA_CACHE_DIR"]).glob(f"monitoring_*/{kernel}")
+    else:
+        from numba.misc.appdirs import AppDirs
+
+        user_wide = Path(AppDirs(appname="numba", appauthor=False).user_cache_dir)
+        cached = (*Path(__file__).parent.glob(f"monitoring/__pycache__/{kernel}"), *user_wide.glob(f"monitoring_*/{kernel}"))
+    if not any(cached):
         print("timegap_env: the first run compiles the simulator's kernels (about 15 CPU-seconds, "
               "cached for every later run)", file=sys.stderr)
 
