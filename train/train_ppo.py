@@ -121,6 +121,9 @@ def load_hyperparams(path: Path) -> dict[str, Any]:
     hyperparams = dict(document[ENV_ID])
     allowed = RUN_KEYS | (set(inspect.signature(PPO).parameters) - {"env", "seed", "tensorboard_log", "device"})
     for key, value in hyperparams.items():
+        if key == "warmup":
+            raise ValueError(f"hyperparams {ENV_ID}.warmup in {path}: the warm-up moved to its own file (rl-zoo3 "
+                             "refuses the key): put it in hyperparams/ppo_warmup.yml's layout and pass --warmup FILE")
         if key not in allowed:
             raise ValueError(f"hyperparams {ENV_ID}.{key} = {value!r}: unknown; allowed: {sorted(allowed)}")
         if key in STRING_KWARGS and isinstance(value, str):

@@ -84,6 +84,10 @@ def test_hyperparams_errors_name_the_field(tmp_path: Path) -> None:
     path.write_text(yaml.safe_dump({"CartPole-v1": {}}))
     with pytest.raises(ValueError, match=ENV_ID):
         train_ppo.load_hyperparams(path)
+    path.write_text(yaml.safe_dump({ENV_ID: {"n_envs": 2, "n_timesteps": 10, "policy": "MlpPolicy",
+                                             "warmup": {"n_timesteps": 5, "env_kwargs": {}}}}))
+    with pytest.raises(ValueError, match="warm-up moved to its own file"):  # a yml of before the move
+        train_ppo.load_hyperparams(path)
 
 
 def test_tiny_training_run_saves_loads_and_resumes(tmp_path: Path) -> None:
