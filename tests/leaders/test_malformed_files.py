@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 import gzip
+import tracemalloc
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -17,6 +18,7 @@ import numpy as np
 import pytest
 
 from timegap_env.leaders import LeaderProfile, read_ngsim, read_openacc
+from timegap_env.leaders.profile import open_csv
 
 
 @dataclasses.dataclass(frozen=True)
@@ -199,3 +201,30 @@ def test_nan_is_an_openacc_gap(tmp_path):
     empty = read_openacc(write(tmp_path / "empty.csv", replace_value(OPENACC, "")))
     np.testing.assert_array_equal(gap.speed, empty.speed)
     assert np.isnan(gap.speed[OPENACC.value_line - OPENACC.header_line - 1, 0])
+
+
+@pytest.mark.parametrize("compress", [False, True], ids=["csv", "gzip"])
+def test_open_csv_reads_a_line_at_a_time(tmp_path, compress):
+    # Reading every line holds a few buffers, not the file: the whole-file reader held 7 times its text.
+    rows = 200_000
+    text = NGSIM.clean.split("\n")[0] + "\n" + "1,10,5.0,20.0,0.5\n" * rows  # 3.6 MB
+    path = write(tmp_path / ("big.csv.gz" if compress else "big.csv"), text, compress)
+    tracemalloc.start()
+    try:
+        with open_csv(path) as lines:
+            count = sum(1 for _ in lines)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert count == rows + 1
+    assert peak < 2**20, f"peak {peak} bytes while reading {len(text)} characters"
+
+
+@pytest.mark.parametrize("compress", [False, True], ids=["csv", "gzip"])
+def test_non_utf8_byte_past_the_first_chunk_is_located(tmp_path, compress):
+    # The reader decodes in chunks of a few kB; the byte offset in the message is still the file's own.
+    good = ("\ufeffspeed\n" + "20.5\n" * 10_000).encode()  # 50 kB, BOM included
+    path = write(tmp_path / ("lead.csv.gz" if compress else "lead.csv"), good + b"21\xe9\n20\n", compress)
+    message = rf"not UTF-8 text \(byte {len(good) + 2} (of the decompressed data )?is 0xe9\)"
+    with pytest.raises(ValueError, match=message):
+        LeaderProfile.from_csv(path)

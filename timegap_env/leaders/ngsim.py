@@ -61,16 +61,19 @@ def read_ngsim(path: str | Path) -> NgsimTable:
     the file, the header being row 1. Names may be padded with spaces; trailing blank lines are ignored.
     """
     path = Path(path)
-    reader = csv.reader(open_csv(path))
-    header = [name.strip() for name in next(reader)]
-    missing = [name for name in REQUIRED_COLUMNS if name not in header]
-    if missing:
-        raise ValueError(f"{path}: missing column(s) {missing} (found columns {header})")
-    pick = operator.itemgetter(*(header.index(name) for name in REQUIRED_COLUMNS))
-    try:
-        rows = list(map(pick, reader))
-    except IndexError:
-        raise ValueError(f"{path}: row {reader.line_num} has fewer fields than the header ({len(header)})") from None
+    with open_csv(path) as lines:
+        reader = csv.reader(lines)
+        header = [name.strip() for name in next(reader)]
+        missing = [name for name in REQUIRED_COLUMNS if name not in header]
+        if missing:
+            raise ValueError(f"{path}: missing column(s) {missing} (found columns {header})")
+        pick = operator.itemgetter(*(header.index(name) for name in REQUIRED_COLUMNS))
+        try:
+            rows = list(map(pick, reader))
+        except IndexError:
+            raise ValueError(
+                f"{path}: row {reader.line_num} has fewer fields than the header ({len(header)})"
+            ) from None
     if not rows:
         raise ValueError(f"{path}: no data rows after the header")
     vehicle_id, frame, v_vel, v_acc = ([row[j] for row in rows] for j in range(len(REQUIRED_COLUMNS)))

@@ -95,19 +95,21 @@ def read_openacc(path: str | Path) -> OpenAccRun:
     an empty table. Rows are numbered as lines of the file. Trailing blank lines are ignored.
     """
     path = Path(path)
-    handle = open_csv(path)
     metadata = {}
-    for line_number, expected in enumerate(METADATA, start=1):
-        line = handle.readline()
-        if not line:
-            raise ValueError(f"{path}: ends after line {line_number - 1}: expected the metadata line {expected!r}")
-        fields = [field.strip() for field in line.rstrip("\r\n").split(",")]
-        if fields[0] != expected:
-            raise ValueError(f"{path}: line {line_number} is {fields[0]!r}: expected the metadata line {expected!r}")
-        metadata[expected] = [field for field in fields[1:] if field]
-    reader = csv.reader(handle)
-    header = [name.strip() for name in next(reader, [])]
-    rows = list(reader)
+    with open_csv(path) as lines:
+        for line_number, expected in enumerate(METADATA, start=1):
+            line = next(lines, "")
+            if not line:
+                raise ValueError(
+                    f"{path}: ends after line {line_number - 1}: expected the metadata line {expected!r}"
+                )
+            fields = [field.strip() for field in line.rstrip("\r\n").split(",")]
+            if fields[0] != expected:
+                raise ValueError(f"{path}: line {line_number} is {fields[0]!r}: expected the metadata line {expected!r}")
+            metadata[expected] = [field for field in fields[1:] if field]
+        reader = csv.reader(lines)
+        header = [name.strip() for name in next(reader, [])]
+        rows = list(reader)
     date, acc, setting, vehicles = _parse_metadata(path, metadata)
     if "Time" not in header:
         raise ValueError(f"{path}: missing column 'Time' (found columns {header[:8]}...)")

@@ -16,12 +16,14 @@ checks it (gzip, UTF-8 text, not empty) and names the file in its errors.
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import dataclasses
 import gzip
 import io
 import math
 import zlib
+from collections.abc import Iterator
 from pathlib import Path
 
 import numba
@@ -33,37 +35,56 @@ from timegap_env.config import LeaderConfig
 GZIP_MAGIC = b"\x1f\x8b"  # the first two bytes of every gzip file
 
 
-def open_csv(path: Path) -> io.StringIO:
-    """The whole text of a ``.csv`` or gzip-compressed ``.csv.gz`` file, checked, as a stream for :mod:`csv`.
+@contextlib.contextmanager
+def open_csv(path: Path) -> Iterator[Iterator[str]]:
+    """Open a ``.csv`` or gzip-compressed ``.csv.gz`` file for :mod:`csv`: ``with open_csv(path) as lines: ...``.
 
-    The text is UTF-8 (a leading byte-order mark is dropped) and its trailing blank lines are dropped.
-    Raises ``FileNotFoundError`` for a missing file and ``ValueError`` naming the file when it is empty,
-    named ``.gz`` but not gzip, a truncated or corrupt gzip stream, or binary (not UTF-8, or NUL bytes).
+    ``lines`` reads the file a line at a time and checks it: the text is UTF-8 (a leading byte-order mark
+    is dropped) and blank lines at the end are dropped. Raises ``FileNotFoundError`` for a missing file and
+    ``ValueError`` naming the file when it is named ``.gz`` but not gzip (on opening), or, as ``lines`` is
+    read, a truncated or corrupt gzip stream, binary (not UTF-8, or NUL bytes), or empty (no line with text).
     """
-    data = path.read_bytes()
     if path.suffix == ".gz":
-        if not data.startswith(GZIP_MAGIC):
-            what = "an empty file" if not data else f"its first bytes are {data[:8]!r}"
+        with path.open("rb") as raw:
+            start = raw.read(8)
+        if not start.startswith(GZIP_MAGIC):
+            what = "an empty file" if not start else f"its first bytes are {start!r}"
             raise ValueError(f"{path}: not gzip-compressed although named .gz ({what})")
-        try:
-            data = gzip.decompress(data)
-        except (EOFError, zlib.error, gzip.BadGzipFile) as err:
-            raise ValueError(f"{path}: truncated or corrupt gzip data ({err})") from err
+        binary = gzip.open(path, "rb")
+    else:
+        binary = path.open("rb")
+    with io.TextIOWrapper(binary, encoding="utf-8-sig", errors="strict", newline="") as text:
+        yield _checked_lines(path, text)
+
+
+def _checked_lines(path: Path, text: io.TextIOWrapper) -> Iterator[str]:
+    """The lines of ``text`` (``path``'s), checked as :func:`open_csv` says; blank lines are held back until a
+    line with text follows, so the blank lines at the end are never yielded."""
+    blank: list[str] = []
+    has_text = False
     try:
-        text = data.decode("utf-8").removeprefix("\ufeff")
+        for number, line in enumerate(text, start=1):
+            if "\0" in line:
+                raise ValueError(f"{path}: NUL byte on line {number}: binary data, not CSV text")
+            if line.isspace():
+                blank.append(line)
+                continue
+            yield from blank
+            blank.clear()
+            has_text = True
+            yield line
+    except (EOFError, zlib.error, gzip.BadGzipFile) as err:
+        raise ValueError(f"{path}: truncated or corrupt gzip data ({err})") from err
     except UnicodeDecodeError as err:
+        # err.object holds the bytes decoded last, which end where the binary stream stands.
+        offset = text.buffer.tell() - len(err.object) + err.start
         where = "of the decompressed data " if path.suffix == ".gz" else ""
         raise ValueError(
-            f"{path}: not UTF-8 text (byte {err.start} {where}is {data[err.start]:#04x}): "
+            f"{path}: not UTF-8 text (byte {offset} {where}is {err.object[err.start]:#04x}): "
             "binary data or another encoding"
         ) from err
-    if "\0" in text:
-        raise ValueError(f"{path}: NUL byte at character {text.index(chr(0))}: binary data, not CSV text")
-    last = len(text.rstrip())  # where the text ends without its trailing white space
-    if last == 0:
+    if not has_text:
         raise ValueError(f"{path}: empty file (no text)")
-    end = text.find("\n", last)  # the end of the last line with text; blank lines follow it
-    return io.StringIO(text if end < 0 else text[:end], newline="")
 
 
 def _series(name: str, values: np.ndarray) -> np.ndarray:
@@ -146,12 +167,13 @@ class LeaderProfile:
         rows are numbered as lines of the file, the header being row 1.
         """
         path = Path(path)
-        reader = csv.DictReader(open_csv(path))
-        columns = [column.strip() for column in reader.fieldnames]
-        if "speed" not in columns:
-            raise ValueError(f"{path}: missing column 'speed' (found columns {columns})")
-        reader.fieldnames = columns
-        rows = [(reader.line_num, row) for row in reader]
+        with open_csv(path) as lines:
+            reader = csv.DictReader(lines)
+            columns = [column.strip() for column in reader.fieldnames]
+            if "speed" not in columns:
+                raise ValueError(f"{path}: missing column 'speed' (found columns {columns})")
+            reader.fieldnames = columns
+            rows = [(reader.line_num, row) for row in reader]
         if len(rows) < 2:
             found = "one data row" if rows else "no data rows"
             raise ValueError(f"{path}: {found} after the header; a profile needs at least 2")
