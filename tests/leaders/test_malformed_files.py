@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from timegap_env.leaders import LeaderProfile, read_ngsim, read_openacc
+from timegap_env.leaders import LeaderProfile, ngsim, read_ngsim, read_openacc
 from timegap_env.leaders.profile import open_csv
 
 
@@ -228,3 +228,34 @@ def test_non_utf8_byte_past_the_first_chunk_is_located(tmp_path, compress):
     message = rf"not UTF-8 text \(byte {len(good) + 2} (of the decompressed data )?is 0xe9\)"
     with pytest.raises(ValueError, match=message):
         LeaderProfile.from_csv(path)
+
+
+def test_read_ngsim_holds_its_columns_not_its_rows(tmp_path, monkeypatch):
+    # Rows become arrays a chunk at a time; holding every row's text as Python strings took 11 times the arrays.
+    monkeypatch.setattr(ngsim, "CHUNK_ROWS", 1000)
+    rows = 50_000
+    lines = (f"{k // 500},{k % 500},{k * 0.01:.2f},0.5\n" for k in range(rows))  # 100 vehicles, 500 frames each
+    text = "Vehicle_ID,Frame_ID,v_Vel,v_Acc\n" + "".join(lines)
+    path = write(tmp_path / "big.csv", text)
+    tracemalloc.start()
+    try:
+        table = read_ngsim(path)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    arrays = sum(column.nbytes for column in NGSIM.values(table).values())
+    assert table.frame.size == rows and table.v_vel[-1] == pytest.approx((rows - 1) * 0.01)
+    assert peak < 3 * arrays, f"peak {peak} bytes for {arrays} bytes of arrays"
+
+
+def test_ngsim_rows_are_numbered_across_chunks(tmp_path, monkeypatch):
+    clean = NGSIM.clean + "2,11,7.1,30.5,-1.0\n2,12,7.2,31.0,-1.0\n"  # rows on lines 2-6
+    expected = read_ngsim(write(tmp_path / "clean.csv", clean))
+    monkeypatch.setattr(ngsim, "CHUNK_ROWS", 2)
+    assert_same_values(NGSIM, read_ngsim(write(tmp_path / "chunked.csv", clean)), expected)
+    with pytest.raises(ValueError, match=r"row 6, column 'v_Vel' = 'fast' is not a finite number"):
+        read_ngsim(write(tmp_path / "bad.csv", clean.replace("31.0", "fast")))
+    with pytest.raises(ValueError, match=r"row 5, column 'Frame_ID' = '11.5' is not an integer"):
+        read_ngsim(write(tmp_path / "bad.csv", clean.replace("2,11,", "2,11.5,")))
+    with pytest.raises(ValueError, match=r"row 6 has fewer fields than the header"):
+        read_ngsim(write(tmp_path / "short.csv", clean.replace("2,12,7.2,31.0,-1.0", "2,12,7.2")))

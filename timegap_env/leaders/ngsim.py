@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import csv
 import dataclasses
+import itertools
 import operator
 import os
 from pathlib import Path
@@ -30,6 +31,8 @@ from timegap_env.leaders.profile import LeaderProfile, open_csv
 FOOT = 0.3048  # [m per ft]
 FRAME_DT = 0.1  # time between two NGSIM frames [s]
 REQUIRED_COLUMNS = ("Vehicle_ID", "Frame_ID", "v_Vel", "v_Acc")
+COLUMN_TYPES = (np.int64, np.int64, np.float64, np.float64)  # of REQUIRED_COLUMNS
+CHUNK_ROWS = 16_384  # rows parsed at a time, so the text of the whole file is never held
 PATH_VARIABLE = "TIMEGAP_NGSIM_PATH"
 SHARED_SUBSET = Path("shared", "data", "ngsim", "i80_0400_0415_pairs.csv.gz")
 
@@ -61,6 +64,8 @@ def read_ngsim(path: str | Path) -> NgsimTable:
     the file, the header being row 1. Names may be padded with spaces; trailing blank lines are ignored.
     """
     path = Path(path)
+    parts: list[list[np.ndarray]] = [[] for _ in REQUIRED_COLUMNS]  # each column's arrays, a chunk each
+    first_row = 2  # the line of the file the chunk's first row is on
     with open_csv(path) as lines:
         reader = csv.reader(lines)
         header = [name.strip() for name in next(reader)]
@@ -68,22 +73,22 @@ def read_ngsim(path: str | Path) -> NgsimTable:
         if missing:
             raise ValueError(f"{path}: missing column(s) {missing} (found columns {header})")
         pick = operator.itemgetter(*(header.index(name) for name in REQUIRED_COLUMNS))
-        try:
-            rows = list(map(pick, reader))
-        except IndexError:
-            raise ValueError(
-                f"{path}: row {reader.line_num} has fewer fields than the header ({len(header)})"
-            ) from None
-    if not rows:
+        while True:
+            try:
+                chunk = list(map(pick, itertools.islice(reader, CHUNK_ROWS)))
+            except IndexError:
+                raise ValueError(
+                    f"{path}: row {reader.line_num} has fewer fields than the header ({len(header)})"
+                ) from None
+            if not chunk:
+                break
+            for j, (name, dtype) in enumerate(zip(REQUIRED_COLUMNS, COLUMN_TYPES)):
+                parts[j].append(_parse(path, name, [row[j] for row in chunk], dtype, first_row))
+            first_row += len(chunk)
+    if not parts[0]:
         raise ValueError(f"{path}: no data rows after the header")
-    vehicle_id, frame, v_vel, v_acc = ([row[j] for row in rows] for j in range(len(REQUIRED_COLUMNS)))
-    return NgsimTable(
-        path=path,
-        vehicle_id=_parse(path, "Vehicle_ID", vehicle_id, np.int64),
-        frame=_parse(path, "Frame_ID", frame, np.int64),
-        v_vel=_parse(path, "v_Vel", v_vel, np.float64),
-        v_acc=_parse(path, "v_Acc", v_acc, np.float64),
-    )
+    vehicle_id, frame, v_vel, v_acc = (np.concatenate(part) for part in parts)
+    return NgsimTable(path=path, vehicle_id=vehicle_id, frame=frame, v_vel=v_vel, v_acc=v_acc)
 
 
 def vehicle_ids(table: NgsimTable, min_duration: float = 0.0) -> list[int]:
@@ -165,8 +170,11 @@ def _adjacent_checks(table: NgsimTable, rows: np.ndarray) -> tuple[np.ndarray, n
     return repeat, repeat & differs, same_vehicle & (step > 1)
 
 
-def _parse(path: Path, column: str, texts: list[str], dtype: type[np.int64] | type[np.float64]) -> np.ndarray:
-    """One column as a finite ``dtype`` array; the first bad value raises ``ValueError`` naming its row."""
+def _parse(
+    path: Path, column: str, texts: list[str], dtype: type[np.int64] | type[np.float64], first_row: int
+) -> np.ndarray:
+    """One column of rows ``first_row``, ``first_row`` + 1, ... (lines of the file) as a finite ``dtype`` array;
+    the first bad value raises ``ValueError`` naming its row."""
     try:
         values = np.array(texts, dtype=dtype)
     except (ValueError, OverflowError):  # slow path, only to find the first bad value
@@ -177,7 +185,7 @@ def _parse(path: Path, column: str, texts: list[str], dtype: type[np.int64] | ty
             return values
         i = bad[0]
     kind = "an integer" if dtype is np.int64 else "a finite number"
-    raise ValueError(f"{path}: row {i + 2}, column '{column}' = {texts[i]!r} is not {kind}")
+    raise ValueError(f"{path}: row {first_row + i}, column '{column}' = {texts[i]!r} is not {kind}")
 
 
 def _converts(text: str, dtype: type[np.int64] | type[np.float64]) -> bool:
