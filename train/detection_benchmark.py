@@ -1,6 +1,6 @@
 """How fast does each detector find trouble, at the same false-alarm rate? Labelled episodes, one table.
 
-    python -m train.detection_benchmark [--episodes 32] [--out results/monitoring]
+    python -m train.detection_benchmark [--episodes 32] [--out results/monitoring] [--backend serial|ray] [--address A]
 
 Episodes: the env's monitored platoon (sensors with the default noise, the env's Bayesian monitor)
 behind the default leader families, 250 s, the setting held at each of ``SETTINGS``. Nominal
@@ -29,6 +29,12 @@ window fills, RLS converges). Real nominal driving: the OpenACC runs (``read_ope
 people driving), each follower charted around its own median statistic, with the same widths:
 false alarms per hour of driving (skipped, saying so, without the data). Writes ``detection.md``,
 ``detection.csv`` and ``detection.png`` to ``--out``; reruns give the same files.
+
+Pieces of work for ``train.backends``: each setting's calibration, then each (setting, condition)
+batch of held-out episodes with its detectors, then each setting's OpenACC false alarms.
+``--backend serial`` (the default) runs them here one after another, ``--backend ray`` as Ray
+tasks; the batches are the same, so the files are too, bit for bit. How the work was spread is
+printed with the runtime.
 """
 
 from __future__ import annotations
@@ -56,6 +62,7 @@ from timegap_env.monitoring.estimate import estimate_time_gap
 from timegap_env.monitoring.loop import MonitoredPlatoon
 from timegap_env.sim.degradation import parse_degradations, round_to_tick
 from timegap_env.config import TIME_GAP_MIN_SPEED
+from train.backends import Backend, add_arguments
 
 SETTINGS = (1.0, 1.6)  # settings held [s]: the best in nominal episodes and the env's initial one
 DURATION = 250.0  # episode length [s]
@@ -221,15 +228,53 @@ def openacc_false_alarms(recordings: list, widths: dict[str, Threshold], dt: flo
     return {key: alarms / hours for key, (alarms, hours) in counts.items() if hours > 0}
 
 
+def calibrated_widths(setting: float, seeds: Sequence[int]) -> dict[str, Threshold]:
+    """Every detector's chart at ``setting`` [s], matched on nominal calibration episodes ``seeds``: one piece."""
+    calibration = simulate(setting, seeds, None)
+    return {detector: calibrate(calibration, setting, kind, statistic, PlatoonConfig.dt)
+            for detector, (statistic, kind) in DETECTORS.items()}
+
+
+def condition_rows(setting: float, label: str, degradation: dict[str, Any] | None, seeds: Sequence[int],
+                   widths: dict[str, Threshold]) -> list[dict[str, Any]]:
+    """One row per detector on held-out episodes ``seeds`` at ``setting`` [s]: its false alarms per hour if
+    ``degradation`` is None (nominal), else its detection rate and delays: one piece."""
+    batch, dt = simulate(setting, seeds, degradation), PlatoonConfig.dt
+    rows = []
+    for detector, width in widths.items():
+        row = {"setting": setting, "condition": label, "detector": detector, "offset": width.offset,
+               "sigma": width.sigma, "width": width.width}
+        starts = charted_starts(batch, setting, detector, width)
+        if degradation is None:
+            row["false_alarms_per_hour"] = false_alarms_per_hour(starts, dt)
+        else:
+            found, followers = detection_delays(starts, batch, dt)
+            row["detection_rate"] = found.size / followers
+            if found.size:
+                row |= {"mean_delay": float(found.mean()), "median_delay": float(np.median(found)),
+                        "p90_delay": float(np.percentile(found, 90))}
+        rows.append(row)
+    return rows
+
+
+def openacc_rates(setting: float, widths: dict[str, Threshold]) -> dict[tuple[bool, str], float]:
+    """:func:`openacc_false_alarms` of the OpenACC runs with priors at ``setting`` [s]: one piece."""
+    return openacc_false_alarms(openacc_statistics(setting), widths, PlatoonConfig.dt)
+
+
 def main(argv: Sequence[str] | None = None) -> None:
     parser = argparse.ArgumentParser(prog="python -m train.detection_benchmark", description=__doc__.split("\n")[0])
     parser.add_argument("--episodes", type=int, default=32, help="episodes per condition (default %(default)s)")
     parser.add_argument("--nominal-episodes", type=int, default=96,
                         help="nominal episodes for calibration and again for the test (default %(default)s)")
     parser.add_argument("--out", type=Path, default=Path("results/monitoring"), help="output directory")
+    add_arguments(parser)
     args = parser.parse_args(argv)
+    try:
+        backend = Backend.from_args(args)
+    except ValueError as error:
+        parser.error(str(error))
     started = time.perf_counter()
-    dt = PlatoonConfig().dt
     labelled = conditions(DegradationConfig())
     calibration_seeds = list(range(CALIBRATION_SEED_START, CALIBRATION_SEED_START + args.nominal_episodes))
     if calibration_seeds[-1] >= EVAL_SEED_START:
@@ -237,30 +282,17 @@ def main(argv: Sequence[str] | None = None) -> None:
                          f"ones ({EVAL_SEED_START} on)")
     test_seeds = list(range(EVAL_SEED_START, EVAL_SEED_START + args.nominal_episodes))
     condition_seeds = list(range(EVAL_SEED_START, EVAL_SEED_START + args.episodes))
-    rows, widths = [], {}
-    for setting in SETTINGS:
-        calibration = simulate(setting, calibration_seeds, None)
-        widths[setting] = {d: calibrate(calibration, setting, kind, statistic, dt) for d, (statistic, kind) in DETECTORS.items()}
-        nominal = simulate(setting, test_seeds, None)
-        for detector, width in widths[setting].items():
-            rows.append({"setting": setting, "condition": "nominal", "detector": detector, "offset": width.offset,
-                         "sigma": width.sigma,
-                         "width": width.width,
-                         "false_alarms_per_hour": false_alarms_per_hour(charted_starts(nominal, setting, detector, width), dt)})
-        for label, degradation in labelled.items():
-            batch = simulate(setting, condition_seeds, degradation)
-            for detector, width in widths[setting].items():
-                found, followers = detection_delays(charted_starts(batch, setting, detector, width), batch, dt)
-                rows.append({"setting": setting, "condition": label, "detector": detector, "offset": width.offset,
-                             "sigma": width.sigma,
-                             "width": width.width,
-                             "detection_rate": found.size / followers,
-                             **({"mean_delay": float(found.mean()), "median_delay": float(np.median(found)),
-                                 "p90_delay": float(np.percentile(found, 90))} if found.size else {})})
+    widths = dict(zip(SETTINGS, backend.map(calibrated_widths, [(setting, calibration_seeds) for setting in SETTINGS])))
+    spread = {"calibration": backend.describe()}
+    pieces = [(setting, label, degradation, seeds, widths[setting]) for setting in SETTINGS
+              for label, degradation, seeds in [("nominal", None, test_seeds),
+                                                *((label, d, condition_seeds) for label, d in labelled.items())]]
+    rows = [row for part in backend.map(condition_rows, pieces) for row in part]
+    spread["episodes"] = backend.describe()
     real: dict[float, dict[tuple[bool, str], float]] = {}
     if default_openacc_dir().exists():
-        for setting in SETTINGS:
-            real[setting] = openacc_false_alarms(openacc_statistics(setting), widths[setting], dt)
+        real = dict(zip(SETTINGS, backend.map(openacc_rates, [(setting, widths[setting]) for setting in SETTINGS])))
+        spread["OpenACC"] = backend.describe()
         note = f"OpenACC runs from `{default_openacc_dir().name}`."
     else:
         note = f"**OpenACC data not found at {default_openacc_dir()}**: no real nominal driving."
@@ -270,7 +302,8 @@ def main(argv: Sequence[str] | None = None) -> None:
     plot(args.out / "detection.png", rows, list(labelled))
     report = write_report(args.out / "detection.md", args, rows, widths, real, list(labelled), note)
     print(report)
-    print(f"Runtime: {time.perf_counter() - started:.0f} s")
+    print(f"Runtime: {time.perf_counter() - started:.0f} s; spread: "
+          + "; ".join(f"{stage}: {how}" for stage, how in spread.items()))
 
 
 FIELDS = ("setting", "condition", "detector", "offset", "sigma", "width", "false_alarms_per_hour", "detection_rate", "mean_delay",

@@ -35,7 +35,14 @@ setting of its true parameters at the step's start.
 Writes ``table.md``, ``table.csv`` (one row per policy and group), ``episodes.csv`` (every
 episode of every policy), ``profiles.png`` and ``metrics.png`` to ``--out``.
 
+Each (policy, group) batch is one piece of work for ``train.backends``: ``--backend serial`` (the
+default) runs them one after another here, ``--backend ray`` as Ray tasks, on this machine or on
+the cluster at ``--address``; the batches are the same, so the files are too, bit for bit (the
+runtime line, which says how the work was spread, aside). The oracle's lookup and choice are
+spread the same way.
+
     python -m train.evaluate [--episodes 112] [--policies rule_platoon fixed_1.6 ...] [--out results/eval]
+                             [--backend serial|ray] [--address A]
 """
 
 from __future__ import annotations
@@ -65,6 +72,7 @@ from timegap_env.config import EnvConfig
 from timegap_env.envs.info import summary_of, truth_of
 from timegap_env.envs.observation import observation_space
 from timegap_env.leaders import default_ngsim_path, default_openacc_dir, openacc_paths
+from train.backends import Backend, add_arguments
 from train.value_of_information import DEFAULT_TRAIN_EPISODES, all_oracles, choose_oracle, measure_lookup
 
 
@@ -178,10 +186,12 @@ class PolicyChoiceError(ValueError):
     """A policy name or a model that ``--policies`` / ``--model`` cannot use."""
 
 
-def build_policies(names: Sequence[str] | None, model: Path) -> dict[str, NamedPolicy | TruthPolicy]:
+def build_policies(
+    names: Sequence[str] | None, model: Path, backend: Backend | None = None
+) -> dict[str, NamedPolicy | TruthPolicy]:
     """Policies by CLI name; ``names=None`` is the default set (PPO only if ``model``, a zip or a run directory,
     exists). The oracle's lookup is measured on training seeds and the oracle chosen on selection seeds
-    (``train.value_of_information``)."""
+    (``train.value_of_information``), their episodes spread by ``backend`` (default: serial)."""
     model = model / MODEL_FILE if model.is_dir() else model
     config = EnvConfig()  # the default, whose action mode is one setting for the platoon
     policies: dict[str, Any] = {
@@ -196,8 +206,8 @@ def build_policies(names: Sequence[str] | None, model: Path) -> dict[str, NamedP
     if unknown:
         raise PolicyChoiceError(f"--policies {unknown}: unknown; known: {sorted(policies) + [ORACLE, 'ppo']}")
     if ORACLE in wanted:
-        table, _ = measure_lookup(config, DEFAULT_TRAIN_EPISODES)
-        policies[ORACLE] = choose_oracle(config, all_oracles(config, table))
+        table, _ = measure_lookup(config, DEFAULT_TRAIN_EPISODES, backend)
+        policies[ORACLE] = choose_oracle(config, all_oracles(config, table), backend)
     if "ppo" in wanted:
         if model.is_file():
             from agents.learned import LearnedPolicy, RunFileError  # torch is slow to import; only when needed
@@ -282,28 +292,41 @@ def run_batch(
     return records, prints, profile
 
 
+def timed_batch(
+    policy: NamedPolicy | TruthPolicy, group: str, seeds: list[int], record_profile: bool
+) -> tuple[list[dict[str, Any]], list[str], Profile | None, float]:
+    """:func:`run_batch` and the seconds it took where it ran: one piece of work for a backend."""
+    start = time.perf_counter()
+    records, prints, profile = run_batch(policy, group, seeds, record_profile)
+    return records, prints, profile, time.perf_counter() - start
+
+
 def run_all(
-    policies: dict[str, NamedPolicy], plan: list[Episode], profile_group: str | None
+    policies: dict[str, NamedPolicy], plan: list[Episode], profile_group: str | None, backend: Backend | None = None
 ) -> tuple[dict[str, list[dict[str, Any]]], dict[str, Profile], dict[str, float]]:
-    """Every policy on every planned episode: records, profiles, seconds per policy.
+    """Every policy on every planned episode, one piece per (policy, group) batch spread by ``backend`` (default:
+    serial): records, profiles, and per policy the seconds its pieces took where they ran.
 
     Raises ``RuntimeError`` if two policies were given different scenarios for the same episode.
     """
+    backend = backend or Backend()
     groups = list(dict.fromkeys(episode.group for episode in plan))
     batches = {group: [episode.seed for episode in plan if episode.group == group] for group in groups}
     if profile_group is not None:
         batches[profile_group] = profile_first(profile_group, batches[profile_group])
+    pieces = [(policy, group, batches[group], group == profile_group) for policy in policies.values() for group in groups]
+    results = iter(backend.map(timed_batch, pieces))
     records: dict[str, list[dict[str, Any]]] = {}
     profiles: dict[str, Profile] = {}
     timings: dict[str, float] = {}
     reference_prints: list[str] | None = None
     for key, policy in policies.items():
-        start = time.perf_counter()
-        records[key], prints = [], []
+        records[key], prints, timings[key] = [], [], 0.0
         for group in groups:
-            batch, batch_prints, profile = run_batch(policy, group, batches[group], record_profile=group == profile_group)
+            batch, batch_prints, profile, seconds_spent = next(results)
             records[key] += batch
             prints += batch_prints
+            timings[key] += seconds_spent
             if profile is not None:
                 profiles[key] = profile
         if reference_prints is None:
@@ -311,7 +334,6 @@ def run_all(
         elif prints != reference_prints:
             differ = [plan[i] for i, (a, b) in enumerate(zip(prints, reference_prints)) if a != b]
             raise RuntimeError(f"policy {key!r} saw different scenarios than {next(iter(policies))!r} in {differ}")
-        timings[key] = time.perf_counter() - start
         print(f"{policy.name:>28}: {len(plan)} episodes in {timings[key]:.1f} s")
     return records, profiles, timings
 
@@ -541,7 +563,12 @@ def main(argv: Sequence[str] | None = None) -> None:
                         help="group one of whose episodes profiles.png shows: the first with a hidden degradation "
                              "starting midway (default training_mix)")
     parser.add_argument("--out", type=Path, default=DEFAULT_OUT, help=f"output directory (default {DEFAULT_OUT})")
+    add_arguments(parser)
     args = parser.parse_args(argv)
+    try:
+        backend = Backend.from_args(args)
+    except ValueError as error:
+        parser.error(str(error))
     if args.model is not None and not (args.model.is_file() or (args.model / MODEL_FILE).is_file()):
         parser.error(f"--model {args.model}: no such model zip")
     args.model = args.model or DEFAULT_MODEL
@@ -552,13 +579,13 @@ def main(argv: Sequence[str] | None = None) -> None:
     planned_groups = list(dict.fromkeys(episode.group for episode in plan))
     profile_group = args.profile_group if args.profile_group in planned_groups else planned_groups[0]
     try:
-        policies = build_policies(args.policies, args.model)
+        policies = build_policies(args.policies, args.model, backend)
     except (PolicyChoiceError, FileNotFoundError) as error:  # unknown names, a model that cannot be used: no traceback
         parser.error(str(error))
     reference = args.reference if args.reference in policies else None
     if reference is None:
         print(f"note: --reference {args.reference} is not among the policies; no paired differences")
-    records, profiles, timings = run_all(policies, plan, profile_group)
+    records, profiles, timings = run_all(policies, plan, profile_group, backend)
     elapsed = time.perf_counter() - start
 
     args.out.mkdir(parents=True, exist_ok=True)
@@ -586,7 +613,9 @@ def main(argv: Sequence[str] | None = None) -> None:
         "length across groups: NGSIM records are shorter than 250 s).",
         (f"PPO: `{args.model}` ({ppo!r})." if ppo else f"PPO: not evaluated (no model at `{args.model}`)."),
         f"Runtime: {elapsed:.0f} s for {len(policies)} policies "
-        f"({', '.join(f'{key} {spent:.0f} s' for key, spent in timings.items())}).",
+        f"({', '.join(f'{key} {spent:.0f} s' for key, spent in timings.items())}, each its batches' seconds where "
+        f"they ran); spread of the (policy, group) batches: {backend.describe()}"
+        + (" (the oracle's lookup and choice before them the same way)." if ORACLE in policies else "."),
     ]
     write_tables(rows, header, reference, args.out)
     write_episodes(policies, records, args.out)

@@ -1,7 +1,7 @@
 """How much is knowing worth? Blind constants, the hindsight-best constant and the oracles, on the same episodes.
 
     python -m train.value_of_information [--episodes 120] [--train-episodes 16] [--out results/degradation]
-                                         [--config '{"preferred_setting": 1.0}']
+                                         [--config '{"preferred_setting": 1.0}'] [--backend serial|ray] [--address A]
 
 On a fixed set of held-out episodes of the default env (seeds ``EVAL_SEED_START`` on, the default
 leader and degradation mix), every ladder setting is held for whole episodes:
@@ -22,6 +22,12 @@ monitor shows at the best blind constant (its chart's time out of control and ex
 episode, and how well each separates that kind's episodes from nominal ones, as an AUC). Writes
 ``value.md``, ``value.csv`` (per episode), ``lookup.csv`` (per training condition) and
 ``value.png`` to ``--out``; reruns give the same files.
+
+Each vector-env batch of episodes (a lookup condition, a chunk of at most ``BATCH`` held-out
+constant runs, an oracle on the selection or held-out seeds) is one piece of work for
+``train.backends``: ``--backend serial`` (the default) runs them here one after another,
+``--backend ray`` as Ray tasks; the batches are the same, so the files are too, bit for bit.
+How the work was spread is printed with the runtime.
 """
 
 from __future__ import annotations
@@ -29,6 +35,7 @@ from __future__ import annotations
 import argparse
 import csv
 import dataclasses
+import functools
 import json
 import time
 from collections.abc import Callable, Sequence
@@ -49,6 +56,7 @@ from agents.protocol import EVAL_SEED_START
 from timegap_env.config import DEGRADATION_KINDS, SIZE_RANGE_FIELDS, EnvConfig
 from timegap_env.envs.info import summary_of, truth_of
 from timegap_env.sim.degradation import round_to_tick
+from train.backends import Backend, add_arguments
 
 DEFAULT_EPISODES = 120
 DEFAULT_TRAIN_EPISODES = 16
@@ -86,23 +94,53 @@ def run(config: EnvConfig, seeds: Sequence[int], choose: Chooser, options: dict[
             **{signal: np.array([s[signal] for s in summaries]) for signal in MONITOR_SIGNALS}}
 
 
-def constants(config: EnvConfig, seeds: Sequence[int], options: dict[str, Any] | None = None,
-              flag_aware: bool = False) -> dict[str, np.ndarray]:
-    """Every constant on every seed: arrays (n_seeds, n_levels). With ``flag_aware``, every pair of constants, one
-    while every follower's V2V flag is up and one while any is down: arrays (n_seeds, n_levels while up, n_levels
-    while down), whose diagonal holds the plain constants. Run in batches of at most BATCH envs."""
+def flag_aware_actions(up: np.ndarray, down: np.ndarray, obs: np.ndarray, infos: dict[str, Any]) -> np.ndarray:
+    """Per env, level ``up`` while every follower's V2V flag is up, else ``down`` (a chooser, with both bound)."""
+    return np.where(infos["v2v"].all(axis=1), up, down)
+
+
+def oracle_actions(oracle: TruthPolicy, obs: np.ndarray, infos: dict[str, Any]) -> np.ndarray:
+    """``oracle``'s action on the ground truth in ``infos`` (a chooser, with the oracle bound)."""
+    return oracle.act(truth_of(infos))
+
+
+def oracle_piece(config: EnvConfig, seeds: Sequence[int], oracle: TruthPolicy) -> tuple[Any, ...]:
+    """The arguments of :func:`run` that run ``oracle`` on ``seeds``: a piece of work for a backend."""
+    return config, list(seeds), functools.partial(oracle_actions, oracle), None
+
+
+def constant_pieces(config: EnvConfig, seeds: Sequence[int], options: dict[str, Any] | None = None,
+                    flag_aware: bool = False) -> list[tuple[Any, ...]]:
+    """The arguments of :func:`run` for :func:`constants`: every job (seed, level up, level down) in batches of at
+    most BATCH envs, each a piece of work for a backend."""
     n_levels = len(config.setting_levels)
     pairs = [(up, down) for up in range(n_levels) for down in range(n_levels)] if flag_aware else \
         [(level, level) for level in range(n_levels)]
     jobs = [(seed, up, down) for seed in seeds for up, down in pairs]
-    parts = []
+    pieces = []
     for start in range(0, len(jobs), BATCH):
         chunk = jobs[start:start + BATCH]
         up, down = (np.array([job[i] for job in chunk]) for i in (1, 2))
-        parts.append(run(config, [job[0] for job in chunk],
-                         lambda obs, infos, up=up, down=down: np.where(infos["v2v"].all(axis=1), up, down), options))
-    shape = (len(seeds), n_levels, n_levels) if flag_aware else (len(seeds), n_levels)
+        pieces.append((config, [job[0] for job in chunk], functools.partial(flag_aware_actions, up, down), options))
+    return pieces
+
+
+def gather_constants(parts: Sequence[dict[str, Any]], config: EnvConfig, n_seeds: int,
+                     flag_aware: bool = False) -> dict[str, np.ndarray]:
+    """The results of :func:`constant_pieces`' pieces, in order, as :func:`constants` returns them."""
+    n_levels = len(config.setting_levels)
+    shape = (n_seeds, n_levels, n_levels) if flag_aware else (n_seeds, n_levels)
     return {name: np.concatenate([part[name] for part in parts]).reshape(shape) for name in parts[0]}
+
+
+def constants(config: EnvConfig, seeds: Sequence[int], options: dict[str, Any] | None = None,
+              flag_aware: bool = False, backend: Backend | None = None) -> dict[str, np.ndarray]:
+    """Every constant on every seed: arrays (n_seeds, n_levels). With ``flag_aware``, every pair of constants, one
+    while every follower's V2V flag is up and one while any is down: arrays (n_seeds, n_levels while up, n_levels
+    while down), whose diagonal holds the plain constants. Run in batches of at most BATCH envs, spread by
+    ``backend`` (default: serial)."""
+    parts = (backend or Backend()).map(run, constant_pieces(config, seeds, options, flag_aware))
+    return gather_constants(parts, config, len(seeds), flag_aware)
 
 
 def sized(kind: str, size: float, config: EnvConfig) -> float:
@@ -131,13 +169,19 @@ def training_conditions(config: EnvConfig) -> dict[str, tuple[EnvConfig, dict[st
     return conditions
 
 
-def measure_lookup(config: EnvConfig, train_episodes: int) -> tuple[dict[str, float], list[dict[str, Any]]]:
-    """The lookup table (condition -> best constant [s]) from training seeds, and a row per condition."""
+def measure_lookup(config: EnvConfig, train_episodes: int,
+                   backend: Backend | None = None) -> tuple[dict[str, float], list[dict[str, Any]]]:
+    """The lookup table (condition -> best constant [s]) from training seeds, and a row per condition; every
+    condition's batches in one map of ``backend`` (default: serial)."""
     seeds = list(range(train_episodes))
     assert seeds[-1] < EVAL_SEED_START
+    conditions = training_conditions(config)
+    pieces = {key: constant_pieces(condition_config, seeds, options)
+              for key, (condition_config, options) in conditions.items()}
+    parts = iter((backend or Backend()).map(run, [piece for chunks in pieces.values() for piece in chunks]))
     table, rows = {}, []
-    for key, (condition_config, options) in training_conditions(config).items():
-        result = constants(condition_config, seeds, options)
+    for key, (condition_config, _) in conditions.items():
+        result = gather_constants([next(parts) for _ in pieces[key]], condition_config, len(seeds))
         means = result["return"].mean(axis=0)
         best = int(np.argmax(means))
         table[key] = float(config.setting_levels[best])
@@ -153,13 +197,13 @@ def all_oracles(config: EnvConfig, table: dict[str, float]) -> list[TruthPolicy]
             LookupOracle(table, config), LookupOracle(table, config, whole_episode=True)]
 
 
-def choose_oracle(config: EnvConfig, oracles: Sequence[TruthPolicy]) -> TruthPolicy:
-    """*The* oracle: of ``oracles``, the best by mean return on the SELECTION_EPISODES selection episodes."""
+def choose_oracle(config: EnvConfig, oracles: Sequence[TruthPolicy], backend: Backend | None = None) -> TruthPolicy:
+    """*The* oracle: of ``oracles``, the best by mean return on the SELECTION_EPISODES selection episodes, each
+    oracle's episodes one piece of ``backend`` (default: serial)."""
     selection = list(range(SELECTION_SEED_START, SELECTION_SEED_START + SELECTION_EPISODES))
     assert selection[-1] < EVAL_SEED_START
-    means = [run(config, selection, lambda obs, infos, o=o: o.act(truth_of(infos)))["return"].mean()
-             for o in oracles]
-    return oracles[int(np.argmax(means))]
+    results = (backend or Backend()).map(run, [oracle_piece(config, selection, oracle) for oracle in oracles])
+    return oracles[int(np.argmax([result["return"].mean() for result in results]))]
 
 
 def auc(positive: np.ndarray, negative: np.ndarray) -> float:
@@ -179,23 +223,33 @@ def main(argv: Sequence[str] | None = None) -> None:
     parser.add_argument("--out", type=Path, default=DEFAULT_OUT, help="output directory (default %(default)s)")
     parser.add_argument("--config", type=json.loads, default={},
                         help="EnvConfig overrides as JSON, e.g. '{\"preferred_setting\": 1.0}' (default: none)")
+    add_arguments(parser)
     args = parser.parse_args(argv)
+    try:
+        backend = Backend.from_args(args)
+    except ValueError as error:
+        parser.error(str(error))
     started = time.perf_counter()
     config = EnvConfig.from_dict(args.config)
     levels = np.asarray(config.setting_levels)
     seeds = list(range(EVAL_SEED_START, EVAL_SEED_START + args.episodes))
 
-    table, lookup_rows = measure_lookup(config, args.train_episodes)
-    pairs = constants(config, seeds, flag_aware=True)
+    spread = {}  # stage -> how its pieces were spread
+    table, lookup_rows = measure_lookup(config, args.train_episodes, backend)
+    spread["lookup"] = backend.describe()
+    pairs = constants(config, seeds, flag_aware=True, backend=backend)
+    spread["held-out constants"] = backend.describe()
     fixed = diagonal(pairs)
     kinds = fixed["kind"][:, 0]
     blind = int(np.argmax(fixed["return"].mean(axis=0)))
     flag_aware = np.unravel_index(int(np.argmax(pairs["return"].mean(axis=0))), pairs["return"].shape[1:])
     hindsight = fixed["return"].max(axis=1)
     oracles = all_oracles(config, table)
-    best_oracle = choose_oracle(config, oracles).name  # chosen before the held-out episodes
-    oracle_results = {oracle.name: run(config, seeds, lambda obs, infos, o=oracle: o.act(truth_of(infos)))
-                      for oracle in oracles}
+    best_oracle = choose_oracle(config, oracles, backend).name  # chosen before the held-out episodes
+    spread["oracle choice"] = backend.describe()
+    results = backend.map(run, [oracle_piece(config, seeds, oracle) for oracle in oracles])
+    spread["held-out oracles"] = backend.describe()
+    oracle_results = {oracle.name: result for oracle, result in zip(oracles, results)}
     for name, result in oracle_results.items():
         assert list(result["kind"]) == list(kinds), f"{name} saw other episodes"
 
@@ -206,7 +260,8 @@ def main(argv: Sequence[str] | None = None) -> None:
     report = write_report(args.out / "value.md", args, config, kinds, fixed, blind, hindsight, oracle_results,
                           best_oracle, pairs, flag_aware)
     print(report)
-    print(f"Runtime: {time.perf_counter() - started:.0f} s")
+    print(f"Runtime: {time.perf_counter() - started:.0f} s; spread: "
+          + "; ".join(f"{stage}: {how}" for stage, how in spread.items()))
 
 
 def kind_groups(kinds: np.ndarray) -> list[tuple[str, np.ndarray]]:

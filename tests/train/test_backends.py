@@ -1,0 +1,95 @@
+"""``train.backends`` and the scripts' pieces: order, errors, the description, pieces a Ray task can take."""
+
+import argparse
+import importlib.util
+import pickle
+
+import pytest
+
+from agents.policies import FixedPolicy, PaperRulePolicy
+from timegap_env.config import EnvConfig
+from train import detection_benchmark, evaluate, value_of_information
+from train.backends import Backend, add_arguments
+
+
+def power(base: int, exponent: int) -> int:
+    return base**exponent
+
+
+class Recording(Backend):
+    """A serial backend that keeps every piece it was given."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.pieces: list[tuple] = []
+
+    def map(self, function, pieces):
+        self.pieces += [(function, *piece) for piece in pieces]
+        return super().map(function, pieces)
+
+
+def test_serial_map_keeps_the_order_and_says_how_it_ran():
+    backend = Backend()
+    assert backend.describe() == "not used yet"
+    assert backend.map(power, [(2, 3), (3, 2), (5, 0)]) == [8, 9, 1]
+    assert backend.describe().startswith("serial: 3 pieces one after another in this process, ")
+    assert backend.describe().endswith(" s wall")
+    assert backend.map(power, []) == [] and backend.describe().startswith("serial: 0 pieces")
+
+
+def test_a_bad_backend_or_address_is_named():
+    with pytest.raises(ValueError, match="backend = 'dask'"):
+        Backend("dask")
+    with pytest.raises(ValueError, match="address = 'auto': only with the ray backend"):
+        Backend("serial", "auto")
+
+
+def test_the_command_line_flags():
+    parser = argparse.ArgumentParser()
+    add_arguments(parser)
+    args = parser.parse_args([])
+    assert (args.backend, args.address) == ("serial", None)
+    backend = Backend.from_args(parser.parse_args(["--backend", "ray", "--address", "ray://head:10001"]))
+    assert (backend.name, backend.address) == ("ray", "ray://head:10001")
+    with pytest.raises(SystemExit):
+        parser.parse_args(["--backend", "dask"])
+
+
+@pytest.mark.parametrize("script", [evaluate, value_of_information, detection_benchmark])
+def test_the_scripts_refuse_an_address_without_ray(script, capsys):
+    with pytest.raises(SystemExit):
+        script.main(["--address", "auto"])
+    assert "address = 'auto': only with the ray backend" in capsys.readouterr().err
+
+
+@pytest.mark.skipif(importlib.util.find_spec("ray") is not None, reason="Ray is installed here")
+def test_without_ray_the_ray_backend_says_how_to_get_it():
+    with pytest.raises(RuntimeError, match=r"pip install -e '\.\[ray\]'"):
+        Backend("ray").map(power, [(2, 3)])
+
+
+def test_evaluate_runs_one_picklable_piece_per_policy_and_group():
+    policies = {"rule_platoon": PaperRulePolicy(), "fixed_1.6": FixedPolicy(1.6)}
+    plan = evaluate.plan_episodes(3, ["training_mix", "idm"])
+    backend = Recording()
+    records, _, timings = evaluate.run_all(policies, plan, None, backend)
+    assert [(piece[0], piece[2], piece[3]) for piece in backend.pieces] == [
+        (evaluate.timed_batch, group, seeds) for _ in policies for group, seeds in
+        (("training_mix", [plan[0].seed, plan[1].seed]), ("idm", [plan[2].seed]))]
+    for piece in backend.pieces:
+        pickle.loads(pickle.dumps(piece))  # plain pickle: no lambda, no local function
+    direct = evaluate.run_batch(policies["fixed_1.6"], "idm", [plan[2].seed], False)[0]
+    assert records["fixed_1.6"][-1] == direct[0]
+    assert set(timings) == set(policies) and all(spent > 0 for spent in timings.values())
+
+
+def test_value_of_information_pieces_are_picklable_and_give_the_serial_results():
+    config = EnvConfig()
+    pieces = value_of_information.constant_pieces(config, [0, 1], flag_aware=True)
+    assert len(pieces) == 1 and len(pieces[0][1]) == 2 * len(config.setting_levels) ** 2
+    oracle = value_of_information.all_oracles(config, {"none": 1.6})[0]
+    for piece in [*pieces, value_of_information.oracle_piece(config, [5], oracle)]:
+        pickle.loads(pickle.dumps(piece))
+    backend = Recording()
+    pairs = value_of_information.constants(config, [0, 1], backend=backend)
+    assert len(backend.pieces) == 1 and pairs["return"].shape == (2, len(config.setting_levels))
