@@ -392,20 +392,19 @@ def plan(grid: Grid) -> tuple[list[Piece], list[str], dict[str, bytes] | None]:
 
 
 # ---------------------------------------------------------------- the table
-def as_text(value: Any) -> str:
-    """A CSV cell: floats as their shortest exact repr, bools as 0/1, lists and maps as JSON."""
-    if isinstance(value, bool):
-        return str(int(value))
-    if isinstance(value, float):
-        return repr(value)
-    if isinstance(value, (int, str)):
-        return str(value)
-    return json.dumps(value)
-
-
 def axis_text(value: Any) -> str:
     """An axis value in its CSV column: strings as they are, anything else as JSON."""
     return value if isinstance(value, str) else json.dumps(value)
+
+
+def table_rows(grid: Grid, piece: Piece, cell_id: str, episodes: Sequence[dict[str, Any]]) -> list[dict[str, str]]:
+    """The CSV rows of a piece's episodes (:func:`run_piece`'s): its key, its cell's id and axis values (empty for a
+    field the cell leaves at its default), the policy, then each episode's values (a float's str is its shortest
+    exact repr, so a row read back holds the same bits)."""
+    cell = grid.cells[piece.cell]
+    axes = {column: axis_text(cell[column]) if column in cell else "" for column in grid.columns}
+    return [{"piece": piece.key, "cell": cell_id, **axes, "policy": piece.policy,
+             **{name: str(value) for name, value in episode.items()}} for episode in episodes]
 
 
 def read_table(path: Path, grid: Grid) -> tuple[list[str] | None, list[dict[str, str]]]:
@@ -469,11 +468,7 @@ def sweep(grid: Grid, out: Path, backend: Backend, chunk: int = DEFAULT_CHUNK) -
                                            files if p.policy == PPO else None) for p in part])
         calls += 1
         for piece, episodes in zip(part, results):
-            cell = grid.cells[piece.cell]
-            done[piece.key] = [{"piece": piece.key, "cell": cell_ids[piece.cell],
-                                **{column: axis_text(cell[column]) if column in cell else "" for column in grid.columns},
-                                "policy": piece.policy, **{name: as_text(value) for name, value in episode.items()}}
-                               for episode in episodes]
+            done[piece.key] = table_rows(grid, piece, cell_ids[piece.cell], episodes)
         written = list(done[part[0].key][0])
         if header is not None and written != header:
             raise ValueError(f"{path}: its columns {header} are not the ones this sweep writes {written}; "
@@ -481,8 +476,11 @@ def sweep(grid: Grid, out: Path, backend: Backend, chunk: int = DEFAULT_CHUNK) -
         header = written
         write_table(path, header, [row for p in pieces if p.key in done for row in done[p.key]] + others)
     runtime = time.perf_counter() - started
-    spread = (f"{len(todo)} of {len(pieces)} pieces run now in {calls} map call(s) of up to {chunk}; the last: "
-              f"{backend.describe()}" if todo else f"all {len(pieces)} pieces were already in {EPISODES_FILE}, none run")
+    if todo:
+        spread = (f"{len(todo)} of {len(pieces)} pieces run now in {calls} map call(s) of up to {chunk}; the last: "
+                  f"{backend.describe()}")
+    else:
+        spread = f"all {len(pieces)} pieces were already in {EPISODES_FILE}, none run"
     text = summary(grid, pieces, cell_ids, done, len(others), f"Runtime: {runtime:.1f} s; {spread}.")
     (out / SUMMARY_FILE).write_text(text)
     return text
@@ -532,9 +530,9 @@ def summary(grid: Grid, pieces: Sequence[Piece], cell_ids: Sequence[str], done: 
             lines.append(f"| `{cell_ids[index]}` | {values} | {name} | {len(chosen)} | {text} | {collisions} | "
                          f"{seconds(setting) if math.isfinite(setting) else 'n/a'} |")
     lines += ["", "## Best policy per cell", "",
-              "Best by mean return (policies with the same mean joined by =); the difference to the next best is "
-              "paired (the same seeds), with its 95 % bootstrap interval: an interval that holds 0 does not separate "
-              "the two.", "",
+              ("Best by mean return (policies with the same mean joined by =); the difference to the next best is "
+               "paired (the same seeds), with its 95 % bootstrap interval: an interval that holds 0 does not separate "
+               "the two."), "",
               "| cell | " + " | ".join(f"`{a}`" for a in axes) + " | best policy | mean return | next best | "
               "best − next [95 % CI] |",
               "|---|" + "---|" * len(axes) + "---|---|---|---|"]
@@ -551,8 +549,8 @@ def summary(grid: Grid, pieces: Sequence[Piece], cell_ids: Sequence[str], done: 
         lines.append(f"| `{cell_ids[index]}` | {values} | {' = '.join(best[index])} | "
                      f"{returns[index, top].mean():.1f} | {versus} |")
     if n_others:
-        lines += ["", f"{EPISODES_FILE} also keeps {n_others} rows of pieces this grid does not plan (an earlier "
-                      "grid's), left out above."]
+        lines += ["", (f"{EPISODES_FILE} also keeps {n_others} rows of pieces this grid does not plan (an earlier "
+                       "grid's), left out above.")]
     lines += ["", runtime_line, ""]
     return "\n".join(lines)
 

@@ -35,7 +35,7 @@ class Counting(Backend):
         self.pieces: list[tuple[Any, ...]] = []
         self.calls, self.fail_after = 0, fail_after
 
-    def map(self, function, pieces):  # noqa: ANN001, ANN201
+    def map(self, function, pieces):
         if self.calls == self.fail_after:
             raise KeyboardInterrupt("interrupted")
         self.calls += 1
@@ -209,7 +209,7 @@ def test_an_interrupted_sweep_keeps_its_finished_chunks_and_resumes(full_run, tm
 
 
 def test_rows_of_pieces_the_grid_no_longer_plans_are_kept_and_not_summarised(full_run, tmp_path):
-    grid, out = full_run
+    _, out = full_run
     (tmp_path / sweep.EPISODES_FILE).write_bytes((out / sweep.EPISODES_FILE).read_bytes())
     smaller = write_grid(tmp_path, {**TINY, "policies": ["fixed_1.6"]}, "smaller.yml")
     backend = Counting()
@@ -225,7 +225,7 @@ def test_rows_of_pieces_the_grid_no_longer_plans_are_kept_and_not_summarised(ful
 
 
 def test_a_table_of_other_axes_is_not_mixed_in(full_run, tmp_path):
-    grid, out = full_run
+    _, out = full_run
     (tmp_path / sweep.EPISODES_FILE).write_bytes((out / sweep.EPISODES_FILE).read_bytes())
     other = write_grid(tmp_path, {**TINY, "axes": {"reward_weights.efficiency": [1.0]}}, "other.yml")
     with pytest.raises(ValueError, match=r"not this grid's .*'reward_weights.efficiency'.*another --out"):
