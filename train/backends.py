@@ -26,6 +26,11 @@ BACKENDS = ("serial", "ray")
 NOT_SHIPPED = [".git", ".venv", ".venv-clients", "results", "runs", "*.egg-info", "__pycache__"]  # of working_dir
 
 
+def call(function: Callable[..., Any], *arguments: Any) -> Any:
+    """``function(*arguments)``: what a Ray task runs, so that any callable can be a backend's function."""
+    return function(*arguments)
+
+
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """``--backend`` and ``--address`` on a script's command line."""
     parser.add_argument("--backend", choices=BACKENDS, default="serial",
@@ -72,8 +77,9 @@ class Backend:
         if not ray.is_initialized():
             ray.init(address=self.address, runtime_env=self._runtime_env(), include_dashboard=False,
                      logging_level="WARNING", log_to_driver=True)
-        task = ray.remote(num_cpus=1)(function)
-        results = ray.get([task.remote(*piece) for piece in pieces])
+        task = ray.remote(num_cpus=1)(call)  # ray.remote takes Python functions only, not a builtin or a partial
+        shared = ray.put(function)  # serialised once, not once per task
+        results = ray.get([task.remote(shared, *piece) for piece in pieces])
         nodes = [node for node in ray.nodes() if node["Alive"]]
         cpus = int(ray.cluster_resources().get("CPU", 0))
         where = "started on this machine" if self.address is None else f"cluster at {self.address}"

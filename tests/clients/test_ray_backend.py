@@ -1,0 +1,81 @@
+"""``--backend ray`` gives the serial results bit for bit (issue 15): evaluation, value of information, detection.
+
+Slow and needing Ray (the ``ray`` extra, which the ``clients`` extra includes), so it runs in .venv-clients:
+``bash .ci/clients -k ray_backend``. Ray is started on this machine once, by the first map, and shut down after
+the module.
+"""
+
+from __future__ import annotations
+
+import math
+import operator
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from train import detection_benchmark, evaluate, value_of_information
+from train.backends import Backend
+
+pytestmark = pytest.mark.slow
+ray = pytest.importorskip("ray", reason="needs the ray extra: pip install -e '.[ray]' (or run bash .ci/clients)")
+
+RAY_SPREAD = "ray (started on this machine): "
+
+
+@pytest.fixture(scope="module", autouse=True)
+def ray_session() -> Iterator[None]:
+    yield
+    ray.shutdown()
+
+
+def files(out: Path) -> dict[str, bytes]:
+    """Every file ``out`` holds, by name: its bytes."""
+    return {path.name: path.read_bytes() for path in sorted(out.iterdir())}
+
+
+def test_ray_map_keeps_the_order_says_how_it_ran_and_raises_a_piece_error() -> None:
+    backend = Backend("ray")  # the functions: importable on the workers (this test module is not)
+    assert backend.map(operator.truediv, [(value, 2) for value in range(9)]) == [value / 2 for value in range(9)]
+    assert backend.describe().startswith(f"{RAY_SPREAD}9 tasks of 1 CPU on ")
+    with pytest.raises(ValueError, match="math domain error"):
+        backend.map(math.sqrt, [(4.0,), (-1.0,)])
+
+
+def test_evaluate_on_ray_equals_serial(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                       capsys: pytest.CaptureFixture[str]) -> None:
+    monkeypatch.setattr(evaluate, "DEFAULT_TRAIN_EPISODES", 1)  # a quick oracle: both read it in this process
+    monkeypatch.setattr(value_of_information, "SELECTION_EPISODES", 2)
+    runs = {}
+    for backend in ("serial", "ray"):
+        evaluate.main(["--episodes", "14", "--policies", "rule_platoon", "fixed_1.6", "oracle", "ppo",
+                       "--out", str(tmp_path / backend), "--backend", backend])
+        runs[backend] = files(tmp_path / backend)
+    capsys.readouterr()
+    tables = {backend: run.pop("table.md").decode().split("\n") for backend, run in runs.items()}
+    assert runs["ray"] == runs["serial"]  # table.csv, episodes.csv and both figures
+    runtime = {backend: [line for line in table if line.startswith("Runtime: ")] for backend, table in tables.items()}
+    assert [line for line in tables["ray"] if not line.startswith("Runtime: ")] == \
+        [line for line in tables["serial"] if not line.startswith("Runtime: ")]
+    assert "batches: serial: 28 pieces one after another in this process" in runtime["serial"][0]
+    assert f"batches: {RAY_SPREAD}28 tasks of 1 CPU" in runtime["ray"][0]
+
+
+def test_value_of_information_on_ray_equals_serial(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    runs = {}
+    for backend in ("serial", "ray"):
+        value_of_information.main(["--episodes", "6", "--train-episodes", "2", "--out", str(tmp_path / backend),
+                                   "--backend", backend])
+        runs[backend] = files(tmp_path / backend)
+    assert runs["ray"] == runs["serial"]  # value.md, value.csv, lookup.csv, value.png
+    assert f"held-out oracles: {RAY_SPREAD}5 tasks" in capsys.readouterr().out
+
+
+def test_detection_benchmark_on_ray_equals_serial(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    runs = {}
+    for backend in ("serial", "ray"):
+        detection_benchmark.main(["--episodes", "2", "--nominal-episodes", "3", "--out", str(tmp_path / backend),
+                                  "--backend", backend])
+        runs[backend] = files(tmp_path / backend)
+    assert runs["ray"] == runs["serial"]  # detection.md, detection.csv, detection.png
+    assert f"calibration: {RAY_SPREAD}2 tasks" in capsys.readouterr().out
