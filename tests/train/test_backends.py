@@ -1,6 +1,7 @@
 """``train.backends`` and the scripts' pieces: order, errors, the description, pieces a Ray task can take."""
 
 import argparse
+import dataclasses
 import importlib.util
 import pickle
 
@@ -93,3 +94,16 @@ def test_value_of_information_pieces_are_picklable_and_give_the_serial_results()
     backend = Recording()
     pairs = value_of_information.constants(config, [0, 1], backend=backend)
     assert len(backend.pieces) == 1 and pairs["return"].shape == (2, len(config.setting_levels))
+
+
+def test_the_sweep_estimate_of_bench_ray():
+    from train.bench_ray import Costs, break_even_work, serial_seconds, sweep_seconds
+
+    costs = Costs(work=100.0, pieces=100, driver=1.0, start=4.0, warm_up=6.0, per_task=0.001, efficiency=1.0)
+    assert serial_seconds(costs, 2) == 202.0
+    assert sweep_seconds(costs, 2, nodes=1, cpus_per_node=2) == 10.0 + 100 * 1.0 + 2.0  # 100 rounds of a 1 s piece
+    assert sweep_seconds(costs, 2, nodes=100, cpus_per_node=2) == 10.0 + 1.0 + 2.0  # one round: the rest is fixed
+    slow_driver = dataclasses.replace(costs, per_task=1.0)
+    assert sweep_seconds(slow_driver, 2, nodes=100, cpus_per_node=2) == 10.0 + 200.0 + 2.0  # the driver's tasks
+    assert break_even_work(costs, 2) == 20.0  # W = 10 + W / 2
+    assert break_even_work(dataclasses.replace(costs, efficiency=0.5), 2) == float("inf")  # no speed-up
