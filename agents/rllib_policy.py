@@ -1,0 +1,107 @@
+"""A PPO policy trained by Ray RLlib (``train/train_rllib.py``) behind the same interface as
+:class:`agents.learned.LearnedPolicy`, for ``train.evaluate``.
+
+    policy = RLlibPolicy.load("results/rllib")       # the run directory, or its checkpoint/ (algo.save's)
+    action, _ = policy.predict(obs, deterministic=True)
+
+Only the learner's RLModule is read (``<checkpoint>/learner_group/learner/rl_module/default_policy``),
+without starting Ray or the env runners; the env it was trained in (its action mode) comes from the
+checkpoint's ``env.json``, which ``train.train_rllib`` writes beside RLlib's files. The run used no
+observation filter (the env's features are already scaled), so observations go in as they are.
+Needs Ray (the ``ray`` extra).
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from gymnasium import spaces
+
+from agents.learned import RunFileError
+from agents.protocol import ENV_FILE
+
+CHECKPOINT_DIR = "checkpoint"  # train.train_rllib's algo.save directory in a run directory
+MODULE_PATH = ("learner_group", "learner", "rl_module", "default_policy")  # the RLModule inside a checkpoint
+ACTION_SPACES = {"platoon": spaces.Discrete, "relative": spaces.Discrete, "per_vehicle": spaces.MultiDiscrete}
+
+
+class RLlibPolicy:
+    """An RLlib RLModule as a policy: ``predict`` takes one observation (obs_dim,) or a batch (n_envs, obs_dim) and
+    returns the module's actions (deterministic: the most likely, row by row, whatever the batch)."""
+
+    def __init__(self, module: Any, action_mode: str, name: str = "RLlib PPO") -> None:
+        if action_mode not in ACTION_SPACES or not isinstance(module.action_space, ACTION_SPACES[action_mode]):
+            raise ValueError(f"action_mode = {action_mode!r}: does not fit module.action_space = {module.action_space}")
+        module.eval()
+        self.module = module
+        self.action_mode = action_mode
+        self.name = name
+        self._inference = module.get_inference_action_dist_cls()
+        self._exploration = module.get_exploration_action_dist_cls()
+
+    @classmethod
+    def load(cls, path: str | Path, name: str = "RLlib PPO") -> RLlibPolicy:
+        """Load ``path``, a checkpoint directory of ``train.train_rllib`` (``algo.save``'s, with its ``env.json``)
+        or a run directory holding one as ``checkpoint/``, on the CPU. A missing directory or file raises
+        FileNotFoundError; a module or env.json that cannot be used, RunFileError naming it."""
+        path = Path(path)
+        checkpoint = path / CHECKPOINT_DIR if (path / CHECKPOINT_DIR).is_dir() else path
+        module_dir = checkpoint.joinpath(*MODULE_PATH)
+        if not module_dir.is_dir():
+            raise FileNotFoundError(f"path = {str(path)!r}: no RLlib checkpoint (no {module_dir})")
+        env_path = checkpoint / ENV_FILE
+        if not env_path.is_file():
+            raise FileNotFoundError(f"path = {str(path)!r}: no {env_path} (train.train_rllib writes it)")
+        try:
+            action_mode = json.loads(env_path.read_text())["env_kwargs"].get("config", {}).get("action_mode", "platoon")
+        except (UnicodeDecodeError, json.JSONDecodeError, AttributeError, KeyError, TypeError) as error:
+            raise RunFileError(f"{env_path}: not a JSON object with env_kwargs (gym.make's) ({error!r})") from error
+        # Ray: slow to import, and only in the clients venv
+        from ray.rllib.core.rl_module.rl_module import RLModule
+
+        try:
+            module = RLModule.from_checkpoint(module_dir.resolve())
+        except Exception as error:  # RLlib raises FileNotFoundError, pickle's and torch's errors for a bad directory
+            raise RunFileError(f"{module_dir}: not a readable RLlib RLModule ({type(error).__name__}: {error})") \
+                from error
+        try:
+            return cls(module, action_mode, name)
+        except ValueError as error:
+            raise RunFileError(f"{env_path} does not fit the module {module_dir}: {error}") from error
+
+    @property
+    def observation_shape(self) -> tuple[int, ...]:
+        """Shape of one observation the policy takes."""
+        return tuple(self.module.observation_space.shape)
+
+    def predict(
+        self,
+        observation: np.ndarray,
+        state: Any = None,
+        episode_start: np.ndarray | None = None,
+        deterministic: bool = True,
+    ) -> tuple[np.ndarray, Any]:
+        """The module's actions for ``observation``; ``state`` is passed back unchanged (the module is
+        feed-forward) and ``episode_start`` is not needed. Not deterministic: drawn from torch's generator."""
+        from ray.rllib.core.columns import Columns
+
+        obs = np.ascontiguousarray(observation, dtype=np.float32)  # torch takes no negative strides (obs[::-1])
+        if obs.shape[-1:] != self.observation_shape or obs.ndim not in (1, 2):
+            raise ValueError(f"observation of shape {obs.shape}: must be {self.observation_shape} or "
+                             f"(n_envs, *{self.observation_shape})")
+        batch = obs[None] if obs.ndim == 1 else obs
+        with torch.no_grad():
+            logits = self.module.forward_inference({Columns.OBS: torch.from_numpy(batch)})[Columns.ACTION_DIST_INPUTS]
+            if deterministic:
+                actions = self._inference.from_logits(logits).to_deterministic().sample()
+            else:
+                actions = self._exploration.from_logits(logits).sample()
+        actions = actions.numpy()
+        return (actions[0] if obs.ndim == 1 else actions), state
+
+    def __repr__(self) -> str:
+        return f"RLlibPolicy({self.name!r}, action_mode={self.action_mode!r})"
