@@ -8,7 +8,8 @@ Only the learner's RLModule is read (``<checkpoint>/learner_group/learner/rl_mod
 without starting Ray or the env runners; the env it was trained in (its action mode) comes from the
 checkpoint's ``env.json``, which ``train.train_rllib`` writes beside RLlib's files. The run used no
 observation filter (the env's features are already scaled), so observations go in as they are.
-Needs Ray (the ``ray`` extra).
+Loading needs Ray (the ``ray`` extra); importing this module does not, nor torch (:func:`find_checkpoint`
+tells a script whether a path is an RLlib run before it pays for them).
 """
 
 from __future__ import annotations
@@ -18,15 +19,24 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import torch
 from gymnasium import spaces
 
-from agents.learned import RunFileError
 from agents.protocol import ENV_FILE
 
 CHECKPOINT_DIR = "checkpoint"  # train.train_rllib's algo.save directory in a run directory
+CHECKPOINT_MARKER = "rllib_checkpoint.json"  # RLlib writes it at the top of every checkpoint
 MODULE_PATH = ("learner_group", "learner", "rl_module", "default_policy")  # the RLModule inside a checkpoint
 ACTION_SPACES = {"platoon": spaces.Discrete, "relative": spaces.Discrete, "per_vehicle": spaces.MultiDiscrete}
+
+
+def find_checkpoint(path: str | Path) -> Path | None:
+    """The RLlib checkpoint ``path`` is (a directory holding ``rllib_checkpoint.json``) or holds as ``checkpoint/``;
+    None if neither."""
+    path = Path(path)
+    for candidate in (path, path / CHECKPOINT_DIR):
+        if (candidate / CHECKPOINT_MARKER).is_file():
+            return candidate
+    return None
 
 
 class RLlibPolicy:
@@ -48,11 +58,15 @@ class RLlibPolicy:
         """Load ``path``, a checkpoint directory of ``train.train_rllib`` (``algo.save``'s, with its ``env.json``)
         or a run directory holding one as ``checkpoint/``, on the CPU. A missing directory or file raises
         FileNotFoundError; a module or env.json that cannot be used, RunFileError naming it."""
-        path = Path(path)
-        checkpoint = path / CHECKPOINT_DIR if (path / CHECKPOINT_DIR).is_dir() else path
+        from agents.learned import RunFileError
+
+        checkpoint = find_checkpoint(path)
+        if checkpoint is None:
+            raise FileNotFoundError(f"path = {str(path)!r}: no RLlib checkpoint (no {CHECKPOINT_MARKER} in it or in "
+                                    f"its {CHECKPOINT_DIR}/)")
         module_dir = checkpoint.joinpath(*MODULE_PATH)
         if not module_dir.is_dir():
-            raise FileNotFoundError(f"path = {str(path)!r}: no RLlib checkpoint (no {module_dir})")
+            raise RunFileError(f"{checkpoint}: an RLlib checkpoint without the RLModule {module_dir}")
         env_path = checkpoint / ENV_FILE
         if not env_path.is_file():
             raise FileNotFoundError(f"path = {str(path)!r}: no {env_path} (train.train_rllib writes it)")
@@ -87,6 +101,7 @@ class RLlibPolicy:
     ) -> tuple[np.ndarray, Any]:
         """The module's actions for ``observation``; ``state`` is passed back unchanged (the module is
         feed-forward) and ``episode_start`` is not needed. Not deterministic: drawn from torch's generator."""
+        import torch
         from ray.rllib.core.columns import Columns
 
         obs = np.ascontiguousarray(observation, dtype=np.float32)  # torch takes no negative strides (obs[::-1])

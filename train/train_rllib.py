@@ -15,10 +15,9 @@ mapped where RLlib has a counterpart (``MAPPED``): env_kwargs -> env_config, gam
 learning_rate -> lr, clip_range -> clip_param, ent_coef -> entropy_coeff, batch_size -> minibatch_size,
 n_epochs -> num_epochs, n_steps -> rollout_fragment_length with a train batch of runners x envs x n_steps
 (n_envs x n_steps when runners x envs = n_envs, the default), policy_kwargs' net_arch -> two separate
-tanh MLPs (fcnet_hiddens, vf_share_layers off). ``normalize`` has no counterpart: the observations are
-already scaled to [-1, 1] and go in as they are, the rewards are not scaled (RLlib's new API stack has no
-running reward normalisation; it standardises the advantages, as SB3 does). RLlib's own settings, set to
-what SB3's PPO does, are in ``RLLIB_OWN``. The SB3 run's warm-up (hyperparams/ppo_warmup.yml) is not
+tanh MLPs (fcnet_hiddens, vf_share_layers off), normalize -> the rewards times ``REWARD_SCALE`` (RLlib's new
+API stack has no running reward normalisation like SB3's VecNormalize; the observations are already scaled
+to [-1, 1] and go in as they are). RLlib's own settings, set to what SB3's PPO does, are in ``RLLIB_OWN``. The SB3 run's warm-up (hyperparams/ppo_warmup.yml) is not
 repeated. ``--timesteps`` defaults to ``DEFAULT_TIMESTEPS``, 1 M env steps, about 3-4 minutes on this
 2-core machine: half the SB3 run's n_timesteps (2 M).
 
@@ -51,12 +50,12 @@ import gymnasium as gym
 import numpy as np
 
 from agents.protocol import ENV_FILE, EVAL_SEED_START
+from agents.rllib_policy import CHECKPOINT_DIR, RLlibPolicy
 from timegap_env import ENV_ID
 from train.backends import NOT_SHIPPED, REPO
 
 QUALIFIED_ID = f"timegap_env:{ENV_ID}"  # gymnasium imports timegap_env, which registers the id, in any process
 RLLIB_ENV = "timegap_rllib"  # RLlib's name of make_env
-CHECKPOINT_DIR = "checkpoint"  # algo.save's directory in --out
 REPORT_FILE = "training.md"
 DEFAULT_TIMESTEPS = 1_000_000  # about 3-4 min on this 2-core machine, half the SB3 run's 2 M [env steps]
 DEFAULT_ENV_RUNNERS = 2  # one per core of this machine
@@ -71,6 +70,9 @@ MAPPED = {  # ppo.yml's PPO key -> PPOConfig.training's; the keys of UNMAPPED: s
     "n_epochs": "num_epochs",
 }
 UNMAPPED = {"n_envs", "n_steps", "n_timesteps", "policy", "normalize", "policy_kwargs", "env_kwargs"}  # read apart
+REWARD_SCALE = 1 / 30  # normalize's counterpart: about 1 / the std of the discounted return (gamma 0.99) that
+# VecNormalize divided the rewards by at the end of the SB3 run (results/ppo/vecnormalize.pkl: variance 880); not
+# tuned. SB3 also clips the scaled rewards at 10, which caps a collision's cost; not done here.
 RLLIB_OWN = {  # PPOConfig.training settings ppo.yml has no key for, set as SB3's PPO behaves
     "use_kl_loss": False,  # RLlib adds a KL penalty by default, SB3 does not
     "vf_clip_param": math.inf,  # RLlib clips the value loss at 10 by default, SB3 (clip_range_vf None) does not
@@ -105,7 +107,11 @@ class ForRLlib(gym.vector.VectorWrapper):
     """The native vector env as RLlib's runners step it: ``reset(seed=s)`` seeds platoon i with s x num_envs + i,
     so vector envs given consecutive seeds (RLlib's runners: seed + worker index) draw disjoint platoons; and the
     infos are left out (PPO reads none, RLlib would keep every step's 35 diagnostics in its episodes and ship them
-    to the learner: 4.5 MB per 2048 steps)."""
+    to the learner: 4.5 MB per 2048 steps); the rewards are multiplied by ``reward_scale``."""
+
+    def __init__(self, env: gym.vector.VectorEnv, reward_scale: float = 1.0) -> None:
+        super().__init__(env)
+        self.reward_scale = reward_scale
 
     def reset(self, *, seed: int | list[int | None] | None = None,
               options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict[str, Any]]:
@@ -116,18 +122,19 @@ class ForRLlib(gym.vector.VectorWrapper):
 
     def step(self, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
         obs, rewards, terminated, truncated, _ = self.env.step(actions)
-        return obs, rewards, terminated, truncated, {}
+        return obs, rewards * self.reward_scale, terminated, truncated, {}
 
 
 def make_env(env_config: dict[str, Any]) -> gym.vector.VectorEnv:
-    """RLlib's env creator: ``env_config`` (gym.make's keyword arguments, ``num_envs`` added by RLlib's
-    vector_entry_point) -> the native vector env in :class:`ForRLlib`."""
+    """RLlib's env creator: ``env_config`` (gym.make's keyword arguments, ``reward_scale`` and ``num_envs``, added by
+    RLlib's vector_entry_point) -> the native vector env in :class:`ForRLlib`."""
     kwargs = dict(env_config)
     if "num_envs" not in kwargs:
         raise ValueError(f"env_config = {env_config!r}: has no num_envs; the runners must use "
                          "gym_env_vectorize_mode='vector_entry_point'")
-    num_envs = kwargs.pop("num_envs")
-    return ForRLlib(gym.make_vec(QUALIFIED_ID, num_envs=num_envs, vectorization_mode="vector_entry_point", **kwargs))
+    num_envs, reward_scale = kwargs.pop("num_envs"), kwargs.pop("reward_scale", 1.0)
+    envs = gym.make_vec(QUALIFIED_ID, num_envs=num_envs, vectorization_mode="vector_entry_point", **kwargs)
+    return ForRLlib(envs, reward_scale)
 
 
 def net_arch_of(policy_kwargs: dict[str, Any], where: Path) -> list[int]:
@@ -187,6 +194,7 @@ class Settings:
     env_kwargs: dict[str, Any]  # gym.make's keyword arguments
     training: dict[str, Any]  # PPOConfig.training's, mapped from the yml
     hidden: list[int]  # hidden layer sizes of the policy's and the value function's MLPs
+    reward_scale: float  # the rewards PPO learns from: the env's times this [-]
 
     @classmethod
     def from_args(cls, args: argparse.Namespace) -> Settings:
@@ -207,6 +215,8 @@ class Settings:
         for name, value in (("--timesteps", args.timesteps), ("--env-runners", runners), ("--envs-per-runner", envs)):
             if value < 1:
                 raise ValueError(f"{name} = {value}: must be >= 1")
+        normalize = hyperparams.get("normalize", False)  # rl-zoo3's: a bool or VecNormalize's keyword arguments
+        scale_rewards = normalize.get("norm_reward", True) if isinstance(normalize, dict) else bool(normalize)
         last_seed = (args.seed + runners) * envs + envs - 1
         if args.seed < 0 or last_seed >= EVAL_SEED_START:
             raise ValueError(f"--seed {args.seed}: the runners' platoons are seeded up to {last_seed}, must stay in "
@@ -218,6 +228,7 @@ class Settings:
             env_kwargs=with_env_config(hyperparams.get("env_kwargs") or {}, args.env_config),
             training={MAPPED[key]: value for key, value in hyperparams.items() if key in MAPPED},
             hidden=net_arch_of(hyperparams.get("policy_kwargs") or {}, args.hyperparams),
+            reward_scale=REWARD_SCALE if scale_rewards else 1.0,
         )
 
     @property
@@ -227,9 +238,9 @@ class Settings:
 
     @property
     def env_config(self) -> dict[str, Any]:
-        """RLlib's env_config: gym.make's keyword arguments, next-step autoreset (RLlib takes the observation after a
-        finished step as the next episode's first)."""
-        return {**self.env_kwargs, "autoreset_mode": "next_step"}
+        """RLlib's env_config, make_env's: gym.make's keyword arguments, next-step autoreset (RLlib takes the observation
+        after a finished step as the next episode's first) and the reward scale."""
+        return {**self.env_kwargs, "autoreset_mode": "next_step", "reward_scale": self.reward_scale}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -240,7 +251,7 @@ class Iteration:
     steps: int  # env steps sampled so far
     sampled: int  # env steps sampled in this iteration
     episodes: int  # episodes that ended in this iteration
-    episode_return: float  # their mean return (NaN: none ended)
+    episode_return: float  # their mean return, the env's rewards (not scaled; NaN: none ended)
     seconds: float  # wall time of the iteration, sampling and update [s]
 
     def line(self) -> str:
@@ -297,7 +308,7 @@ class Run:
              f"steps), {', '.join(f'{key} {value}' for key, value in s.training.items())}, two MLPs {s.hidden} "
              "(tanh) |"),
             (f"| PPO, RLlib's own | {', '.join(f'{key} {value}' for key, value in RLLIB_OWN.items())}; "
-             "no observation filter, no reward scaling, no warm-up |"),
+             f"rewards x {s.reward_scale:.4g} (returns below in the env's units), no observation filter, no warm-up |"),
             f"| iterations, env steps | {len(self.iterations)}, {steps:,} |",
             (f"| training time, throughput | {self.training_seconds:.0f} s, "
              f"{steps / self.training_seconds:,.0f} env steps/s |"),
@@ -311,12 +322,13 @@ class Run:
                 ("By this command, through `train.evaluate`'s functions (`available_groups`, `plan_episodes`, "
                  "`build_policies`, `run_all`, `summarise`): its held-out groups and seeds, deterministic actions. "
                  "Mean return [95 % bootstrap interval]; Δ: paired difference to the paper's rule on the same "
-                 "episodes."), "",
-                "| policy | return | Δ return vs paper rule (platoon) | collisions |", "|---|---|---|---|",
+                 "episodes; switches: follower setting changes per episode."), "",
+                "| policy | return | Δ return vs paper rule (platoon) | collisions | mean τ* [s] | switches |",
+                "|---|---|---|---|---|---|",
                 *(f"| {r['name']} | {r['return_mean']:.1f} [{r['return_ci_low']:.1f}, {r['return_ci_high']:.1f}] | "
                   f"{r['return_vs_reference_mean']:.1f} [{r['return_vs_reference_ci_low']:.1f}, "
-                  f"{r['return_vs_reference_ci_high']:.1f}] | {r['collisions']}/{r['episodes']} |"
-                  for r in held_out.rows),
+                  f"{r['return_vs_reference_ci_high']:.1f}] | {r['collisions']}/{r['episodes']} | "
+                  f"{r['mean_setting_mean']:.2f} | {r['switches_mean']:.2f} |" for r in held_out.rows),
                 "",
             ]
         return "\n".join([
@@ -345,8 +357,6 @@ def main(argv: list[str] | None = None) -> None:
         NUM_EPISODES,
     )
     from ray.tune.registry import register_env
-
-    from agents.rllib_policy import RLlibPolicy
 
     # ---------------------------------------------------------------- Ray and the algorithm
     torch.set_num_threads(1)  # the learner here: with 2 threads its update took 5-30 times longer on this machine
@@ -378,7 +388,8 @@ def main(argv: list[str] | None = None) -> None:
             result = algo.train()[ENV_RUNNER_RESULTS]
             previous, steps = steps, int(result[NUM_ENV_STEPS_SAMPLED_LIFETIME])
             rows.append(Iteration(len(rows) + 1, steps, steps - previous, int(result.get(NUM_EPISODES, 0)),
-                                  float(result.get(EPISODE_RETURN_MEAN, math.nan)), time.perf_counter() - tick))
+                                  float(result.get(EPISODE_RETURN_MEAN, math.nan)) / settings.reward_scale,
+                                  time.perf_counter() - tick))
             print(rows[-1].line(), flush=True)
         training_seconds = time.perf_counter() - clock
         checkpoint = args.out / CHECKPOINT_DIR

@@ -8,6 +8,7 @@ short episodes, its checkpoint loaded by :class:`RLlibPolicy` and its report hol
 from __future__ import annotations
 
 import json
+import pickle
 import re
 from pathlib import Path
 
@@ -17,13 +18,13 @@ import pytest
 import yaml
 
 from agents.learned import RunFileError
-from agents.rllib_policy import RLlibPolicy
+from agents.rllib_policy import CHECKPOINT_DIR, RLlibPolicy, find_checkpoint
 from timegap_env import ENV_ID
 from timegap_env.config import EnvConfig
 from timegap_env.envs.observation import observation_space
 from train.train_rllib import (
-    CHECKPOINT_DIR,
     REPORT_FILE,
+    REWARD_SCALE,
     Settings,
     main,
     make_env,
@@ -62,7 +63,14 @@ def test_settings_map_the_sb3_yml() -> None:
     }
     assert settings.hidden == [64, 64]
     assert settings.env_kwargs == yml["env_kwargs"]
-    assert settings.env_config == {**yml["env_kwargs"], "autoreset_mode": "next_step"}
+    assert yml["normalize"] is True and settings.reward_scale == REWARD_SCALE
+    assert settings.env_config == {**yml["env_kwargs"], "autoreset_mode": "next_step", "reward_scale": REWARD_SCALE}
+
+
+def test_rewards_are_scaled_only_when_the_yml_normalizes_them(tmp_path: Path) -> None:
+    for normalize, scale in ((False, 1.0), ("dict(norm_obs=True, norm_reward=False)", 1.0), (True, REWARD_SCALE)):
+        settings = Settings.from_args(parse_args(["--hyperparams", str(_yml(tmp_path, normalize=normalize))]))
+        assert settings.reward_scale == scale, normalize
 
 
 def test_settings_refuse_what_rllib_cannot_map(tmp_path: Path) -> None:
@@ -77,10 +85,10 @@ def test_settings_refuse_what_rllib_cannot_map(tmp_path: Path) -> None:
         Settings.from_args(parse_args(["--hyperparams", str(PPO_YML), "--envs-per-runner", "-1"]))
 
 
-def test_runner_env_spreads_seeds_and_leaves_infos_out() -> None:
+def test_runner_env_spreads_seeds_scales_rewards_and_leaves_infos_out() -> None:
     """Runner w's vector env, seeded seed + w by RLlib, steps platoons (seed + w) x num_envs + i."""
-    n = 3
-    envs = make_env({"config": SHORT, "autoreset_mode": "next_step", "num_envs": n})
+    n, scale = 3, 0.5
+    envs = make_env({"config": SHORT, "autoreset_mode": "next_step", "reward_scale": scale, "num_envs": n})
     native = gym.make_vec(ENV_ID, num_envs=n, vectorization_mode="vector_entry_point", config=SHORT,
                           autoreset_mode="next_step")
     obs, infos = envs.reset(seed=2)
@@ -91,7 +99,7 @@ def test_runner_env_spreads_seeds_and_leaves_infos_out() -> None:
         obs, rewards, terminated, truncated, infos = envs.step(actions)
         expected, expected_rewards, expected_terminated, expected_truncated, _ = native.step(actions)
         assert infos == {}
-        assert np.array_equal(obs, expected) and np.array_equal(rewards, expected_rewards)
+        assert np.array_equal(obs, expected) and np.array_equal(rewards, expected_rewards * scale)
         assert np.array_equal(terminated, expected_terminated) and np.array_equal(truncated, expected_truncated)
     with pytest.raises(ValueError, match="num_envs"):
         make_env({"config": SHORT})
@@ -99,6 +107,12 @@ def test_runner_env_spreads_seeds_and_leaves_infos_out() -> None:
 
 def test_rllib_policy_load_names_what_is_missing_or_broken(tmp_path: Path) -> None:
     with pytest.raises(FileNotFoundError, match="no RLlib checkpoint"):
+        RLlibPolicy.load(tmp_path)
+    assert find_checkpoint(tmp_path) is None and find_checkpoint(tmp_path / "model.zip") is None
+    (tmp_path / CHECKPOINT_DIR).mkdir()
+    (tmp_path / CHECKPOINT_DIR / "rllib_checkpoint.json").write_text("{}")
+    assert find_checkpoint(tmp_path) == find_checkpoint(tmp_path / CHECKPOINT_DIR) == tmp_path / CHECKPOINT_DIR
+    with pytest.raises(RunFileError, match="without the RLModule"):
         RLlibPolicy.load(tmp_path)
     module_dir = tmp_path / CHECKPOINT_DIR / "learner_group" / "learner" / "rl_module" / "default_policy"
     module_dir.mkdir(parents=True)
@@ -145,5 +159,7 @@ def test_train_rllib_end_to_end_then_the_policy_acts(tmp_path: Path) -> None:
         sampled, _ = policy.predict(obs, deterministic=False)
         assert all(envs.single_action_space.contains(action) for action in sampled)
         obs, *_ = envs.step(actions)
+    shipped = pickle.loads(pickle.dumps(policy))  # as train.evaluate --backend ray sends it to its tasks
+    assert np.array_equal(shipped.predict(obs)[0], policy.predict(obs)[0])
     with pytest.raises(ValueError, match="observation of shape"):
         policy.predict(obs[:, :-1])
