@@ -17,9 +17,9 @@ n_epochs -> num_epochs, n_steps -> rollout_fragment_length with a train batch of
 (n_envs x n_steps when runners x envs = n_envs, the default), policy_kwargs' net_arch -> two separate
 tanh MLPs (fcnet_hiddens, vf_share_layers off), normalize -> the rewards times ``REWARD_SCALE`` (RLlib's new
 API stack has no running reward normalisation like SB3's VecNormalize; the observations are already scaled
-to [-1, 1] and go in as they are). RLlib's own settings, set to what SB3's PPO does, are in ``RLLIB_OWN``. The SB3 run's warm-up (hyperparams/ppo_warmup.yml) is not
-repeated. ``--timesteps`` defaults to ``DEFAULT_TIMESTEPS``, 1 M env steps, about 3-4 minutes on this
-2-core machine: half the SB3 run's n_timesteps (2 M).
+to [-1, 1] and go in as they are). RLlib's own settings, set to what SB3's PPO does, are in ``RLLIB_OWN``.
+The SB3 run's warm-up (hyperparams/ppo_warmup.yml) is not repeated. ``--timesteps`` defaults to
+``DEFAULT_TIMESTEPS``, 1 M env steps, about 2-3 minutes on this 2-core machine: half the SB3 run's 2 M.
 
 Runner w (1, 2, ...) steps platoons seeded (seed + w) x envs-per-runner + i, i < envs-per-runner (RLlib
 seeds runner w's vector env with seed + w; ``ForRLlib`` spreads that over its platoons), so runners never
@@ -57,7 +57,7 @@ from train.backends import NOT_SHIPPED, REPO
 QUALIFIED_ID = f"timegap_env:{ENV_ID}"  # gymnasium imports timegap_env, which registers the id, in any process
 RLLIB_ENV = "timegap_rllib"  # RLlib's name of make_env
 REPORT_FILE = "training.md"
-DEFAULT_TIMESTEPS = 1_000_000  # about 3-4 min on this 2-core machine, half the SB3 run's 2 M [env steps]
+DEFAULT_TIMESTEPS = 1_000_000  # about 2-3 min on this 2-core machine, half the SB3 run's 2 M [env steps]
 DEFAULT_ENV_RUNNERS = 2  # one per core of this machine
 EVAL_POLICIES = ("rule_platoon", "fixed_1.6")  # train.evaluate's policies the report compares with
 MAPPED = {  # ppo.yml's PPO key -> PPOConfig.training's; the keys of UNMAPPED: see Settings.from_args
@@ -69,7 +69,8 @@ MAPPED = {  # ppo.yml's PPO key -> PPOConfig.training's; the keys of UNMAPPED: s
     "batch_size": "minibatch_size",
     "n_epochs": "num_epochs",
 }
-UNMAPPED = {"n_envs", "n_steps", "n_timesteps", "policy", "normalize", "policy_kwargs", "env_kwargs"}  # read apart
+UNMAPPED = {"n_envs", "n_steps", "n_timesteps", "policy", "normalize", "policy_kwargs", "env_kwargs"}  # read apart;
+# n_timesteps is the SB3 run's length, not this one's (--timesteps)
 REWARD_SCALE = 1 / 30  # normalize's counterpart: about 1 / the std of the discounted return (gamma 0.99) that
 # VecNormalize divided the rewards by at the end of the SB3 run (results/ppo/vecnormalize.pkl: variance 880); not
 # tuned. SB3 also clips the scaled rewards at 10, which caps a collision's cost; not done here.
@@ -105,9 +106,10 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
 
 class ForRLlib(gym.vector.VectorWrapper):
     """The native vector env as RLlib's runners step it: ``reset(seed=s)`` seeds platoon i with s x num_envs + i,
-    so vector envs given consecutive seeds (RLlib's runners: seed + worker index) draw disjoint platoons; and the
-    infos are left out (PPO reads none, RLlib would keep every step's 35 diagnostics in its episodes and ship them
-    to the learner: 4.5 MB per 2048 steps); the rewards are multiplied by ``reward_scale``."""
+    so vector envs given consecutive seeds (RLlib's runners: seed + worker index) draw disjoint platoons; the
+    infos are left out (PPO reads none; RLlib would keep them in its episodes and ship them to the learner: with
+    the per-step diagnostics 4.5 MB per 2048 steps, which made sampling 5-10 times slower); the rewards are
+    multiplied by ``reward_scale``."""
 
     def __init__(self, env: gym.vector.VectorEnv, reward_scale: float = 1.0) -> None:
         super().__init__(env)
@@ -127,13 +129,14 @@ class ForRLlib(gym.vector.VectorWrapper):
 
 def make_env(env_config: dict[str, Any]) -> gym.vector.VectorEnv:
     """RLlib's env creator: ``env_config`` (gym.make's keyword arguments, ``reward_scale`` and ``num_envs``, added by
-    RLlib's vector_entry_point) -> the native vector env in :class:`ForRLlib`."""
+    RLlib's vector_entry_point) -> the native vector env, without its per-step diagnostics, in :class:`ForRLlib`."""
     kwargs = dict(env_config)
     if "num_envs" not in kwargs:
         raise ValueError(f"env_config = {env_config!r}: has no num_envs; the runners must use "
                          "gym_env_vectorize_mode='vector_entry_point'")
     num_envs, reward_scale = kwargs.pop("num_envs"), kwargs.pop("reward_scale", 1.0)
-    envs = gym.make_vec(QUALIFIED_ID, num_envs=num_envs, vectorization_mode="vector_entry_point", **kwargs)
+    envs = gym.make_vec(QUALIFIED_ID, num_envs=num_envs, vectorization_mode="vector_entry_point",
+                        step_diagnostics=False, **kwargs)
     return ForRLlib(envs, reward_scale)
 
 
@@ -200,21 +203,24 @@ class Settings:
     def from_args(cls, args: argparse.Namespace) -> Settings:
         """The settings of ``args``; a yml key with no counterpart, sizes below 1 or seeds reaching the evaluation's
         raise ValueError naming them."""
-        from train.train_ppo import (  # SB3's parser of the yml
-            load_hyperparams,
-            with_env_config,
-        )
+        # SB3's parser of the yml and its env_kwargs
+        from train.train_ppo import load_hyperparams, with_env_config
 
         hyperparams = load_hyperparams(args.hyperparams)
         unknown = set(hyperparams) - set(MAPPED) - UNMAPPED
         if unknown:
             raise ValueError(f"hyperparams {ENV_ID} keys {sorted(unknown)} in {args.hyperparams}: no RLlib "
                              f"counterpart here; mapped: {sorted(MAPPED)}, read apart: {sorted(UNMAPPED)}")
+        if hyperparams["policy"] != "MlpPolicy":
+            raise ValueError(f"hyperparams {ENV_ID}.policy = {hyperparams['policy']!r} in {args.hyperparams}: only "
+                             "'MlpPolicy' has an RLlib counterpart here (its default MLP module)")
         runners = args.env_runners
-        envs = args.envs_per_runner or max(1, hyperparams["n_envs"] // max(runners, 1))
+        envs = max(1, hyperparams["n_envs"] // max(runners, 1)) if args.envs_per_runner is None else args.envs_per_runner
         for name, value in (("--timesteps", args.timesteps), ("--env-runners", runners), ("--envs-per-runner", envs)):
             if value < 1:
                 raise ValueError(f"{name} = {value}: must be >= 1")
+        if args.eval_episodes is not None and args.eval_episodes < 0:
+            raise ValueError(f"--eval-episodes = {args.eval_episodes}: must be >= 0 (0: no held-out evaluation)")
         normalize = hyperparams.get("normalize", False)  # rl-zoo3's: a bool or VecNormalize's keyword arguments
         scale_rewards = normalize.get("norm_reward", True) if isinstance(normalize, dict) else bool(normalize)
         last_seed = (args.seed + runners) * envs + envs - 1

@@ -79,10 +79,14 @@ def test_settings_refuse_what_rllib_cannot_map(tmp_path: Path) -> None:
     with pytest.raises(ValueError, match="net_arch"):
         Settings.from_args(parse_args(["--hyperparams", str(_yml(
             tmp_path, policy_kwargs="dict(net_arch=dict(pi=[64, 64], vf=[32]))"))]))
+    with pytest.raises(ValueError, match="CnnPolicy"):
+        Settings.from_args(parse_args(["--hyperparams", str(_yml(tmp_path, policy="CnnPolicy"))]))
     with pytest.raises(ValueError, match="--seed 400"):  # (400 + 2) x 32 + 31 reaches the evaluation's seeds
         Settings.from_args(parse_args(["--hyperparams", str(PPO_YML), "--seed", "400"]))
     with pytest.raises(ValueError, match="--envs-per-runner"):
-        Settings.from_args(parse_args(["--hyperparams", str(PPO_YML), "--envs-per-runner", "-1"]))
+        Settings.from_args(parse_args(["--hyperparams", str(PPO_YML), "--envs-per-runner", "0"]))
+    with pytest.raises(ValueError, match="--eval-episodes"):
+        Settings.from_args(parse_args(["--hyperparams", str(PPO_YML), "--eval-episodes", "-1"]))
 
 
 def test_runner_env_spreads_seeds_scales_rewards_and_leaves_infos_out() -> None:
