@@ -1,8 +1,9 @@
 """``python -m train.train_rllib`` and ``agents.rllib_policy`` (issue 15).
 
-The settings and the runners' env are checked without Ray (fast, any venv); the end-to-end run needs the ``ray``
-extra (``.venv-clients``, ``bash .ci/clients``) and is slow: a tiny run of two runners with two platoons each and
-short episodes, its checkpoint loaded by :class:`RLlibPolicy` and its report holding the held-out returns.
+The settings, the runners' env, the reward scale's selection and its report are checked without Ray (fast, any
+venv); the end-to-end runs need the ``ray`` extra (``.venv-clients``, ``bash .ci/clients``) and are slow: a tiny run
+of two runners with two platoons each and short episodes, its checkpoint loaded by :class:`RLlibPolicy` and its
+report holding the returns on the check and held-out episodes; a tiny ``--select-scale`` of two candidates.
 """
 
 from __future__ import annotations
@@ -22,17 +23,27 @@ from agents.rllib_policy import CHECKPOINT_DIR, RLlibPolicy, find_checkpoint
 from timegap_env import ENV_ID
 from timegap_env.config import EnvConfig
 from timegap_env.envs.observation import observation_space
+from train.train_ppo import EVAL_EPISODES, EVAL_SEED
 from train.train_rllib import (
     REPORT_FILE,
     REWARD_SCALE,
+    SELECTION_FILE,
+    Candidate,
+    Checked,
+    Iteration,
     Settings,
+    Trained,
+    best_candidate,
     main,
     make_env,
     parse_args,
+    scale_text,
+    selection_report,
 )
 
 REPO = Path(__file__).resolve().parents[2]
 PPO_YML = REPO / "hyperparams" / "ppo.yml"
+COMMITTED_SELECTION = REPO / "results" / "rllib" / SELECTION_FILE
 SHORT = {"episode_duration": 20.0}  # [s]: 20 decisions
 INSTALL = "needs the ray extra: pip install -e '.[ray]' (or run bash .ci/clients)"
 
@@ -71,6 +82,63 @@ def test_rewards_are_scaled_only_when_the_yml_normalizes_them(tmp_path: Path) ->
     for normalize, scale in ((False, 1.0), ("dict(norm_obs=True, norm_reward=False)", 1.0), (True, REWARD_SCALE)):
         settings = Settings.from_args(parse_args(["--hyperparams", str(_yml(tmp_path, normalize=normalize))]))
         assert settings.reward_scale == scale, normalize
+
+
+def test_reward_scale_is_read_as_a_positive_number_or_fraction(capsys: pytest.CaptureFixture[str]) -> None:
+    args = parse_args(["--hyperparams", str(PPO_YML), "--reward-scale", "1/30"])
+    assert args.reward_scale == 1 / 30 and Settings.from_args(args).reward_scale == 1 / 30
+    assert parse_args(["--select-scale", "1", "1/30", "0.02"]).select_scale == [1.0, 1 / 30, 0.02]
+    for text in ("0", "-0.1", "abc", "1/0"):
+        with pytest.raises(SystemExit):
+            parse_args(["--reward-scale", text])
+        assert f"reward scale {text!r}" in capsys.readouterr().err
+    assert [scale_text(scale) for scale in (1.0, 1 / 30, 0.02, 0.0333)] == ["1", "1/30", "0.02", "0.0333"]
+
+
+def test_select_scale_refuses_what_would_not_be_a_fair_choice() -> None:
+    base = ["--hyperparams", str(PPO_YML), "--select-scale"]
+    for extra, message in ((["1"], "two or more different"), (["1", "1/30", "1/30"], "two or more different"),
+                           (["1", "0.02", "--reward-scale", "1"], "--reward-scale 1 with --select-scale"),
+                           (["1", "0.02", "--eval-episodes", "0"], "--eval-episodes 0 with --select-scale")):
+        with pytest.raises(ValueError, match=message):
+            Settings.from_args(parse_args(base + extra))
+    # (280 + 2) x 32 + 31 = 9055: below the held-out seeds, so a plain run may, but among the check episodes' seeds
+    assert Settings.from_args(parse_args(["--hyperparams", str(PPO_YML), "--seed", "280"])).runners == 2
+    with pytest.raises(ValueError, match=f"must stay below {EVAL_SEED}"):
+        Settings.from_args(parse_args(base + ["1", "0.02", "--seed", "280"]))
+
+
+def _candidate(scale: float, returns: list[float]) -> Candidate:
+    """A --select-scale candidate with ``returns`` on the check episodes and one iteration of 4 ended episodes."""
+    seeds = list(range(EVAL_SEED, EVAL_SEED + len(returns)))
+    trained = Trained([Iteration(1, 4096, 4096, 4, -200.0, 0.5)], 0.5, Path("gone"))
+    return Candidate(scale, trained, Checked(seeds, np.array(returns), 1))
+
+
+def test_selection_chooses_the_highest_mean_return_on_the_check_episodes() -> None:
+    candidates = [_candidate(1.0, [-20.0, -10.0]), _candidate(1 / 30, [-12.0, -11.0]), _candidate(0.02, [-11.0, -12.0])]
+    assert best_candidate(candidates) is candidates[1]  # -11.5, equal to 0.02's: the first of equal ones
+    settings = Settings.from_args(parse_args(["--hyperparams", str(PPO_YML)]))
+    report = selection_report("python -m train.train_rllib --select-scale 1 1/30 0.02", settings, 0, "here",
+                              candidates, 60.0)
+    assert "| 1/30 (chosen) | -11.5 [" in report and "| 1 | -15.0 [" in report and "| 0.02 | -11.5 [" in report
+    assert "| 1 | -15.0 [-20.0, -10.0] | -3.5 [" in report  # paired with the chosen: (-8 + 1) / 2
+    assert f"seeds {EVAL_SEED}-{EVAL_SEED + 1}" in report and "1/32" not in report and "1/2 |" in report
+    assert "Chosen: rewards x 0.0333333 (1/30). `REWARD_SCALE` in train/train_rllib.py is 0.0333333, the chosen" \
+        in report
+    assert "not the chosen scale" in selection_report("c", settings, 0, "here", candidates[:1], 1.0)
+
+
+def test_reward_scale_is_the_one_the_committed_selection_chose() -> None:
+    """REWARD_SCALE was once set after a look at held-out returns; it must be what --select-scale chose on the check
+    episodes (results/rllib/selection.md), among no scaling, 1/30 and 0.02, scored on the check episodes."""
+    report = COMMITTED_SELECTION.read_text()
+    chosen = re.search(r"^Chosen: rewards x ([0-9.e-]+)", report, re.MULTILINE)
+    assert chosen is not None, f"{COMMITTED_SELECTION}: no 'Chosen: rewards x' line"
+    assert float(chosen.group(1)) == pytest.approx(REWARD_SCALE, rel=1e-5)
+    assert "--select-scale 1 1/30 0.02" in report
+    assert f"seeds {EVAL_SEED}-{EVAL_SEED + EVAL_EPISODES - 1}" in report
+    assert len(re.findall(r"^\| (1|1/30|0\.02)( \(chosen\))? \| ", report, re.MULTILINE)) == 3
 
 
 def test_settings_refuse_what_rllib_cannot_map(tmp_path: Path) -> None:
@@ -142,6 +210,9 @@ def test_train_rllib_end_to_end_then_the_policy_acts(tmp_path: Path) -> None:
     iterations = [line for line in report.splitlines() if re.fullmatch(r"\| \d+ \| [\d,]+ \| .*", line)]
     assert len(iterations) >= 2  # 80 env steps each, up to 160
     assert "## Held-out evaluation (7 episodes per policy" in report
+    assert re.search(rf"{EVAL_EPISODES} check episodes \(seeds {EVAL_SEED}-{EVAL_SEED + EVAL_EPISODES - 1}\); "
+                     rf"collisions \| -?[\d.]+ \[-?[\d.]+, -?[\d.]+\]; \d+/{EVAL_EPISODES} \|", report)
+    assert "## Reward scale" in report and "seen before this choice" in report
     for name in ("RLlib PPO", "paper rule (platoon)", "fixed 1.6 s"):
         assert f"| {name} | " in report
     assert json.loads((out / CHECKPOINT_DIR / "env.json").read_text())["env_kwargs"]["config"] == {
@@ -167,3 +238,21 @@ def test_train_rllib_end_to_end_then_the_policy_acts(tmp_path: Path) -> None:
     assert np.array_equal(shipped.predict(obs)[0], policy.predict(obs)[0])
     with pytest.raises(ValueError, match="observation of shape"):
         policy.predict(obs[:, :-1])
+
+
+@pytest.mark.slow
+def test_select_scale_trains_each_candidate_and_keeps_only_the_table(tmp_path: Path) -> None:
+    ray = pytest.importorskip("ray", reason=INSTALL)
+    pytest.importorskip("ray.rllib", reason=INSTALL)
+    yml = _yml(tmp_path, n_envs=4, n_steps=20, batch_size=40, n_epochs=1)
+    out = tmp_path / "selection"
+    try:
+        main(["--select-scale", "1", "1/30", "--timesteps", "80", "--env-runners", "2", "--envs-per-runner", "2",
+              "--hyperparams", str(yml), "--env-config", json.dumps(SHORT), "--out", str(out)])
+    finally:
+        ray.shutdown()
+    assert sorted(path.name for path in out.iterdir()) == [SELECTION_FILE]  # no checkpoint, no training.md
+    report = (out / SELECTION_FILE).read_text()
+    rows = re.findall(r"^\| (1|1/30)( \(chosen\))? \| -?[\d.]+ \[.*\| [\d,]+ \| \d+ \|$", report, re.MULTILINE)
+    assert [row[0] for row in rows] == ["1", "1/30"] and sum(bool(row[1]) for row in rows) == 1
+    assert "--select-scale 1 1/30 --timesteps 80" in report and "No held-out episode is run" in report
