@@ -68,6 +68,7 @@ import timegap_env
 from agents.oracles import TruthPolicy
 from agents.policies import ChartStepPolicy, NamedPolicy, PaperRulePolicy, V2VAwarePolicy, fixed_policies, seconds
 from agents.protocol import EVAL_SEED_START, MODEL_FILE
+from agents.rllib_policy import find_checkpoint
 from timegap_env.config import EnvConfig
 from timegap_env.envs.info import summary_of, truth_of
 from timegap_env.envs.observation import observation_space
@@ -192,7 +193,8 @@ def build_policies(
     """Policies by CLI name; ``names=None`` is the default set (PPO only if ``model``, a zip or a run directory,
     exists). The oracle's lookup is measured on training seeds and the oracle chosen on selection seeds
     (``train.value_of_information``), their episodes spread by ``backend`` (default: serial)."""
-    model = model / MODEL_FILE if model.is_dir() else model
+    rllib = find_checkpoint(model)  # a train.train_rllib run rather than an SB3 model
+    model = model / MODEL_FILE if model.is_dir() and rllib is None else model
     config = EnvConfig()  # the default, whose action mode is one setting for the platoon
     policies: dict[str, Any] = {
         "rule_platoon": PaperRulePolicy(config),
@@ -209,11 +211,16 @@ def build_policies(
         table, _ = measure_lookup(config, DEFAULT_TRAIN_EPISODES, backend)
         policies[ORACLE] = choose_oracle(config, all_oracles(config, table), backend)
     if "ppo" in wanted:
-        if model.is_file():
+        if rllib is not None or model.is_file():
             from agents.learned import LearnedPolicy, RunFileError  # torch is slow to import; only when needed
 
             try:
-                policies["ppo"] = LearnedPolicy.load(model)
+                if rllib is not None:
+                    from agents.rllib_policy import RLlibPolicy  # loading needs the ray extra
+
+                    policies["ppo"] = RLlibPolicy.load(rllib)
+                else:
+                    policies["ppo"] = LearnedPolicy.load(model)
             except RunFileError as error:
                 raise PolicyChoiceError(str(error)) from error
             expected = observation_space(config).shape
@@ -556,7 +563,8 @@ def main(argv: Sequence[str] | None = None) -> None:
                              "ppo (default: all, ppo if --model exists)")
     parser.add_argument("--model", type=Path,
                         help="SB3 PPO zip or a run directory holding model.zip; vecnormalize.pkl and env.json beside "
-                             f"it are used if present (default {DEFAULT_MODEL}, skipped if absent)")
+                             f"it are used if present (default {DEFAULT_MODEL}, skipped if absent); or a run of "
+                             "train.train_rllib (results/rllib or its checkpoint/; needs the ray extra)")
     parser.add_argument("--reference", default=DEFAULT_REFERENCE,
                         help=f"policy the paired return differences are taken against (default {DEFAULT_REFERENCE})")
     parser.add_argument("--profile-group", default="training_mix",
@@ -569,8 +577,9 @@ def main(argv: Sequence[str] | None = None) -> None:
         backend = Backend.from_args(args)
     except ValueError as error:
         parser.error(str(error))
-    if args.model is not None and not (args.model.is_file() or (args.model / MODEL_FILE).is_file()):
-        parser.error(f"--model {args.model}: no such model zip")
+    if args.model is not None and not (args.model.is_file() or (args.model / MODEL_FILE).is_file()
+                                       or find_checkpoint(args.model) is not None):
+        parser.error(f"--model {args.model}: no such model zip or RLlib checkpoint")
     args.model = args.model or DEFAULT_MODEL
 
     start = time.perf_counter()
