@@ -7,7 +7,9 @@ compiled kernels loaded by a short batch of each kind of policy):
    the held-out groups, the oracle's lookup and choice first) run serially here: its wall time and
    each policy's seconds per episode;
 2. Ray's fixed start-up (``ray.init`` on this machine and a first task that does nothing), one more
-   empty task, and the cost per task of ``NOOP_TASKS`` empty tasks mapped at once;
+   empty task, the cost per task of ``NOOP_TASKS`` empty tasks mapped at once, and how many CPUs'
+   worth the machine really gives: a CPU-bound sum alone here against one per CPU as Ray tasks at
+   once (a virtual machine's CPUs may share their host's cores), here and again at the end;
 3. the same evaluation workload on Ray three times: with fresh workers (each imports the package
    and loads its kernels on its first piece), then twice with warm ones, then serially once more;
    the records must equal the first serial ones bit for bit. Other processes may share the CPUs:
@@ -44,6 +46,7 @@ from train.backends import Backend
 
 DEFAULT_OUT = Path("results/ray/scaling.md")
 NOOP_TASKS = 200  # empty tasks mapped at once to measure Ray's cost per task [-]
+SPIN_ITERATIONS = 100_000_000  # integers summed: a CPU-bound task of about a second [-]
 SWEEP_CELLS = 20  # config cells of the estimated sweep, each a full evaluation [-]
 CPUS_PER_NODE = 2  # the estimate's nodes: like this machine [-]
 NODES = (1, 2, 4, 8, 16, 32)
@@ -56,17 +59,25 @@ class Size:
     episodes: int  # evaluation episodes per policy [-]
     policies: list[str] | None  # evaluate's --policies; None: its default set
     noop_tasks: int  # empty Ray tasks [-]
+    spin: int  # integers the CPU-bound task sums [-]
     value_of_information: list[str]  # the script's size arguments
     detection: list[str]
 
 
-FULL = Size(evaluate.DEFAULT_EPISODES, None, NOOP_TASKS, [], [])
-QUICK = Size(14, ["rule_platoon", "fixed_1.6", "ppo"], 20, ["--episodes", "4", "--train-episodes", "1"],
-             ["--episodes", "2", "--nominal-episodes", "3"])
+FULL = Size(evaluate.DEFAULT_EPISODES, None, NOOP_TASKS, SPIN_ITERATIONS, [], [])
+QUICK = Size(14, ["rule_platoon", "fixed_1.6", "ppo"], 20, SPIN_ITERATIONS // 10,
+             ["--episodes", "4", "--train-episodes", "1"], ["--episodes", "2", "--nominal-episodes", "3"])
 
 
-def nothing() -> None:
-    """An empty piece of work: what a task costs Ray itself."""
+def capacity(backend: Backend, cpus: int, iterations: int) -> float:
+    """How many CPUs' worth ``cpus`` CPU-bound tasks at once get: cpus x (a sum of ``iterations`` integers here) /
+    (the wall of ``cpus`` such sums as tasks at once). Builtins: the workers import nothing of this project."""
+    started = time.perf_counter()
+    sum(range(iterations))
+    alone = time.perf_counter() - started
+    started = time.perf_counter()
+    backend.map(sum, [(range(iterations),)] * cpus)
+    return cpus * alone / (time.perf_counter() - started)
 
 
 class Counting(Backend):
@@ -200,15 +211,16 @@ def main(argv: Sequence[str] | None = None) -> None:
 
     ray_backend = Counting("ray")
     started = time.perf_counter()
-    ray_backend.map(nothing, [()])  # ray.init here, then the first task
+    ray_backend.map(int, [()])  # ray.init here, then the first task: int() is 0, a builtin: nothing to import
     start = time.perf_counter() - started
     started = time.perf_counter()
-    ray_backend.map(nothing, [()])
+    ray_backend.map(int, [()])
     one_task = time.perf_counter() - started
     started = time.perf_counter()
-    ray_backend.map(nothing, [()] * size.noop_tasks)
+    ray_backend.map(int, [()] * size.noop_tasks)
     per_task = (time.perf_counter() - started) / size.noop_tasks
     cpus = int(ray.cluster_resources().get("CPU", 0))
+    capacities = [capacity(ray_backend, cpus, size.spin)]
 
     fresh = run_evaluation(ray_backend, size)
     loads["after Ray's first evaluation"] = load()
@@ -229,6 +241,7 @@ def main(argv: Sequence[str] | None = None) -> None:
             times = {backend: run_script(script, arguments, backend, Path(scratch, name, backend))
                      for backend in ("serial", "ray")}
             scripts[name] = (times, same_files(Path(scratch, name, "serial"), Path(scratch, name, "ray")), arguments)
+    capacities.append(capacity(ray_backend, cpus, size.spin))
     loads["end"] = load()
     ray.shutdown()
 
@@ -236,7 +249,7 @@ def main(argv: Sequence[str] | None = None) -> None:
                   warm_up=max(fresh.seconds - warm.seconds, 0.0), per_task=per_task,
                   efficiency=serial.seconds / (cpus * warm.seconds))
     text = report(args, size, serial, (serial_runs[0].seconds, serial_runs[1].seconds), fresh, warm, costs, cpus,
-                  one_task, spread, identical, scripts, loads)
+                  one_task, spread, identical, scripts, loads, capacities)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(text)
     print(text)
@@ -244,7 +257,8 @@ def main(argv: Sequence[str] | None = None) -> None:
 
 def report(args: argparse.Namespace, size: Size, serial: Evaluation, serial_runs: tuple[float, float],
            fresh: Evaluation, warm: Evaluation, costs: Costs, cpus: int, one_task: float, spread: str, identical: bool,
-           scripts: dict[str, tuple[dict[str, float], bool, list[str]]], loads: dict[str, str]) -> str:
+           scripts: dict[str, tuple[dict[str, float], bool, list[str]]], loads: dict[str, str],
+           capacities: list[float]) -> str:
     """The markdown of ``--out``."""
     import ray
     import torch
@@ -292,6 +306,8 @@ def report(args: argparse.Namespace, size: Size, serial: Evaluation, serial_runs
         f"| cost per task, {size.noop_tasks} empty tasks mapped at once | {1000 * costs.per_task:.2f} ms |",
         f"| fresh workers' warm-up (first evaluation minus the faster warm one, 0 if not longer) | "
         f"{costs.warm_up:.1f} s |",
+        f"| CPUs' worth the machine gave {cpus} CPU-bound tasks at once (before the evaluations on Ray, at the end) | "
+        + ", ".join(f"{value:.2f}" for value in capacities) + " |",
         f"| efficiency: serial work / ({cpus} CPUs x warm Ray wall) | {costs.efficiency:.2f} |",
         f"| mean piece of the evaluation (serial) | {1000 * mean_piece:.0f} ms, {mean_piece / costs.per_task:.0f}x "
         "the cost per task |", "",
@@ -339,6 +355,8 @@ def report(args: argparse.Namespace, size: Size, serial: Evaluation, serial_runs
         f"warm Ray workers than serially (efficiency {costs.efficiency:.2f}; 1 would be all {cpus} CPUs fully used"
         + (": above 1 because the serial run was slowed, its torch running PPO on several threads that crawl when "
            "other processes load the CPUs, where Ray's workers use one thread each" if costs.efficiency > 1 else "")
+        + f"; the machine itself gave {min(capacities):.2f}-{max(capacities):.2f} CPUs' worth to {cpus} CPU-bound "
+        "tasks at once, its virtual CPUs sharing the host's cores with other work, which bounds any speed-up here"
         + "). A fresh `--backend ray` command first pays Ray's start-up and its workers' warm-up "
         f"({fresh_cost:.0f} s here), so Ray pays once the spread work is worth more than about "
         + (f"**{even:.0f} s serially**" if math.isfinite(even) else "**never** (no speed-up here)") + ". Here: "
