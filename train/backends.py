@@ -75,7 +75,7 @@ class Backend:
         except ImportError as error:
             raise RuntimeError("--backend ray needs Ray: pip install -e '.[ray]'") from error
         if not ray.is_initialized():
-            ray.init(address=self.address, runtime_env=self._runtime_env(), include_dashboard=False,
+            ray.init(address=self.address, runtime_env=runtime_env(self.address), include_dashboard=False,
                      logging_level="WARNING", log_to_driver=True)
         task = ray.remote(num_cpus=1)(call)  # ray.remote takes Python functions only, not a builtin or a partial
         shared = ray.put(function)  # serialised once, not once per task
@@ -86,15 +86,17 @@ class Backend:
         self._spread = f"ray ({where}): {len(pieces)} tasks of 1 CPU on {cpus} CPUs, {len(nodes)} node(s)"
         return results
 
-    def _runtime_env(self) -> dict[str, Any]:
-        """What the workers need: this repository's code and where the data are."""
-        from timegap_env.leaders import default_ngsim_path, default_openacc_dir
+def runtime_env(address: str | None) -> dict[str, Any]:
+    """What Ray's workers need: this repository's code and where the data are. On this machine (``address``
+    None) the workers share its install and only the scripts' folder is added to their path; on a cluster the
+    repository is shipped as Ray's ``working_dir``."""
+    from timegap_env.leaders import default_ngsim_path, default_openacc_dir
 
-        data = {"TIMEGAP_NGSIM_PATH": str(default_ngsim_path()), "TIMEGAP_OPENACC_PATH": str(default_openacc_dir())}
-        if self.address is None:  # the workers share this machine's install: only the scripts' folder is added
-            path = os.pathsep.join(filter(None, [str(REPO), os.environ.get("PYTHONPATH")]))
-            return {"env_vars": {**data, "PYTHONPATH": path}}
-        return {"working_dir": str(REPO), "excludes": NOT_SHIPPED, "env_vars": data}
+    data = {"TIMEGAP_NGSIM_PATH": str(default_ngsim_path()), "TIMEGAP_OPENACC_PATH": str(default_openacc_dir())}
+    if address is None:
+        path = os.pathsep.join(filter(None, [str(REPO), os.environ.get("PYTHONPATH")]))
+        return {"env_vars": {**data, "PYTHONPATH": path}}
+    return {"working_dir": str(REPO), "excludes": NOT_SHIPPED, "env_vars": data}
 
 
-__all__ = ["BACKENDS", "Backend", "add_arguments"]
+__all__ = ["BACKENDS", "Backend", "add_arguments", "runtime_env"]

@@ -47,7 +47,6 @@ import argparse
 import dataclasses
 import json
 import math
-import os
 import shlex
 import shutil
 import sys
@@ -63,7 +62,7 @@ import numpy as np
 from agents.protocol import ENV_FILE, EVAL_SEED_START
 from agents.rllib_policy import CHECKPOINT_DIR, RLlibPolicy
 from timegap_env import ENV_ID
-from train.backends import NOT_SHIPPED, REPO
+from train.backends import runtime_env
 
 QUALIFIED_ID = f"timegap_env:{ENV_ID}"  # gymnasium imports timegap_env, which registers the id, in any process
 RLLIB_ENV = "timegap_rllib"  # RLlib's name of make_env
@@ -188,15 +187,6 @@ def net_arch_of(policy_kwargs: dict[str, Any], where: Path) -> list[int]:
     if extra:
         raise ValueError(f"hyperparams {ENV_ID}.policy_kwargs keys {sorted(extra)} in {where}: no RLlib counterpart")
     return list(arch)
-
-
-def runtime_env(address: str | None) -> dict[str, Any]:
-    """What the runners need to import this repository (``train``, for make_env): its folder on their path here,
-    its code as ``working_dir`` on a cluster."""
-    if address is None:
-        path = os.pathsep.join(filter(None, [str(REPO), os.environ.get("PYTHONPATH")]))
-        return {"env_vars": {"PYTHONPATH": path}}
-    return {"working_dir": str(REPO), "excludes": NOT_SHIPPED}
 
 
 @dataclasses.dataclass(frozen=True)
