@@ -68,7 +68,7 @@ class ChartMemory(NamedTuple):
     exceedances_in_window: np.ndarray  # int64 [-]
     run_length: np.ndarray  # int64 [ticks]
     hold_off: np.ndarray  # int64 ticks left in which alarms are held off [ticks]
-    starts: np.ndarray  # (window ticks, n_envs, n_vehicles) int64 ring: chart tick of an excursion start, -1 none
+    starts: np.ndarray  # (n_envs, n_vehicles, window ticks) int64 ring: chart tick of an excursion start, -1 none
     restarted: np.ndarray  # int64 chart tick of each vehicle's last (re)start; older starts do not count
 
 
@@ -78,7 +78,7 @@ class ControlChart:
     A subclass names its ``kind`` (its key in :data:`CHARTS`) and defines
     ``_sides(estimates, centers)``: update its statistic through a block of ticks and say on which
     side of its limits it lies after each (-1, 0, +1); ``_restart(mask)``: restart its statistic
-    for those vehicles; and, if it has a statistic, ``_allocate()`` to create it.
+    for those vehicles. A statistic lives in ``statistic`` (n_envs, n_vehicles, 2), in place.
 
     Public state, arrays (n_envs, n_vehicles): ``center`` [s], ``side``, ``alarm``,
     ``exceedance``, ``exceedances_in_window``, ``run_length`` [ticks], ``hold_off`` [ticks].
@@ -99,12 +99,13 @@ class ControlChart:
             exceedances_in_window=np.zeros(self.shape, dtype=np.int64),
             run_length=np.zeros(self.shape, dtype=np.int64),
             hold_off=np.zeros(self.shape, dtype=np.int64),
-            starts=np.full((config.exceedance_window_ticks,) + self.shape, -1, dtype=np.int64),
+            starts=np.full(self.shape + (config.exceedance_window_ticks,), -1, dtype=np.int64),
             restarted=np.zeros(self.shape, dtype=np.int64),
         )
         self._memory_args = tuple(self._memory)  # the same arrays, as the kernel takes them
-        self._tick = 0  # ticks charted so far; this tick's ring slot is _tick % window
-        self._allocate()
+        self._tick = np.zeros(1, dtype=np.int64)  # ticks charted so far; this tick's ring slot is _tick % window
+        # the statistic of EWMA (z [s] in column 0) and CUSUM (C+, C- [sigma_desired]) charts, unused by Shewhart's
+        self.statistic = np.zeros(self.shape + (2,))
         self.reset(None, center)
 
     side = property(lambda self: self._memory.side, doc="-1 below, +1 above the limits, 0 inside (n_envs, n_vehicles).")
@@ -153,9 +154,9 @@ class ControlChart:
         flags, counts = np.empty((2, *sides.shape), dtype=bool), np.empty((2, *sides.shape), dtype=np.int64)
         block = ChartState(center=centers, alarm=flags[0], side=sides, exceedance=flags[1],
                            exceedances_in_window=counts[0], run_length=counts[1])
-        _count_excursions(self._memory_args, self._tick, tuple(block))
-        self._tick += len(sides)
-        self.center = centers[-1].copy()
+        _count_excursions(self._memory_args, self._tick[0], tuple(block))
+        self._tick[0] += len(sides)
+        self.center[:] = centers[-1]
         return block
 
     def recenter(self, center: ArrayLike, mask: ArrayLike | None = None) -> None:
@@ -171,7 +172,7 @@ class ControlChart:
         for state in (memory.side, memory.exceedance, memory.exceedances_in_window, memory.run_length,
                       memory.hold_off):
             np.copyto(state, 0, where=vehicles, casting="unsafe")  # 0, False
-        np.copyto(memory.restarted, self._tick, where=vehicles)  # their earlier starts no longer count
+        np.copyto(memory.restarted, self._tick[0], where=vehicles)  # their earlier starts no longer count
         self._restart(vehicles)
 
     def hold(self, ticks: ArrayLike, mask: ArrayLike | None = None) -> None:
@@ -187,9 +188,6 @@ class ControlChart:
         """Restart the envs in ``mask`` ((n_envs,) bool, None = all), centred on ``center`` [s]."""
         vehicles = np.broadcast_to(env_mask(mask, self.shape[0])[:, None], self.shape)
         self.recenter(center, vehicles)
-
-    def _allocate(self) -> None:
-        """Create the chart's own statistic arrays (none by default)."""
 
     def _sides(self, estimates: np.ndarray, centers: np.ndarray) -> np.ndarray:
         raise NotImplementedError
@@ -239,8 +237,7 @@ class EwmaChart(ControlChart):
 
     kind = "ewma"
 
-    def _allocate(self) -> None:
-        self.ewma = np.zeros(self.shape)  # z [s]
+    ewma = property(lambda self: self.statistic[..., 0], doc="z (n_envs, n_vehicles) [s] (the chart's own array).")
 
     @property
     def half_width(self) -> float:
@@ -261,7 +258,7 @@ class EwmaChart(ControlChart):
     def _sides(self, estimates: np.ndarray, centers: np.ndarray) -> np.ndarray:
         lam, ewmas = self.config.ewma_lambda, np.empty_like(estimates)
         for k, estimate in enumerate(estimates):  # a recursion: tick by tick
-            self.ewma = ewmas[k] = lam * estimate + (1.0 - lam) * self.ewma
+            self.ewma[:] = ewmas[k] = lam * estimate + (1.0 - lam) * self.ewma
         return _outside(ewmas, centers - self.half_width, centers + self.half_width)
 
     def _restart(self, mask: np.ndarray) -> None:
@@ -278,17 +275,16 @@ class CusumChart(ControlChart):
 
     kind = "cusum"
 
-    def _allocate(self) -> None:
-        self.upper_sum = np.zeros(self.shape)  # C+ [sigma_desired]
-        self.lower_sum = np.zeros(self.shape)  # C- [sigma_desired]
+    upper_sum = property(lambda self: self.statistic[..., 0], doc="C+ (n_envs, n_vehicles) [sigma_desired].")
+    lower_sum = property(lambda self: self.statistic[..., 1], doc="C- (n_envs, n_vehicles) [sigma_desired].")
 
     def _sides(self, estimates: np.ndarray, centers: np.ndarray) -> np.ndarray:
         cfg = self.config
         deviations = (estimates - centers) / cfg.baseline_std
         upper, lower = np.empty_like(estimates), np.empty_like(estimates)
         for k, y in enumerate(deviations):  # a recursion: tick by tick
-            self.upper_sum = upper[k] = np.maximum(0.0, self.upper_sum + y - cfg.cusum_k)
-            self.lower_sum = lower[k] = np.maximum(0.0, self.lower_sum - y - cfg.cusum_k)
+            self.upper_sum[:] = upper[k] = np.maximum(0.0, self.upper_sum + y - cfg.cusum_k)
+            self.lower_sum[:] = lower[k] = np.maximum(0.0, self.lower_sum - y - cfg.cusum_k)
         above = (upper > cfg.cusum_h) & (upper >= lower)
         below = (lower > cfg.cusum_h) & ~above
         return above.astype(np.int8) - below.astype(np.int8)
@@ -300,34 +296,41 @@ class CusumChart(ControlChart):
 
 @numba.njit(cache=True)
 def _count_excursions(memory, first_tick, block):  # noqa: ANN001, ANN202
-    """What every chart does with its statistic's sides, tick by tick, in place.
+    """What every chart does with its statistic's sides, env by env (:func:`count_excursions_env`), in place."""
+    for e in range(block[2].shape[1]):
+        count_excursions_env(memory, first_tick, block, e, e)
 
-    ``block`` (:class:`ChartState` of (n_ticks, n_envs, n_vehicles) arrays) comes in with the
-    statistic's sides in ``block.side``; they leave as the charted sides (0 while alarms are held
-    off) and the rest of ``block`` is filled; ``memory`` (:class:`ChartMemory`) carries on. Both
-    come as plain tuples (see :mod:`timegap_env.sim.platoon`). Chart tick t uses ring slot
-    t % window; the start it overwrites leaves the window, and counts down only if it was recorded
-    since the vehicle's last restart.
+
+@numba.njit(cache=True)
+def count_excursions_env(memory, first_tick, block, e, column):  # noqa: ANN001, ANN201
+    """What every chart does with its statistic's sides, tick by tick, for env ``e``, in place.
+
+    Column ``column`` of ``block`` (:class:`ChartState` of (n_ticks, n_envs, n_vehicles) arrays) comes in with
+    the statistic's sides in ``block.side``; they leave as the charted sides (0 while alarms are held off) and the
+    rest of the column is filled; ``memory`` (:class:`ChartMemory`) carries on. Both come as plain tuples (see
+    :mod:`timegap_env.sim.platoon`). Chart tick t uses ring slot t % window; the start it overwrites leaves the
+    window, and counts down only if it was recorded since the vehicle's last restart.
     """
     memory, block = ChartMemory(*memory), ChartState(*block)
     side, hold_off, in_window, run_length = memory.side, memory.hold_off, memory.exceedances_in_window, memory.run_length
-    n_ticks, n_envs, n_vehicles = block.side.shape
-    ring_length = memory.starts.shape[0]
+    n_ticks, n_vehicles = block.side.shape[0], block.side.shape[2]
+    starts = memory.starts[e]  # (n_vehicles, window ticks)
+    ring_length = starts.shape[1]
+    c = column
     for k in range(n_ticks):
         tick = first_tick + k
         slot = tick % ring_length
-        for e in range(n_envs):
-            for i in range(n_vehicles):
-                now = block.side[k, e, i] if hold_off[e, i] == 0 else 0
-                hold_off[e, i] = max(hold_off[e, i] - 1, 0)
-                started = now != 0 and now != side[e, i]  # a new excursion
-                side[e, i], memory.exceedance[e, i] = now, started
-                leaving = memory.starts[slot, e, i] >= memory.restarted[e, i]  # -1 (no start) never counts
-                in_window[e, i] += int(started) - int(leaving)
-                memory.starts[slot, e, i] = tick if started else -1
-                run_length[e, i] = 0 if now != 0 else run_length[e, i] + 1
-                block.side[k, e, i], block.alarm[k, e, i], block.exceedance[k, e, i] = now, now != 0, started
-                block.exceedances_in_window[k, e, i], block.run_length[k, e, i] = in_window[e, i], run_length[e, i]
+        for i in range(n_vehicles):
+            now = block.side[k, c, i] if hold_off[e, i] == 0 else 0
+            hold_off[e, i] = max(hold_off[e, i] - 1, 0)
+            started = now != 0 and now != side[e, i]  # a new excursion
+            side[e, i], memory.exceedance[e, i] = now, started
+            leaving = starts[i, slot] >= memory.restarted[e, i]  # -1 (no start) never counts
+            in_window[e, i] += int(started) - int(leaving)
+            starts[i, slot] = tick if started else -1
+            run_length[e, i] = 0 if now != 0 else run_length[e, i] + 1
+            block.side[k, c, i], block.alarm[k, c, i], block.exceedance[k, c, i] = now, now != 0, started
+            block.exceedances_in_window[k, c, i], block.run_length[k, c, i] = in_window[e, i], run_length[e, i]
 
 
 CHARTS: dict[str, type[ControlChart]] = {chart.kind: chart for chart in (ShewhartChart, EwmaChart, CusumChart)}

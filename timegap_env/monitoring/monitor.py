@@ -33,11 +33,12 @@ class MonitorTicks(NamedTuple):
 
 
 class WindowMemory(NamedTuple):
-    """What the monitor carries from tick to tick; sums have a leading axis of N_SUMS channels."""
+    """What the monitor carries from tick to tick; each env's arrays together (env-major), sums with a last axis of
+    N_SUMS channels."""
 
-    slots: np.ndarray  # (W + 1, N_SUMS, n_envs, n_vehicles) ring of per-tick sums, slot W stays zero (drift guard)
-    block_sum: np.ndarray  # (N_SUMS, n_envs, n_vehicles) forgetting-weighted sum of the current block
-    window_sums: np.ndarray  # (N_SUMS, n_envs, n_vehicles) forgetting-weighted sum of the window
+    slots: np.ndarray  # (n_envs, n_vehicles, W + 1, N_SUMS) ring of per-tick sums, slot W stays zero (drift guard)
+    block_sum: np.ndarray  # (n_envs, n_vehicles, N_SUMS) forgetting-weighted sum of the current block
+    window_sums: np.ndarray  # (n_envs, n_vehicles, N_SUMS) forgetting-weighted sum of the window
     skipped: np.ndarray  # (n_envs, n_vehicles) int64 measurements skipped since reset [-]
     prior_tau: np.ndarray  # (n_envs, n_vehicles) prior mean of tau, the setting tau* [s]
 
@@ -100,10 +101,10 @@ class TimeGapMonitor:
     ) -> None:
         self.config = config
         self.shape = batch_shape(n_envs, n_vehicles)
-        sums_shape = (N_SUMS,) + self.shape
+        sums_shape = self.shape + (N_SUMS,)
         W, decay = config.window_ticks or 0, float(config.forgetting)  # W = 0: no window
         self._memory = WindowMemory(
-            slots=np.zeros((W + 1,) + sums_shape),
+            slots=np.zeros(self.shape + (W + 1, N_SUMS)),
             block_sum=np.zeros(sums_shape),
             window_sums=np.zeros(sums_shape),
             skipped=np.zeros(self.shape, dtype=np.int64),
@@ -180,15 +181,16 @@ class TimeGapMonitor:
         setting, vehicles = setting_array(setting, self.shape), vehicle_mask(mask, self.shape)
         memory = self._memory
         np.copyto(memory.prior_tau, setting, where=vehicles)
-        for sums in (memory.block_sum, memory.window_sums, memory.slots):  # (..., n_envs, n_vehicles)
-            np.copyto(sums, 0.0, where=vehicles)
+        for sums in (memory.block_sum, memory.window_sums, memory.slots):  # (n_envs, n_vehicles, ...)
+            np.copyto(sums, 0.0, where=vehicles.reshape(vehicles.shape + (1,) * (sums.ndim - 2)))
         self._moments = None  # the prior, recomputed when first read
 
     def _latest(self) -> Moments:
         """The posterior after the last tick (or change of setting)."""
         if self._moments is None:
             memory = self._memory
-            self._moments = posterior_moments(WindowSums(*memory.window_sums), memory.prior_tau, self._prior)
+            self._moments = posterior_moments(WindowSums(*np.moveaxis(memory.window_sums, -1, 0)), memory.prior_tau,
+                                              self._prior)
         return self._moments
 
     # ---- read-outs ----------------------------------------------------------------------------
@@ -231,18 +233,18 @@ class TimeGapMonitor:
     @property
     def n_measurements(self) -> np.ndarray:
         """Forgetting-weighted number of measurements in the window (n_envs, n_vehicles) [-]."""
-        return self._memory.window_sums[0].copy()
+        return self._memory.window_sums[..., 0].copy()
 
     @property
     def ztz(self) -> np.ndarray:
         """The window's forgetting-weighted Z^T Z (n_envs, n_vehicles, 2, 2)."""
-        n, sum_v, sum_vv = self._memory.window_sums[:3]
+        n, sum_v, sum_vv = np.moveaxis(self._memory.window_sums[..., :3], -1, 0)
         return np.stack([np.stack([n, sum_v], axis=-1), np.stack([sum_v, sum_vv], axis=-1)], axis=-2)
 
     @property
     def zts(self) -> np.ndarray:
         """The window's forgetting-weighted Z^T S (n_envs, n_vehicles, 2)."""
-        return np.stack([self._memory.window_sums[3], self._memory.window_sums[4]], axis=-1)
+        return self._memory.window_sums[..., 3:5].copy()
 
     def prob_outside(self, lcl: ArrayLike, ucl: ArrayLike) -> np.ndarray:
         """Posterior P(tau < lcl or tau > ucl) (n_envs, n_vehicles) under tau's normal marginal.
@@ -259,63 +261,70 @@ class TimeGapMonitor:
 
 @numba.njit(cache=True)
 def _update_kernel(speed, spacing, memory, slot, rule, prior, out, out_moments):  # noqa: ANN001, ANN202
-    """:meth:`TimeGapMonitor.update_block`, tick by tick and vehicle by vehicle, in place.
+    """:meth:`TimeGapMonitor.update_block`, env by env (:func:`update_env`), in place.
 
     ``memory`` (:class:`WindowMemory`) is updated under ``rule`` (:class:`WindowRule`) and ``prior``
     (:class:`Prior`); ``slot`` (n_envs,) is each env's next ring slot, advanced in place; ``out``
     (:class:`MonitorTicks`) gets each tick's verdict and posterior mean and variance of tau,
     ``out_moments`` (:class:`Moments` of (n_envs, n_vehicles) arrays) the whole posterior after the last
     tick; each structure comes as a plain tuple (see :mod:`timegap_env.sim.platoon`).
+    """
+    for e in range(speed.shape[1]):
+        update_env(speed, spacing, memory, slot, rule, prior, out, out_moments, e, e)
+
+
+@numba.njit(cache=True)
+def update_env(speed, spacing, memory, slot, rule, prior, out, out_moments, e, column):  # noqa: ANN001, ANN201, PLR0913
+    """Env ``e``'s vehicles through a block of measurements, column ``column`` of ``speed``, ``spacing`` and
+    ``out`` (the arguments of :func:`_update_kernel`), tick by tick and vehicle by vehicle, in place.
 
     ``slot[e] = -1`` means no window: the window sums are the block sums, which never close.
     The additions are those of the class docstring's drift guard, in the same order.
     """
     memory, rule, prior = WindowMemory(*memory), WindowRule(*rule), Prior(*prior)
     out, out_moments = MonitorTicks(*out), Moments(*out_moments)
-    slots, block_sum, window_sums = memory.slots, memory.block_sum, memory.window_sums
-    n_ticks, n_envs, n_vehicles = speed.shape
-    window_ticks = slots.shape[0] - 1
+    slots, block_sum, window_sums = memory.slots[e], memory.block_sum[e], memory.window_sums[e]
+    n_ticks, n_vehicles = speed.shape[0], speed.shape[2]
+    window_ticks = slots.shape[1] - 1
+    c = column
     x = np.empty(N_SUMS)
     for k in range(n_ticks):
-        for e in range(n_envs):
-            p = slot[e]
+        p = slot[e]
+        for i in range(n_vehicles):
+            v, s = speed[k, c, i], spacing[k, c, i]
+            valid = -rule.max_speed <= v <= rule.max_speed and 0.0 <= s <= rule.max_spacing  # NaN -> False
+            used = valid and v >= rule.min_speed
+            out.used[k, c, i] = used
+            if not valid:
+                memory.skipped[e, i] += 1
+            if not used:
+                v = s = 0.0
+            x[0], x[1], x[2], x[3], x[4] = (1.0 if used else 0.0), v, v * v, s, v * s
+            for n in range(N_SUMS):
+                if rule.forgetting < 1.0:
+                    block_sum[i, n] *= rule.forgetting
+                block_sum[i, n] += x[n]
+                if p < 0:
+                    window_sums[i, n] = block_sum[i, n]
+                else:
+                    slots[i, p, n] = x[n]
+                    window_sums[i, n] = slots[i, p + 1, n] * rule.suffix_weight[p] + block_sum[i, n]
+            sums = WindowSums(window_sums[i, 0], window_sums[i, 1], window_sums[i, 2], window_sums[i, 3],
+                              window_sums[i, 4])
+            moments = posterior_moments(sums, memory.prior_tau[e, i], prior)
+            out.tau_mean[k, c, i], out.tau_var[k, c, i] = moments.mean_tau, moments.var_tau
+            if k == n_ticks - 1:  # field by field: a tuple indexed by a variable is slow in numba
+                out_moments.mean_s0[e, i], out_moments.mean_tau[e, i] = moments.mean_s0, moments.mean_tau
+                out_moments.var_s0[e, i], out_moments.cov_s0_tau[e, i] = moments.var_s0, moments.cov_s0_tau
+                out_moments.var_tau[e, i] = moments.var_tau
+        if p < 0:  # no window
+            continue
+        if p < window_ticks - 1:
+            slot[e] = p + 1
+        else:  # the block is full: turn it into suffix sums
             for i in range(n_vehicles):
-                v, s = speed[k, e, i], spacing[k, e, i]
-                valid = -rule.max_speed <= v <= rule.max_speed and 0.0 <= s <= rule.max_spacing  # NaN -> False
-                used = valid and v >= rule.min_speed
-                out.used[k, e, i] = used
-                if not valid:
-                    memory.skipped[e, i] += 1
-                if not used:
-                    v = s = 0.0
-                x[0], x[1], x[2], x[3], x[4] = (1.0 if used else 0.0), v, v * v, s, v * s
-                for c in range(N_SUMS):
-                    if rule.forgetting < 1.0:
-                        block_sum[c, e, i] *= rule.forgetting
-                    block_sum[c, e, i] += x[c]
-                    if p < 0:
-                        window_sums[c, e, i] = block_sum[c, e, i]
-                    else:
-                        slots[p, c, e, i] = x[c]
-                        window_sums[c, e, i] = slots[p + 1, c, e, i] * rule.suffix_weight[p] + block_sum[c, e, i]
-                sums = WindowSums(
-                    window_sums[0, e, i], window_sums[1, e, i], window_sums[2, e, i], window_sums[3, e, i],
-                    window_sums[4, e, i],
-                )
-                moments = posterior_moments(sums, memory.prior_tau[e, i], prior)
-                out.tau_mean[k, e, i], out.tau_var[k, e, i] = moments.mean_tau, moments.var_tau
-                if k == n_ticks - 1:  # field by field: a tuple indexed by a variable is slow in numba
-                    out_moments.mean_s0[e, i], out_moments.mean_tau[e, i] = moments.mean_s0, moments.mean_tau
-                    out_moments.var_s0[e, i], out_moments.cov_s0_tau[e, i] = moments.var_s0, moments.cov_s0_tau
-                    out_moments.var_tau[e, i] = moments.var_tau
-            if p < 0:  # no window
-                continue
-            if p < window_ticks - 1:
-                slot[e] = p + 1
-            else:  # env e's block is full: turn it into suffix sums
                 for m in range(window_ticks - 2, -1, -1):
-                    for c in range(N_SUMS):
-                        for i in range(n_vehicles):
-                            slots[m, c, e, i] = slots[m, c, e, i] * rule.age_weight[m] + slots[m + 1, c, e, i]
-                block_sum[:, e, :] = 0.0
-                slot[e] = 0
+                    for n in range(N_SUMS):
+                        slots[i, m, n] = slots[i, m, n] * rule.age_weight[m] + slots[i, m + 1, n]
+            block_sum[:, :] = 0.0
+            slot[e] = 0

@@ -105,29 +105,36 @@ class Sensors:
 
 @numba.njit(cache=True)
 def _measure(true, ticks_before, noise, faults, out):  # noqa: ANN001, ANN202
-    """:meth:`Sensors.measure`: fill ``out`` (:class:`Readings`) from ``true`` under ``noise`` (:class:`NoiseModel`)
-    and ``faults`` (:class:`SensorFaults`), each a plain tuple (see :mod:`timegap_env.sim.platoon`)."""
+    """:meth:`Sensors.measure`, env by env (:func:`measure_env`)."""
+    for e in range(true[0].shape[1]):
+        measure_env(true, ticks_before[e], noise, faults, out, e, e)
+
+
+@numba.njit(cache=True)
+def measure_env(true, ticks_before, noise, faults, out, e, column):  # noqa: ANN001, ANN201, PLR0913
+    """Fill column ``column`` of ``out`` (:class:`Readings`) from that of ``true`` for env ``e``, whose block starts
+    after ``ticks_before`` ticks since its reset, under ``noise`` (:class:`NoiseModel`) and ``faults``
+    (:class:`SensorFaults`), each a plain tuple (see :mod:`timegap_env.sim.platoon`)."""
     true, noise, faults, out = Readings(*true), NoiseModel(*noise), SensorFaults(*faults), Readings(*out)
-    n_ticks, n_envs, n_followers = true.spacing.shape
+    n_ticks, n_followers = true.spacing.shape[0], true.spacing.shape[2]
+    c, key = column, noise.keys[e]
     for k in range(n_ticks):
-        for e in range(n_envs):
-            tick = ticks_before[e] + 1 + k
-            key = noise.keys[e]
-            for f in range(n_followers):
-                u0 = _uniform(key, tick, f, 0, n_followers)
-                u1 = _uniform(key, tick, f, 1, n_followers)
-                u2 = _uniform(key, tick, f, 2, n_followers)
-                if u2 < noise.dropout_probability[e]:
-                    out.spacing[k, e, f] = out.speed[k, e, f] = np.nan
-                    continue
-                radius = np.sqrt(-2.0 * np.log(u0))  # Box-Muller: two independent standard normals
-                angle = 2.0 * np.pi * u1
-                if faults.start[e, f] <= tick - 1 < faults.end[e, f]:  # the reading after physics tick tick - 1
-                    out.spacing[k, e, f] = (true.spacing[k, e, f] + faults.spacing_bias[e, f]
-                                            + faults.spacing_noise_std[e, f] * radius * np.cos(angle))
-                else:
-                    out.spacing[k, e, f] = true.spacing[k, e, f] + noise.spacing_noise_std * radius * np.cos(angle)
-                out.speed[k, e, f] = true.speed[k, e, f] + noise.speed_noise_std * radius * np.sin(angle)
+        tick = ticks_before + 1 + k
+        for f in range(n_followers):
+            u0 = _uniform(key, tick, f, 0, n_followers)
+            u1 = _uniform(key, tick, f, 1, n_followers)
+            u2 = _uniform(key, tick, f, 2, n_followers)
+            if u2 < noise.dropout_probability[e]:
+                out.spacing[k, c, f] = out.speed[k, c, f] = np.nan
+                continue
+            radius = np.sqrt(-2.0 * np.log(u0))  # Box-Muller: two independent standard normals
+            angle = 2.0 * np.pi * u1
+            if faults.start[e, f] <= tick - 1 < faults.end[e, f]:  # the reading after physics tick tick - 1
+                out.spacing[k, c, f] = (true.spacing[k, c, f] + faults.spacing_bias[e, f]
+                                        + faults.spacing_noise_std[e, f] * radius * np.cos(angle))
+            else:
+                out.spacing[k, c, f] = true.spacing[k, c, f] + noise.spacing_noise_std * radius * np.cos(angle)
+            out.speed[k, c, f] = true.speed[k, c, f] + noise.speed_noise_std * radius * np.sin(angle)
 
 
 @numba.njit(cache=True)

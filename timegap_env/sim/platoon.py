@@ -144,8 +144,8 @@ class PlatoonState(NamedTuple):
     applied_setting: np.ndarray  # per follower: the tau* the controller uses, ramped towards the setting [s]
     v2v: np.ndarray  # per follower: CACC on (V2V feed-forward) [bool]
     collided: np.ndarray  # per follower: gap <= 0 was reached; sticky [bool]
-    predecessor_accel: np.ndarray  # (v2v_delay_ticks + max_v2v_latency_ticks + 1, n_envs, n_followers) ring of
-    # recent predecessor accelerations [m/s^2]
+    predecessor_accel: np.ndarray  # (n_envs, v2v_delay_ticks + max_v2v_latency_ticks + 1, n_followers) ring of
+    # recent predecessor accelerations [m/s^2], each env's together
     received_accel: np.ndarray  # per follower: the last predecessor acceleration a V2V message delivered [m/s^2]
     ticks: np.ndarray  # (n_envs,) int64 ticks since each env's reset [-]
 
@@ -255,7 +255,7 @@ class Platoon:
             applied_setting=np.full(followers, config.initial_setting),
             v2v=np.full(followers, bool(config.v2v)),
             collided=np.zeros(followers, dtype=bool),
-            predecessor_accel=np.zeros((config.v2v_delay_ticks + config.max_v2v_latency_ticks + 1, *followers)),
+            predecessor_accel=np.zeros((self.n_envs, config.v2v_delay_ticks + config.max_v2v_latency_ticks + 1, self.n_followers)),
             received_accel=np.zeros(followers),
             ticks=np.zeros(self.n_envs, dtype=np.int64),
         )
@@ -341,7 +341,7 @@ class Platoon:
         state.u[mask, 0] = accel
         state.v2v[mask] = bool(cfg.v2v)
         state.collided[mask] = False
-        state.predecessor_accel[:, mask] = state.a[mask, :-1]
+        state.predecessor_accel[mask] = state.a[mask, None, :-1]
         state.received_accel[mask] = state.a[mask, :-1]
         state.ticks[mask] = 0
 
@@ -424,69 +424,79 @@ def per_env(name: str, value: np.ndarray | float, n_envs: int) -> np.ndarray:
 
 @numba.njit(cache=True)
 def _advance(state, leader, zoh, controller, faults, out):  # noqa: ANN001, ANN202
-    """The physics of :meth:`Platoon.advance`, tick by tick, in place; see the module docstring for the model.
+    """The physics of :meth:`Platoon.advance`, env by env (:func:`advance_env`), in place.
 
     ``state`` (:class:`PlatoonState`) is updated, ``out`` (:class:`PlatoonTicks`) filled for the
     ``leader`` (:class:`LeaderTicks`) of each tick, under ``zoh`` (:class:`ZOHCoefficients`),
     ``controller`` (:class:`Controller`) and ``faults`` (:class:`FollowerFaults`), each passed as a
-    plain tuple. Followers are updated from the last to the first, so each one still sees its
-    predecessor's state from the start of the tick, as in the continuous model.
+    plain tuple (see the module docstring).
     """
+    for e in range(leader[0].shape[1]):
+        advance_env(state, leader, zoh, controller, faults, out, e, e)
+
+
+@numba.njit(cache=True)
+def advance_env(state, leader, zoh, controller, faults, out, e, column):  # noqa: ANN001, ANN201, PLR0913
+    """Env ``e``'s platoon through the block's ticks, in place; its leader and V2V flags are column ``column`` of
+    ``leader``'s arrays and its records go to column ``column`` of ``out``'s (the structures of :func:`_advance`,
+    plain tuples). Followers are updated from the last to the first, so each one still sees its predecessor's
+    state from the start of the tick, as in the continuous model. The fused env step calls it with one env's
+    block (``column`` 0), :meth:`Platoon.advance` for every env."""
     state, leader, zoh = PlatoonState(*state), LeaderTicks(*leader), ZOHCoefficients(*zoh)
     controller, out = Controller(*controller), PlatoonTicks(*out)
     start, end, degraded_zoh = faults[0], faults[1], ZOHCoefficients(*faults[2])
     faults = FollowerFaults(start, end, degraded_zoh, *faults[3:])
     x, v, a, u = state.x, state.v, state.a, state.u
-    n_ticks, n_envs, n_followers = leader.v2v.shape
-    buffer_length = state.predecessor_accel.shape[0]
+    n_ticks, n_followers = leader.v2v.shape[0], leader.v2v.shape[2]
+    ring = state.predecessor_accel[e]  # (ring length, n_followers)
+    buffer_length = ring.shape[0]
     nominal_delay = controller.v2v_delay_ticks
+    c = column
     for k in range(n_ticks):
-        for e in range(n_envs):
-            tick = state.ticks[e] + k
-            slot = tick % buffer_length
-            for i in range(n_followers, 0, -1):  # vehicle i is follower f = i - 1
-                f = i - 1
-                applied = ramp_toward(state.applied_setting[e, f], state.setting[e, f], controller.max_setting_change)
-                state.applied_setting[e, f] = applied
-                state.predecessor_accel[slot, e, f] = a[e, i - 1]
-                spacing = x[e, i - 1] - x[e, i] - controller.vehicle_length
-                active = faults.start[e, f] <= tick < faults.end[e, f]
-                if active:
-                    delay = nominal_delay + faults.extra_delay[e, f]
-                    lost = leader.v2v[k, e, f] and counter_uniform(
-                        faults.keys[e], np.uint64(tick * n_followers + f)) < faults.packet_loss[e, f]
-                    if not lost:
-                        state.received_accel[e, f] = state.predecessor_accel[(tick - delay) % buffer_length, e, f]
-                    follower_controller = Controller(
-                        controller.dt, faults.k_s[e, f], faults.k_v[e, f], controller.k_a, controller.k_f,
-                        controller.accel_min, faults.accel_max[e, f], controller.standstill_spacing,
-                        controller.vehicle_length, controller.max_setting_change, controller.v2v_delay_ticks,
-                    )
-                    seen_spacing = spacing + faults.spacing_bias[e, f]
-                    dynamics = degraded_zoh
-                else:
-                    state.received_accel[e, f] = state.predecessor_accel[(tick - nominal_delay) % buffer_length, e, f]
-                    follower_controller = controller
-                    seen_spacing = spacing
-                    dynamics = zoh
-                feedforward = 1.0 if leader.v2v[k, e, f] else 0.0, state.received_accel[e, f]
-                command = cth_command(seen_spacing, v[e, i], v[e, i - 1], a[e, i], feedforward, applied, follower_controller)
-                coefficients = ZOHCoefficients(
-                    dynamics.a_from_a[e, f], dynamics.a_from_u[e, f], dynamics.v_from_a[e, f], dynamics.v_from_u[e, f],
-                    dynamics.x_from_a[e, f], dynamics.x_from_u[e, f], dynamics.dt,
+        tick = state.ticks[e] + k
+        slot = tick % buffer_length
+        for i in range(n_followers, 0, -1):  # vehicle i is follower f = i - 1
+            f = i - 1
+            applied = ramp_toward(state.applied_setting[e, f], state.setting[e, f], controller.max_setting_change)
+            state.applied_setting[e, f] = applied
+            ring[slot, f] = a[e, i - 1]
+            spacing = x[e, i - 1] - x[e, i] - controller.vehicle_length
+            active = faults.start[e, f] <= tick < faults.end[e, f]
+            if active:
+                delay = nominal_delay + faults.extra_delay[e, f]
+                lost = leader.v2v[k, c, f] and counter_uniform(
+                    faults.keys[e], np.uint64(tick * n_followers + f)) < faults.packet_loss[e, f]
+                if not lost:
+                    state.received_accel[e, f] = ring[(tick - delay) % buffer_length, f]
+                follower_controller = Controller(
+                    controller.dt, faults.k_s[e, f], faults.k_v[e, f], controller.k_a, controller.k_f,
+                    controller.accel_min, faults.accel_max[e, f], controller.standstill_spacing,
+                    controller.vehicle_length, controller.max_setting_change, controller.v2v_delay_ticks,
                 )
-                x_next, v_next, a_next = follower_tick(x[e, i], v[e, i], a[e, i], command, coefficients)
-                x[e, i], v[e, i], a[e, i], u[e, i] = x_next, v_next, a_next, command
-            x[e, 0] += 0.5 * (v[e, 0] + leader.speed[k, e]) * zoh.dt
-            v[e, 0] = leader.speed[k, e]
-            a[e, 0] = u[e, 0] = leader.accel[k, e]
-            for f in range(n_followers):
-                spacing = x[e, f] - x[e, f + 1] - controller.vehicle_length
-                out.collisions[k, e, f] = spacing <= 0.0 and not state.collided[e, f]
-                state.collided[e, f] = state.collided[e, f] or spacing <= 0.0
-                out.spacing[k, e, f] = spacing
-                out.speed[k, e, f] = v[e, f + 1]
-                out.accel[k, e, f] = a[e, f + 1]
-                out.applied_setting[k, e, f] = state.applied_setting[e, f]
-    for e in range(n_envs):
-        state.ticks[e] += n_ticks
+                seen_spacing = spacing + faults.spacing_bias[e, f]
+                dynamics = degraded_zoh
+            else:
+                state.received_accel[e, f] = ring[(tick - nominal_delay) % buffer_length, f]
+                follower_controller = controller
+                seen_spacing = spacing
+                dynamics = zoh
+            feedforward = 1.0 if leader.v2v[k, c, f] else 0.0, state.received_accel[e, f]
+            command = cth_command(seen_spacing, v[e, i], v[e, i - 1], a[e, i], feedforward, applied, follower_controller)
+            coefficients = ZOHCoefficients(
+                dynamics.a_from_a[e, f], dynamics.a_from_u[e, f], dynamics.v_from_a[e, f], dynamics.v_from_u[e, f],
+                dynamics.x_from_a[e, f], dynamics.x_from_u[e, f], dynamics.dt,
+            )
+            x_next, v_next, a_next = follower_tick(x[e, i], v[e, i], a[e, i], command, coefficients)
+            x[e, i], v[e, i], a[e, i], u[e, i] = x_next, v_next, a_next, command
+        x[e, 0] += 0.5 * (v[e, 0] + leader.speed[k, c]) * zoh.dt
+        v[e, 0] = leader.speed[k, c]
+        a[e, 0] = u[e, 0] = leader.accel[k, c]
+        for f in range(n_followers):
+            spacing = x[e, f] - x[e, f + 1] - controller.vehicle_length
+            out.collisions[k, c, f] = spacing <= 0.0 and not state.collided[e, f]
+            state.collided[e, f] = state.collided[e, f] or spacing <= 0.0
+            out.spacing[k, c, f] = spacing
+            out.speed[k, c, f] = v[e, f + 1]
+            out.accel[k, c, f] = a[e, f + 1]
+            out.applied_setting[k, c, f] = state.applied_setting[e, f]
+    state.ticks[e] += n_ticks
