@@ -1,18 +1,20 @@
-"""``make bench``: how much the simulator, the monitor and the environment cost, against reference environments.
+"""``make bench``: how much the environment, its simulator and monitor cost, as ratios against reference runs.
 
-Every figure is measured in this process, the same way, back to back, and the
-table reports ratios, which survive a busy machine better than absolute times:
+Every figure is measured in this process (or, for the cold start, in child processes it launches), the same
+way, and set against a reference measured alongside it; ratios survive a busy machine better than absolute
+rates. The targets are issue 16's.
 
-1. env steps/s of ``TimeGapMonitor-v0`` (one env, random actions) against
-   highway-env's ``highway-fast-v0`` and gymnasium's ``CartPole-v1``, the three
-   taking turns over several rounds;
-2. vehicle-ticks/s of the batched simulator (``Platoon.advance``, a decision's
-   10 ticks per call) at 1, 64 and 1024 envs, and the native vector env against
-   a ``SyncVectorEnv`` of single envs;
-3. monitor updates/s, batched (1024 envs x 5 vehicles);
-4. PPO training steps/s on ``TimeGapMonitor-v0`` against PPO on ``CartPole-v1``
-   with the same hyperparameters, the two taking turns;
-5. peak memory of a 1024-env vector env (tracemalloc: NumPy allocations included).
+1. single env steps/s of ``TimeGapMonitor-v0``, with its full per-step info and with
+   ``step_diagnostics=False``, against gymnasium's ``CartPole-v1`` and highway-env's ``highway-fast-v0``,
+   the envs taking turns over several rounds;
+2. the native vector env (``step_diagnostics=False``) from 256 to 65,536 envs on one core: env-steps/s
+   against the 256-env figure and CartPole-v1's steps/s, peak memory per env (tracemalloc), 256 envs with
+   the per-step diagnostics on, and 64 envs against a ``SyncVectorEnv`` of single envs;
+3. batched reset, ``envs.reset(seed=0)`` at 4,096 and 65,536 envs, against creating as many NumPy generators;
+4. cold start: a child process's CPU and wall seconds to its first ``env.step``, with an empty numba cache
+   and a warm one, against a child stepping CartPole-v1;
+5. the share of PPO's time (``make train``'s setting) spent in the env, and the most a free env could gain;
+6. the batched simulator (vehicle-ticks/s) and the batched monitor (against a NumPy add of the same arrays).
 
 Writes ``results/bench.md``.
 
@@ -25,46 +27,71 @@ import argparse
 import dataclasses
 import platform
 import time
-import tracemalloc
 from collections.abc import Callable
 from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
-import torch
 
 import timegap_env
 from timegap_env.config import MonitorConfig, PlatoonConfig
 from timegap_env.sim import Platoon
+from train import bench_cold, bench_ppo, bench_vector
 from train.bench_monitor import bench as bench_monitor
 
 TARGET_VS_HIGHWAY = 100.0  # single env steps/s over highway-fast-v0's [-]
+TARGET_VS_CARTPOLE = 0.5  # single env (step_diagnostics=False) steps/s over CartPole-v1's [-]
 TARGET_VEHICLE_TICKS = 10e6  # batched simulator at 1024 envs [vehicle-ticks/s]
-TARGET_PPO_VS_CARTPOLE = 0.8  # PPO steps/s on TimeGapMonitor-v0 over CartPole-v1's [-]
-PPO_SMALL = dict(n_envs=8, n_steps=128, batch_size=256, n_epochs=4, learning_rate=3e-4)  # a small, common setting
-PPO_TRAINING = dict(n_envs=64, n_steps=64, batch_size=512, n_epochs=10, learning_rate=1e-3)  # hyperparams/ppo.yml's
+TARGET_VECTOR_RATE = 150e3  # native vector env at TARGET_VECTOR_BASE envs, one core [env-steps/s]
+TARGET_VECTOR_BASE = 256  # envs
+TARGET_VECTOR_SPREAD = 0.2  # every size's env-steps/s within this fraction of the base size's [-]
+TARGET_RESET_SECONDS = 2.0  # envs.reset(seed=0) at TARGET_RESET_ENVS envs [s]
+TARGET_RESET_ENVS = 65_536
+TARGET_COLD_CPU = 5.0  # first step with an empty numba cache [CPU s]
+NO_KWARG = "n/a"  # the value of a row whose env does not take step_diagnostics yet
 
 
 @dataclasses.dataclass(frozen=True)
 class Sizes:
     """How long each measurement runs."""
 
-    rounds: int  # single-env and PPO measurements alternate between the envs this many times
+    rounds: int  # single-env measurements alternate between the envs this many times
     env_steps: int  # steps of TimeGapMonitor-v0 and CartPole-v1 per round
     highway_steps: int  # steps of highway-fast-v0 per round (it is about 100x slower)
     ticks: dict[int, int]  # simulator ticks timed per batch size, in blocks of TICKS_PER_BLOCK
-    vector_envs: int  # sub-envs of the vector env comparison
-    vector_steps: int
+    vector_sizes: tuple[int, ...]  # native vector env sizes; the first is the reference size
+    vector_seconds: float  # at least this much stepping timed per size [s]
+    vector_min_steps: int  # and at least this many steps
+    reset_sizes: tuple[int, ...]  # sizes whose batched reset is timed (each one of vector_sizes)
+    sync_envs: int  # sub-envs of the native against SyncVectorEnv comparison
+    sync_steps: int
     monitor_ticks: int
-    ppo_timesteps: int
-    ppo_n_steps: int  # rollout length per env; 0 = the setting's own
-    memory_envs: int
+    cold_repeats: int  # warm-cache and CartPole-v1 child runs (one empty-cache run)
+    ppo_rollouts: int  # rollouts (with their updates) timed
+    ppo_shrink: dict[str, int] | None  # overrides of hyperparams/ppo.yml's n_envs, n_steps, ... (None: as trained)
 
 
-FULL = Sizes(10, 1000, 25, {1: 20000, 64: 5000, 1024: 1000}, 64, 100, 300, 4096, 0, 1024)  # 0: each setting's n_steps
-QUICK = Sizes(1, 20, 3, {1: 20, 64: 10, 1024: 10}, 4, 5, 5, 64, 1, 16)
+FULL = Sizes(10, 1000, 25, {1: 20000, 64: 5000, 1024: 1000}, (256, 1024, 4096, 16384, 65536), 1.5, 3,
+             (4096, 65536), 64, 100, 300, 3, 8, None)
+QUICK = Sizes(1, 20, 3, {1: 20, 64: 10, 1024: 10}, (4, 8, 16), 0.0, 2, (8, 16), 4, 5, 5, 1, 1,
+              {"n_envs": 4, "n_steps": 8, "batch_size": 16, "n_epochs": 1})
 TICKS_PER_BLOCK = 10  # the simulator advances a decision's ticks in one call, as the env does
 WARM_UP_STEPS = 20  # untimed steps first: numba kernels load (or compile) on their first call
+
+
+@dataclasses.dataclass(frozen=True)
+class Row:
+    """One line of the table."""
+
+    measure: str
+    value: str
+    reference: str = ""  # what it is set against, measured alongside
+    ratio: str = ""  # value over reference
+    target: str = ""  # the target and whether it is met
+
+
+def verdict(target: str, met: bool) -> str:
+    return f"{target}: {'met' if met else 'NOT met'}"
 
 
 def timed(run: Callable[[], int]) -> float:
@@ -101,8 +128,18 @@ def interleaved_steps_per_second(envs: dict[str, tuple[gym.Env, int]], rounds: i
     return {name: rounds * n_steps / seconds[name] for name, (_, n_steps) in envs.items()}
 
 
+def single_env_without_diagnostics() -> gym.Env | None:
+    """``gym.make(ENV_ID, step_diagnostics=False)``, or None while the single env does not take that argument."""
+    try:
+        return gym.make(timegap_env.ENV_ID, step_diagnostics=False)
+    except TypeError as error:
+        if "step_diagnostics" not in str(error):
+            raise
+        return None
+
+
 def vector_env_steps_per_second(envs: gym.vector.VectorEnv, n_steps: int) -> float:
-    """Env-steps/s (sub-envs x steps) of a vector env under random actions."""
+    """Env-steps/s (sub-envs x steps) of a vector env under random actions, autoresets included."""
     envs.reset(seed=0)
     envs.action_space.seed(0)
     envs.step(envs.action_space.sample())  # warm-up
@@ -134,43 +171,157 @@ def vehicle_ticks_per_second(n_envs: int, n_ticks: int) -> float:
     return timed(run)
 
 
-def ppo_steps_per_second(
-    make_venvs: dict[str, Callable[[int], object]], setting: dict, timesteps: int, n_steps: int, rounds: int
-) -> dict[str, float]:
-    """Environment steps/s of PPO learning with ``setting`` on each env {name: make_venv(n_envs)}, over all rounds.
+def single_env_rows(sizes: Sizes) -> tuple[list[Row], float]:
+    """Rows of measurement 1, and CartPole-v1's steps/s (the vector env's reference too)."""
+    import highway_env  # noqa: F401  (registers highway-fast-v0)
 
-    Each model first learns one rollout (torch start-up and kernel loading excluded); then the
-    models take turns, ``timesteps`` each per round, so machine noise hits them alike.
-    """
-    from stable_baselines3 import PPO
+    envs = {"ours": (gym.make(timegap_env.ENV_ID), sizes.env_steps)}
+    lean = single_env_without_diagnostics()
+    if lean is not None:
+        envs["lean"] = (lean, sizes.env_steps)
+    envs["cartpole"] = (gym.make("CartPole-v1"), sizes.env_steps)
+    envs["highway"] = (gym.make("highway-fast-v0"), sizes.highway_steps)
+    rates = interleaved_steps_per_second(envs, sizes.rounds)
+    ours, cartpole, highway = rates["ours"], rates["cartpole"], rates["highway"]
+    against_cartpole = f"CartPole-v1, one env: {cartpole:,.0f}"
+    target = f">= {TARGET_VS_CARTPOLE}x CartPole-v1"
+    if lean is None:
+        lean_row = Row("TimeGapMonitor-v0, one env, step_diagnostics=False [steps/s]", NO_KWARG, against_cartpole,
+                       NO_KWARG, f"{target}: n/a (the single env takes no step_diagnostics yet)")
+    else:
+        lean_ratio = rates["lean"] / cartpole
+        lean_row = Row("TimeGapMonitor-v0, one env, step_diagnostics=False [steps/s]", f"{rates['lean']:,.0f}",
+                       against_cartpole, f"{lean_ratio:.3f}x", verdict(target, lean_ratio >= TARGET_VS_CARTPOLE))
+    rows = [
+        Row("TimeGapMonitor-v0, one env, full info [steps/s]", f"{ours:,.0f}", against_cartpole,
+            f"{ours / cartpole:.3f}x", ""),
+        lean_row,
+        Row("TimeGapMonitor-v0, one env, full info [steps/s] against highway-env", f"{ours:,.0f}",
+            f"highway-fast-v0, one env: {highway:,.1f}", f"{ours / highway:,.1f}x",
+            verdict(f">= {TARGET_VS_HIGHWAY:.0f}x highway-fast-v0", ours / highway >= TARGET_VS_HIGHWAY)),
+    ]
+    for env, _ in envs.values():
+        env.close()
+    return rows, cartpole
 
-    settings = {key: value for key, value in setting.items() if key != "n_envs"}
-    settings["n_steps"] = n_steps or setting["n_steps"]
-    settings["batch_size"] = min(settings["batch_size"], settings["n_steps"] * setting["n_envs"])
-    models = {name: PPO("MlpPolicy", make(setting["n_envs"]), seed=0, device="cpu", verbose=0, **settings)
-              for name, make in make_venvs.items()}
-    for model in models.values():
-        model.learn(setting["n_envs"] * settings["n_steps"])
-    seconds = dict.fromkeys(models, 0.0)
-    for _ in range(rounds):
-        for name, model in models.items():
-            start = time.perf_counter()
-            model.learn(timesteps, reset_num_timesteps=False)
-            seconds[name] += time.perf_counter() - start
-    return {name: rounds * timesteps / seconds[name] for name in models}
+
+def vector_rows(sizes: Sizes, cartpole: float) -> list[Row]:
+    """Rows of measurements 2 and 3."""
+    runs = [bench_vector.measure(n, False, n in sizes.reset_sizes, sizes.vector_seconds, sizes.vector_min_steps)
+            for n in sizes.vector_sizes]
+    base = runs[0]
+    rows = []
+    for run in runs:
+        ratio = run.env_steps_per_second / base.env_steps_per_second
+        if run is base:
+            target = (verdict(f">= {TARGET_VECTOR_RATE / 1e3:.0f} k", run.env_steps_per_second >= TARGET_VECTOR_RATE)
+                      if run.n_envs == TARGET_VECTOR_BASE else "")
+        else:
+            target = verdict(f"within ±{TARGET_VECTOR_SPREAD:.0%} of {base.n_envs} envs'",
+                             abs(ratio - 1.0) <= TARGET_VECTOR_SPREAD)
+        rows.append(Row(f"native vector env, {run.n_envs} envs, one core [env-steps/s]",
+                        f"{run.env_steps_per_second:,.0f}",
+                        f"{base.n_envs} envs: {base.env_steps_per_second:,.0f} / CartPole-v1, one env: {cartpole:,.0f}",
+                        f"{ratio:.2f}x / {run.env_steps_per_second / cartpole:.2f}x", target))
+    for run in runs:
+        rows.append(Row(f"native vector env, {run.n_envs} envs: peak memory [KiB per env]",
+                        f"{run.kib_per_env:,.1f} KiB ({run.peak_mib:,.1f} MiB in all)"))
+    with_info = bench_vector.measure(base.n_envs, True, False, sizes.vector_seconds, sizes.vector_min_steps)
+    rows.append(Row(f"native vector env, {base.n_envs} envs, step_diagnostics=True [env-steps/s]",
+                    f"{with_info.env_steps_per_second:,.0f}",
+                    f"step_diagnostics=False: {base.env_steps_per_second:,.0f}",
+                    f"{with_info.env_steps_per_second / base.env_steps_per_second:.2f}x"))
+    n = sizes.sync_envs
+    native = vector_env_steps_per_second(
+        gym.make_vec(timegap_env.ENV_ID, num_envs=n, vectorization_mode="vector_entry_point"), sizes.sync_steps)
+    synced = vector_env_steps_per_second(gym.make_vec(timegap_env.ENV_ID, num_envs=n, vectorization_mode="sync"),
+                                         max(sizes.sync_steps // 4, 1))
+    rows.append(Row(f"native vector env, {n} envs, full info [env-steps/s]", f"{native:,.0f}",
+                    f"SyncVectorEnv of {n} single envs: {synced:,.0f}", f"{native / synced:,.1f}x"))
+    for run in runs:
+        if run.reset_seconds is None:
+            continue
+        reference = bench_vector.generators_seconds(run.n_envs)
+        target = (verdict(f"< {TARGET_RESET_SECONDS:.0f} s", run.reset_seconds < TARGET_RESET_SECONDS)
+                  if run.n_envs == TARGET_RESET_ENVS else "")
+        rows.append(Row(f"batched reset, envs.reset(seed=0), {run.n_envs} envs [s]",
+                        f"{run.reset_seconds:,.3f} s ({run.reset_seconds / run.n_envs * 1e6:,.1f} µs per env)",
+                        f"{run.n_envs} x np.random.default_rng(seed + i): {reference:,.3f} s "
+                        f"({reference / run.n_envs * 1e6:,.2f} µs per env)",
+                        f"{run.reset_seconds / reference:,.1f}x", target))
+    return rows
 
 
-def peak_memory_mib(n_envs: int, n_steps: int = 10) -> float:
-    """Peak traced memory of building, resetting and stepping an n_envs vector env [MiB]."""
-    tracemalloc.start()
-    envs = gym.make_vec(timegap_env.ENV_ID, num_envs=n_envs, vectorization_mode="vector_entry_point")
-    envs.reset(seed=0)
-    for _ in range(n_steps):
-        envs.step(envs.action_space.sample())
-    peak = tracemalloc.get_traced_memory()[1]
-    tracemalloc.stop()
-    envs.close()
-    return peak / 2**20
+def cold_start_rows(sizes: Sizes) -> list[Row]:
+    """Rows of measurement 4."""
+    start = bench_cold.measure(timegap_env.ENV_ID, sizes.cold_repeats)
+    ref = start.reference
+    rows = []
+    for label, run in (("empty numba cache", start.cold), ("warm numba cache", start.warm)):
+        target = verdict(f"< {TARGET_COLD_CPU:.0f} CPU s", run.cpu_seconds < TARGET_COLD_CPU) if run is start.cold else ""
+        rows += [
+            Row(f"first step from python -c, {label} [CPU s]", f"{run.cpu_seconds:.2f}",
+                f"CartPole-v1 child: {ref.cpu_seconds:.2f}", f"{run.cpu_seconds / ref.cpu_seconds:.1f}x", target),
+            Row(f"first step from python -c, {label} [wall s]", f"{run.wall_seconds:.2f}",
+                f"CartPole-v1 child: {ref.wall_seconds:.2f}", f"{run.wall_seconds / ref.wall_seconds:.1f}x"),
+        ]
+    rows.append(Row("numba functions compiled by the empty-cache run [.nbi files]", f"{start.compiled}"))
+    return rows
+
+
+def ppo_rows(sizes: Sizes) -> list[Row]:
+    """Rows of measurement 5."""
+    split = bench_ppo.measure(sizes.ppo_rollouts, sizes.ppo_shrink)
+    setting = ", ".join(f"{key} {value}" for key, value in split.setting.items())
+    return [
+        Row(f"PPO, make train's setting ({setting}): env's share of model.learn [%]", f"{split.env_share:.1%}",
+            f"learner: {split.learner_share:.1%}, VecNormalize: {split.normalize_share:.1%}", "",
+            "learner-bound: report"),
+        Row("PPO: the most its throughput could gain with a free env, 1 / (1 - env share)",
+            f"{split.most_gain_if_env_free:.2f}x", "", "", "claim no more"),
+        Row("PPO, make train's setting [env steps/s of learning]", f"{split.steps_per_second:,.0f}"),
+    ]
+
+
+def kernel_rows(sizes: Sizes) -> list[Row]:
+    """Rows of measurement 6."""
+    rows = []
+    for n, n_ticks in sizes.ticks.items():
+        rate = vehicle_ticks_per_second(n, n_ticks)
+        target = verdict(f">= {TARGET_VEHICLE_TICKS / 1e6:.0f} M", rate >= TARGET_VEHICLE_TICKS) if n == 1024 else ""
+        rows.append(Row(f"simulator, {n} envs [vehicle-ticks/s]", f"{rate / 1e6:,.2f} M", target=target))
+    monitor = bench_monitor(1024, 5, sizes.monitor_ticks, MonitorConfig())
+    rows.append(Row("monitor, 1024 x 5 [vehicle-updates/s]", f"{1024 * 5 / monitor['monitor'] / 1e6:,.1f} M",
+                    "NumPy add of the same arrays (time per tick)", f"{monitor['monitor'] / monitor['add']:,.0f}x"))
+    return rows
+
+
+def table(rows: list[Row], quick: bool) -> str:
+    """The markdown of results/bench.md."""
+    lines = [
+        f"# Benchmarks (`python -m train.bench{' --quick' if quick else ''}`)",
+        "",
+        f"Python {platform.python_version()}, NumPy {np.__version__}, {platform.machine()}. Each figure is set against "
+        "a reference measured alongside it in the same process (cold start: in child processes launched alike); "
+        "the ratios are the figures to compare, absolute rates move with the machine's load. Numba kernels are "
+        "loaded (or compiled) before timing, except in the cold start.",
+        "",
+        "- Single envs take turns over several rounds, random actions, resets included.",
+        "- The native vector env runs in this one process on one core (numba's kernels are single-threaded), "
+        "random actions; its stepping is timed within episodes (all sub-envs start together, so their episodes "
+        "end in the same step: the envs are reset, untimed, before that step; resets are timed on their own). "
+        "Peak memory: tracemalloc's peak (NumPy's allocations included) while building, resetting and stepping.",
+        "- Cold start: CPU seconds (the child's `time.process_time()`) and wall seconds from `python -c` to the "
+        "first `env.step` returning (imports, `gym.make`, reset, one step), `NUMBA_CACHE_DIR` a fresh directory, "
+        "then the same directory again (warm, median of the runs); the reference child steps CartPole-v1 once.",
+        "- PPO: `hyperparams/ppo.yml` as `make train` runs it (TimeGapVecEnv, VecNormalize, MlpPolicy, CPU, one "
+        "torch thread), after one untimed rollout; the env's share is the time in its `step_wait` and `reset`.",
+        "",
+        "| measure | value | reference (same process) | ratio | target |",
+        "|---|---|---|---|---|",
+        *[f"| {row.measure} | {row.value} | {row.reference} | {row.ratio} | {row.target} |" for row in rows],
+    ]
+    return "\n".join(lines) + "\n"
 
 
 def main() -> None:
@@ -179,86 +330,15 @@ def main() -> None:
     parser.add_argument("--out", type=Path, default=Path("results/bench.md"))
     args = parser.parse_args()
     sizes = QUICK if args.quick else FULL
+    started = time.perf_counter()
 
-    from stable_baselines3.common.env_util import make_vec_env
+    rows, cartpole = single_env_rows(sizes)
+    rows += vector_rows(sizes, cartpole)
+    rows += cold_start_rows(sizes)
+    rows += ppo_rows(sizes)
+    rows += kernel_rows(sizes)
 
-    from timegap_env.envs.sb3 import TimeGapVecEnv
-
-    import highway_env  # noqa: F401  (registers highway-fast-v0)
-
-    rows: list[tuple[str, str, str]] = []  # (measure, value, verdict)
-
-    single = interleaved_steps_per_second({
-        "ours": (gym.make(timegap_env.ENV_ID), sizes.env_steps),
-        "highway": (gym.make("highway-fast-v0"), sizes.highway_steps),
-        "cartpole": (gym.make("CartPole-v1"), sizes.env_steps),
-    }, sizes.rounds)
-    ours, highway, cartpole = single["ours"], single["highway"], single["cartpole"]
-    rows += [
-        ("TimeGapMonitor-v0, one env [steps/s]", f"{ours:,.0f}", ""),
-        ("highway-fast-v0, one env [steps/s]", f"{highway:,.1f}", ""),
-        ("CartPole-v1, one env [steps/s]", f"{cartpole:,.0f}", ""),
-        ("TimeGapMonitor-v0 / highway-fast-v0", f"{ours / highway:,.1f}x",
-         f"target >= {TARGET_VS_HIGHWAY:.0f}x: {'met' if ours / highway >= TARGET_VS_HIGHWAY else 'NOT met'}"),
-        ("TimeGapMonitor-v0 / CartPole-v1", f"{ours / cartpole:.3f}x", ""),
-    ]
-
-    ticks = {n: vehicle_ticks_per_second(n, k) for n, k in sizes.ticks.items()}
-    for n, rate in ticks.items():
-        verdict = ""
-        if n == 1024:
-            verdict = f"target >= {TARGET_VEHICLE_TICKS / 1e6:.0f} M: {'met' if rate >= TARGET_VEHICLE_TICKS else 'NOT met'}"
-        rows.append((f"simulator, {n} envs [vehicle-ticks/s]", f"{rate / 1e6:,.2f} M", verdict))
-
-    n = sizes.vector_envs
-    native = vector_env_steps_per_second(
-        gym.make_vec(timegap_env.ENV_ID, num_envs=n, vectorization_mode="vector_entry_point"), sizes.vector_steps)
-    synced = vector_env_steps_per_second(gym.make_vec(timegap_env.ENV_ID, num_envs=n, vectorization_mode="sync"),
-                                         max(sizes.vector_steps // 4, 1))
-    rows += [
-        (f"native vector env, {n} envs [env-steps/s]", f"{native:,.0f}", ""),
-        (f"SyncVectorEnv, {n} envs [env-steps/s]", f"{synced:,.0f}", ""),
-        ("native / SyncVectorEnv", f"{native / synced:,.1f}x", ""),
-    ]
-
-    monitor = bench_monitor(1024, 5, sizes.monitor_ticks, MonitorConfig())
-    rows += [
-        ("monitor, 1024 x 5 [vehicle-updates/s]", f"{1024 * 5 / monitor['monitor'] / 1e6:,.1f} M", ""),
-        ("monitor / NumPy add of the same arrays [time ratio]", f"{monitor['monitor'] / monitor['add']:,.0f}x", ""),
-    ]
-
-    torch.set_num_threads(1)  # as train_ppo does
-    for label, setting in (("small setting", PPO_SMALL), ("training setting", PPO_TRAINING)):
-        timesteps = max(sizes.ppo_timesteps, 2 * setting["n_envs"] * (sizes.ppo_n_steps or setting["n_steps"]))
-        ppo = ppo_steps_per_second({
-            "ours": lambda n: TimeGapVecEnv(n_envs=n),
-            "cartpole": lambda n: make_vec_env("CartPole-v1", n_envs=n, seed=0),
-        }, setting, timesteps, sizes.ppo_n_steps, sizes.rounds)
-        ppo_ours, ppo_cartpole = ppo["ours"], ppo["cartpole"]
-        ratio = ppo_ours / ppo_cartpole
-        rows += [
-            (f"PPO, {label} {setting}: TimeGapMonitor-v0 [steps/s]", f"{ppo_ours:,.0f}", ""),
-            (f"PPO, {label}: CartPole-v1 [steps/s]", f"{ppo_cartpole:,.0f}", ""),
-            (f"PPO, {label}: TimeGapMonitor-v0 / CartPole-v1", f"{ratio:.2f}x",
-             f"target >= {TARGET_PPO_VS_CARTPOLE:.0%}: {'met' if ratio >= TARGET_PPO_VS_CARTPOLE else 'NOT met'}"),
-        ]
-
-    rows.append((f"peak memory, {sizes.memory_envs}-env vector env [MiB]", f"{peak_memory_mib(sizes.memory_envs):,.1f}", ""))
-
-    lines = [
-        f"# Benchmarks (`python -m train.bench{' --quick' if args.quick else ''}`)",
-        "",
-        f"Python {platform.python_version()}, NumPy {np.__version__}, {platform.machine()}; one process, "
-        "single envs and PPO runs take turns over several rounds. Ratios are the figures to compare; absolute rates move "
-        "with the machine's load. Numba kernels are loaded (or compiled) before timing.",
-        "PPO: each setting runs on both envs alike, MlpPolicy, CPU, one torch thread; "
-        "TimeGapMonitor-v0 through the native vector env (`timegap_env.envs.sb3.TimeGapVecEnv`), CartPole-v1 through DummyVecEnv.",
-        "",
-        "| measure | value | target |",
-        "|---|---|---|",
-        *[f"| {measure} | {value} | {verdict} |" for measure, value, verdict in rows],
-    ]
-    text = "\n".join(lines) + "\n"
+    text = table(rows, args.quick) + f"\nThe whole benchmark took {time.perf_counter() - started:,.0f} s.\n"
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(text)
     print(text)

@@ -1,16 +1,63 @@
-"""The benchmark script runs on tiny sizes and writes its table (its numbers are not asserted: machines are noisy)."""
+"""The benchmark runs on tiny sizes and writes every row with finite positive numbers (their sizes are not
+asserted: machines are noisy)."""
 
+import math
+import re
 import sys
 
 from train import bench
+
+NUMBER = re.compile(r"[-+]?\d[\d,]*(?:\.\d+)?(?:e[-+]?\d+)?|nan|inf", re.IGNORECASE)
+
+
+def first_number(cell: str) -> float:
+    match = NUMBER.search(cell)
+    assert match, f"no number in {cell!r}"
+    return float(match.group().replace(",", ""))
+
+
+def expected_measures(sizes: bench.Sizes) -> list[str]:
+    """The start of every row's measure, in order of the sizes."""
+    vector = [f"native vector env, {n} envs, one core" for n in sizes.vector_sizes]
+    memory = [f"native vector env, {n} envs: peak memory" for n in sizes.vector_sizes]
+    reset = [f"batched reset, envs.reset(seed=0), {n} envs" for n in sizes.reset_sizes]
+    return [
+        "TimeGapMonitor-v0, one env, full info [steps/s]",
+        "TimeGapMonitor-v0, one env, step_diagnostics=False",
+        "TimeGapMonitor-v0, one env, full info [steps/s] against highway-env",
+        *vector, *memory,
+        f"native vector env, {sizes.vector_sizes[0]} envs, step_diagnostics=True",
+        f"native vector env, {sizes.sync_envs} envs, full info",
+        *reset,
+        "first step from python -c, empty numba cache [CPU s]",
+        "first step from python -c, empty numba cache [wall s]",
+        "first step from python -c, warm numba cache [CPU s]",
+        "first step from python -c, warm numba cache [wall s]",
+        "numba functions compiled by the empty-cache run",
+        "PPO, make train's setting (",
+        "PPO: the most its throughput could gain",
+        "PPO, make train's setting [env steps/s",
+        *[f"simulator, {n} envs" for n in sizes.ticks],
+        "monitor, 1024 x 5",
+    ]
 
 
 def test_bench_runs_quick(tmp_path, monkeypatch, capsys):
     out = tmp_path / "bench.md"
     monkeypatch.setattr(sys, "argv", ["bench", "--quick", "--out", str(out)])
     bench.main()
-    table = out.read_text()
-    for measure in ("TimeGapMonitor-v0 / highway-fast-v0", "simulator, 1024 envs", "native / SyncVectorEnv",
-                    "monitor, 1024 x 5", "PPO, training setting: TimeGapMonitor-v0 / CartPole-v1", "peak memory"):
-        assert measure in table
-    assert "| TimeGapMonitor-v0 / highway-fast-v0 |" in capsys.readouterr().out
+    text = out.read_text()
+    assert text in capsys.readouterr().out
+    rows = [line.split(" | ") for line in text.splitlines() if line.startswith("| ") and not line.startswith("| measure")]
+    measures = [row[0].removeprefix("| ") for row in rows]
+    expected = expected_measures(bench.QUICK)
+    assert len(measures) == len(expected), measures
+    lean_env = bench.single_env_without_diagnostics()
+    for (measure, value, _, ratio, _), start in zip(rows, expected):
+        assert measure.removeprefix("| ").startswith(start), (measure, start)
+        if value == bench.NO_KWARG:  # only while the single env takes no step_diagnostics
+            assert lean_env is None and "step_diagnostics=False" in measure, measure
+            continue
+        for cell in (value, ratio) if ratio else (value,):
+            number = first_number(cell)
+            assert math.isfinite(number) and number > 0, (measure, cell)
