@@ -33,15 +33,21 @@ class SettingLadder:
         self.shape = (n_envs, self.n_followers) if config.action_mode == "per_vehicle" else (n_envs,)  # of an action
         self.n_actions = len(RELATIVE_STEPS) if self.relative else self.levels.size  # per entry of an action
 
-    def settings(self, action: np.ndarray, current: np.ndarray) -> np.ndarray:
-        """Settings [s] (n_envs, n_followers) for an action: ladder indices, (n_envs,) platoon or (n_envs, N) per
-        vehicle, or relative steps (n_envs,) from the platoon's ``current`` settings [s] (n_envs, n_followers),
-        clipped to the ladder (its largest follower's, should they differ)."""
+    def check(self, action: np.ndarray) -> np.ndarray:
+        """``action`` (integers of shape ``shape``, each in [0, n_actions)) as int64 (n_envs, 1), or (n_envs, N)
+        per vehicle, the layout of the fused step; ``ValueError`` naming the action otherwise."""
         action = np.asarray(action)
         if action.shape != self.shape or action.dtype.kind not in "iu":
             raise ValueError(f"action = {action!r}: expected integer actions of shape {self.shape}")
         if ((action < 0) | (action >= self.n_actions)).any():
             raise ValueError(f"action = {action!r}: every entry must be in [0, {self.n_actions - 1}]")
+        return action.astype(np.int64, copy=False).reshape(self.shape[0], -1)
+
+    def settings(self, action: np.ndarray, current: np.ndarray) -> np.ndarray:
+        """Settings [s] (n_envs, n_followers) for an action: ladder indices, (n_envs,) platoon or (n_envs, N) per
+        vehicle, or relative steps (n_envs,) from the platoon's ``current`` settings [s] (n_envs, n_followers),
+        clipped to the ladder (its largest follower's, should they differ)."""
+        action = self.check(action).reshape(self.shape)
         if self.relative:
             now = np.abs(self.levels[None, :] - np.asarray(current).max(axis=1)[:, None]).argmin(axis=1)
             action = np.clip(now + np.asarray(RELATIVE_STEPS)[action], 0, self.levels.size - 1)

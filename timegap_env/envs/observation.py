@@ -96,29 +96,47 @@ def observe(state: FollowerState, scales: ObservationScales) -> np.ndarray:
     return features
 
 
+def observe_into(state: FollowerState, scales: ObservationScales, out: np.ndarray, mask: np.ndarray) -> None:
+    """:func:`observe` for the envs in ``mask`` (n_envs,) bool only, into their rows of ``out``."""
+    _encode_envs(tuple(state), tuple(scales), out, np.flatnonzero(mask))
+
+
+@numba.njit(cache=True)
+def _encode_envs(state, scales, out, envs):  # noqa: ANN001, ANN202
+    """:func:`_encode` for the envs ``envs`` only."""
+    for e in envs:
+        encode_env(state, scales, out, e)
+
+
 @numba.njit(cache=True)
 def _encode(state, scales, out):  # noqa: ANN001, ANN202
     """Fill ``out`` (n_envs, n_followers, len(FEATURES)) float32 with the features of ``state``
     (:class:`FollowerState`) under ``scales`` (:class:`ObservationScales`), both plain tuples (see
     :mod:`timegap_env.sim.platoon`), in FEATURES order, clipped to [OBSERVATION_LOW, OBSERVATION_HIGH]."""
+    for e in range(out.shape[0]):
+        encode_env(state, scales, out, e)
+
+
+@numba.njit(cache=True)
+def encode_env(state, scales, out, e):  # noqa: ANN001, ANN201
+    """Env ``e``'s row of :func:`_encode`."""
     state, scales = FollowerState(*state), ObservationScales(*scales)
-    n_envs, n_followers, n_features = out.shape
-    for e in range(n_envs):
-        for f in range(n_followers):
-            mean, variance, line = state.tau_mean[e, f], state.tau_var[e, f], state.center[e, f]
-            out[e, f, _DEVIATION] = (mean - line) / DEVIATION_SCALE
-            out[e, f, _ESTIMATE_STD] = math.sqrt(variance) / scales.half_width
-            out[e, f, _PROB_OUTSIDE] = outside_probability(
-                mean, variance, line - scales.half_width, line + scales.half_width
-            )
-            out[e, f, _ALARM] = state.side[e, f] != 0
-            out[e, f, _EXCEEDANCES] = state.exceedances_in_window[e, f] / scales.exceedance_scale
-            out[e, f, _TIME_SINCE_ALARM] = state.run_length[e, f] * scales.dt / scales.exceedance_window
-            out[e, f, _SETTING] = (state.setting[e, f] - scales.smallest_level) / scales.level_span
-            out[e, f, _SPEED] = state.speed[e, f] / SPEED_SCALE
-            out[e, f, _V2V] = state.v2v[e, f]
-            for i in range(n_features):
-                out[e, f, i] = min(max(out[e, f, i], OBSERVATION_LOW[i]), OBSERVATION_HIGH[i])
+    n_followers, n_features = out.shape[1], out.shape[2]
+    for f in range(n_followers):
+        mean, variance, line = state.tau_mean[e, f], state.tau_var[e, f], state.center[e, f]
+        out[e, f, _DEVIATION] = (mean - line) / DEVIATION_SCALE
+        out[e, f, _ESTIMATE_STD] = math.sqrt(variance) / scales.half_width
+        out[e, f, _PROB_OUTSIDE] = outside_probability(
+            mean, variance, line - scales.half_width, line + scales.half_width
+        )
+        out[e, f, _ALARM] = state.side[e, f] != 0
+        out[e, f, _EXCEEDANCES] = state.exceedances_in_window[e, f] / scales.exceedance_scale
+        out[e, f, _TIME_SINCE_ALARM] = state.run_length[e, f] * scales.dt / scales.exceedance_window
+        out[e, f, _SETTING] = (state.setting[e, f] - scales.smallest_level) / scales.level_span
+        out[e, f, _SPEED] = state.speed[e, f] / SPEED_SCALE
+        out[e, f, _V2V] = state.v2v[e, f]
+        for i in range(n_features):
+            out[e, f, i] = min(max(out[e, f, i], OBSERVATION_LOW[i]), OBSERVATION_HIGH[i])
 
 
 class FollowerView(NamedTuple):

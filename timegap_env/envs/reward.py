@@ -205,77 +205,97 @@ def _score(step, previous_accel, envelope, setting, changed, constants, weights,
 
 @numba.njit(cache=True)
 def _step_readouts(step, previous_accel, envelope, constants, out):  # noqa: ANN001, ANN202
-    n_ticks, n_envs, n_followers = step.speed.shape
-    for e in range(n_envs):
-        for k in range(n_ticks):  # the acceleration envelopes, the leader's in column 0
-            envelope[e, 0] = max(abs(step.leader_accel[k, e]), envelope[e, 0] * constants.envelope_decay)
-            for f in range(n_followers):
-                envelope[e, f + 1] = max(abs(step.accel[k, e, f]), envelope[e, f + 1] * constants.envelope_decay)
-        growth = 0.0
-        for i in range(1, n_followers + 1):
-            growth += max(0.0, envelope[e, i] - envelope[e, i - 1])
-        out.accel_growth[e] = growth
-        deviation_sum = max_deviation = alarm_ticks = exceedances = gap_deviation_sum = 0.0
-        collided = False
-        for k in range(n_ticks):
-            tick_deviation = tick_gap_deviation = 0.0
-            for f in range(n_followers):
-                deviation = abs(step.tau_mean[k, e, f] - step.center[k, e, f])
-                tick_deviation += deviation
-                max_deviation = max(max_deviation, deviation)
-                alarm_ticks += step.alarm[k, e, f]
-                exceedances += step.exceedance[k, e, f]
-                collided = collided or step.collisions[k, e, f]
-                speed = step.speed[k, e, f]
-                if speed >= constants.min_speed:
-                    gap = (step.spacing[k, e, f] - constants.standstill_spacing) / speed
-                    tick_gap_deviation += min(abs(gap - step.applied_setting[k, e, f]), constants.tracking_cap)
-            deviation_sum += tick_deviation
-            gap_deviation_sum += tick_gap_deviation
-        out.deviation_sum[e], out.max_deviation[e], out.collided[e] = deviation_sum, max_deviation, collided
-        out.alarm_ticks[e], out.exceedances[e], out.gap_deviation_sum[e] = alarm_ticks, exceedances, gap_deviation_sum
+    for e in range(step.speed.shape[1]):
+        env_readouts(step, e, previous_accel, envelope, constants, out, e)
+
+
+@numba.njit(cache=True)
+def env_readouts(step, column, previous_accel, envelope, constants, out, e):  # noqa: ANN001, ANN201, PLR0913
+    """Env ``e``'s read-outs (into ``out``, a :class:`StepReadouts`) of column ``column`` of ``step`` (a
+    :class:`StepTicks`); its acceleration envelopes are updated in place."""
+    n_ticks, n_followers = step.speed.shape[0], step.speed.shape[2]
+    c = column
+    for k in range(n_ticks):  # the acceleration envelopes, the leader's in column 0
+        envelope[e, 0] = max(abs(step.leader_accel[k, c]), envelope[e, 0] * constants.envelope_decay)
         for f in range(n_followers):
-            out.min_ttc[e, f], out.jerk_squared[e, f] = np.inf, 0.0
-            for k in range(n_ticks):
-                predecessor_speed = step.leader_speed[k, e] if f == 0 else step.speed[k, e, f - 1]
-                closing = step.speed[k, e, f] - predecessor_speed  # [m/s], > 0 when the gap shrinks
-                if closing > 0:
-                    out.min_ttc[e, f] = min(out.min_ttc[e, f], step.spacing[k, e, f] / closing)
-                before = previous_accel[e, f] if k == 0 else step.accel[k - 1, e, f]
-                out.jerk_squared[e, f] += ((step.accel[k, e, f] - before) / constants.dt) ** 2
-            out.final_speed[e, f] = step.speed[n_ticks - 1, e, f]
+            envelope[e, f + 1] = max(abs(step.accel[k, c, f]), envelope[e, f + 1] * constants.envelope_decay)
+    growth = 0.0
+    for i in range(1, n_followers + 1):
+        growth += max(0.0, envelope[e, i] - envelope[e, i - 1])
+    out.accel_growth[e] = growth
+    deviation_sum = max_deviation = alarm_ticks = exceedances = gap_deviation_sum = 0.0
+    collided = False
+    for k in range(n_ticks):
+        tick_deviation = tick_gap_deviation = 0.0
+        for f in range(n_followers):
+            deviation = abs(step.tau_mean[k, c, f] - step.center[k, c, f])
+            tick_deviation += deviation
+            max_deviation = max(max_deviation, deviation)
+            alarm_ticks += step.alarm[k, c, f]
+            exceedances += step.exceedance[k, c, f]
+            collided = collided or step.collisions[k, c, f]
+            speed = step.speed[k, c, f]
+            if speed >= constants.min_speed:
+                gap = (step.spacing[k, c, f] - constants.standstill_spacing) / speed
+                tick_gap_deviation += min(abs(gap - step.applied_setting[k, c, f]), constants.tracking_cap)
+        deviation_sum += tick_deviation
+        gap_deviation_sum += tick_gap_deviation
+    out.deviation_sum[e], out.max_deviation[e], out.collided[e] = deviation_sum, max_deviation, collided
+    out.alarm_ticks[e], out.exceedances[e], out.gap_deviation_sum[e] = alarm_ticks, exceedances, gap_deviation_sum
+    for f in range(n_followers):
+        out.min_ttc[e, f], out.jerk_squared[e, f] = np.inf, 0.0
+        for k in range(n_ticks):
+            predecessor_speed = step.leader_speed[k, c] if f == 0 else step.speed[k, c, f - 1]
+            closing = step.speed[k, c, f] - predecessor_speed  # [m/s], > 0 when the gap shrinks
+            if closing > 0:
+                out.min_ttc[e, f] = min(out.min_ttc[e, f], step.spacing[k, c, f] / closing)
+            before = previous_accel[e, f] if k == 0 else step.accel[k - 1, c, f]
+            out.jerk_squared[e, f] += ((step.accel[k, c, f] - before) / constants.dt) ** 2
+        out.final_speed[e, f] = step.speed[n_ticks - 1, c, f]
 
 
 @numba.njit(cache=True)
 def _reward_terms(readouts, setting, changed, constants, out):  # noqa: ANN001, ANN202
-    n_envs, n_followers = setting.shape
+    for e in range(setting.shape[0]):
+        env_reward_terms(readouts, setting, changed, constants, out, e)
+
+
+@numba.njit(cache=True)
+def env_reward_terms(readouts, setting, changed, constants, out, e):  # noqa: ANN001, ANN201, PLR0913
+    """Env ``e``'s terms (into ``out``, a :class:`RewardTerms` of (n_envs,) arrays) from its read-outs."""
+    n_followers = setting.shape[1]
     n_ticks = constants.ticks_per_step
     follower_ticks = n_ticks * n_followers
-    for e in range(n_envs):
-        safety = comfort = efficiency = preference = switching = 0.0
-        for f in range(n_followers):
-            v = readouts.final_speed[e, f]  # [m/s]
-            safety += max(0.0, 1.0 - readouts.min_ttc[e, f] / constants.ttc_threshold)
-            comfort += readouts.jerk_squared[e, f] / n_ticks
-            efficiency += 1.0 - (v * constants.smallest_level + constants.gap_per_vehicle) / (
-                v * setting[e, f] + constants.gap_per_vehicle
-            )
-            preference += abs(setting[e, f] - constants.preferred_setting)
-            switching += changed[e, f]
-        out.tracking[e] = -readouts.gap_deviation_sum[e] / follower_ticks / constants.tracking_reference
-        out.string_stability[e] = -min(1.0, readouts.accel_growth[e] / constants.accel_growth_reference)
-        out.safety[e] = -(safety / n_followers)
-        out.collision[e] = -1.0 if readouts.collided[e] else -0.0
-        out.comfort[e] = -(comfort / n_followers) / constants.jerk_reference**2
-        out.efficiency[e] = -(efficiency / n_followers)
-        out.preference[e] = -(preference / n_followers) / constants.level_span
-        out.switching[e] = -(switching / n_followers)
+    safety = comfort = efficiency = preference = switching = 0.0
+    for f in range(n_followers):
+        v = readouts.final_speed[e, f]  # [m/s]
+        safety += max(0.0, 1.0 - readouts.min_ttc[e, f] / constants.ttc_threshold)
+        comfort += readouts.jerk_squared[e, f] / n_ticks
+        efficiency += 1.0 - (v * constants.smallest_level + constants.gap_per_vehicle) / (
+            v * setting[e, f] + constants.gap_per_vehicle
+        )
+        preference += abs(setting[e, f] - constants.preferred_setting)
+        switching += changed[e, f]
+    out.tracking[e] = -readouts.gap_deviation_sum[e] / follower_ticks / constants.tracking_reference
+    out.string_stability[e] = -min(1.0, readouts.accel_growth[e] / constants.accel_growth_reference)
+    out.safety[e] = -(safety / n_followers)
+    out.collision[e] = -1.0 if readouts.collided[e] else -0.0
+    out.comfort[e] = -(comfort / n_followers) / constants.jerk_reference**2
+    out.efficiency[e] = -(efficiency / n_followers)
+    out.preference[e] = -(preference / n_followers) / constants.level_span
+    out.switching[e] = -(switching / n_followers)
 
 
 @numba.njit(cache=True)
 def _weighted_sum(terms, weights, out):  # noqa: ANN001, ANN202
     """``out`` (n_envs,) = sum over t of weights[t] terms[t], ``terms`` (n_terms, n_envs), in row order."""
     for e in range(out.size):
-        out[e] = 0.0
-        for t in range(terms.shape[0]):
-            out[e] += weights[t] * terms[t, e]
+        env_weighted_sum(terms, weights, out, e)
+
+
+@numba.njit(cache=True)
+def env_weighted_sum(terms, weights, out, e):  # noqa: ANN001, ANN201
+    """``out[e]`` of :func:`_weighted_sum`."""
+    out[e] = 0.0
+    for t in range(terms.shape[0]):
+        out[e] += weights[t] * terms[t, e]

@@ -7,6 +7,11 @@ platoon, and the step is scored (:mod:`~timegap_env.envs.reward`) and added to t
 totals (:mod:`~timegap_env.envs.totals`); the observation is :mod:`~timegap_env.envs.observation`'s.
 The single env runs the task with ``n_envs = 1``, the native vector env with ``n_envs = N``:
 same code, so they agree step by step.
+
+A step runs in one of two ways with the same result, bit for bit: fused (the default), one compiled
+call that takes each env through every stage (:func:`~timegap_env.envs.step_kernel.fused_step`); or
+staged (``fused=False``, and whenever a trace is recorded), each stage over every env in turn through
+the objects' own methods, the readable specification the tests hold the fused step to.
 """
 
 from __future__ import annotations
@@ -21,21 +26,28 @@ from timegap_env.config import TIME_GAP_MIN_SPEED, EnvConfig
 from timegap_env.envs.action import SettingLadder
 from timegap_env.envs.episodes import Episodes, check_reset_options
 from timegap_env.envs.info import TRUTH_PREFIX, prefixed
-from timegap_env.envs.observation import FollowerState, ObservationScales, observe
+from timegap_env.envs.observation import FEATURES, FollowerState, ObservationScales, observe_into
 from timegap_env.envs.rendering import RenderFrame
-from timegap_env.envs.reward import RewardConstants, StepReadouts, StepTicks, score_step, weights_of
+from timegap_env.envs.reward import REWARD_TERMS, RewardConstants, StepReadouts, StepTicks, score_step, weights_of
+from timegap_env.envs.step_kernel import StepRules, StepState, fused_step
 from timegap_env.envs.totals import EpisodeTotals
 from timegap_env.monitoring.loop import MonitoredPlatoon
 
 
 @dataclasses.dataclass(frozen=True)
 class StepResult:
-    """What one step returns for every env, arrays with a leading n_envs axis."""
+    """What one step returns for every env, arrays with a leading n_envs axis: the task's own, overwritten by the
+    next step (copy what you keep)."""
 
     reward: np.ndarray  # (n_envs,)
-    terms: dict[str, np.ndarray]  # reward term -> (n_envs,), each <= 0
+    term_rows: np.ndarray  # (n_terms, n_envs) the reward terms in REWARD_TERMS order, each <= 0
     terminated: np.ndarray  # (n_envs,) a collision ended the episode
     truncated: np.ndarray  # (n_envs,) the episode ran out of time or leader profile
+
+    @property
+    def terms(self) -> dict[str, np.ndarray]:
+        """Reward term -> (n_envs,), copies."""
+        return {name: row.copy() for name, row in zip(REWARD_TERMS, self.term_rows)}
 
 
 class TraceArrays(NamedTuple):
@@ -71,11 +83,13 @@ class PlatoonTask:
     """Episodes, actions, observations and rewards of ``n_envs`` monitored platoons.
 
     ``trace``: None, or a :class:`Trace` of env 0 that every step adds to (see :meth:`start_trace`).
+    ``fused``: steps run as one compiled call (True) or stage by stage (False); see the module docstring.
     """
 
-    def __init__(self, config: EnvConfig, n_envs: int) -> None:
+    def __init__(self, config: EnvConfig, n_envs: int, fused: bool = True) -> None:
         self.config = config
         self.n_envs = n_envs
+        self.fused = bool(fused)
         self.n_followers = config.platoon.n_followers
         self.ticks_per_decision = config.ticks_per_decision
         self.episodes = Episodes(config, n_envs)
@@ -90,6 +104,16 @@ class PlatoonTask:
         self._reward_constants = RewardConstants.from_config(config)
         self._weights = weights_of(config)
         self.trace: Trace | None = None
+        # what a step writes, refilled by every step
+        self._result = StepResult(reward=np.zeros(n_envs), term_rows=np.zeros((len(REWARD_TERMS), n_envs)),
+                                  terminated=np.zeros(n_envs, dtype=bool), truncated=np.zeros(n_envs, dtype=bool))
+        self._changed = np.zeros((n_envs, self.n_followers), dtype=bool)
+        self._observation = np.zeros((n_envs, self.n_followers, len(FEATURES)), dtype=np.float32)
+        chart = self.loop.chart
+        self._rules = tuple(StepRules.from_config(config, getattr(chart, "half_width", config.chart.half_width),
+                                                  tuple(self._reward_constants), np.array(self._weights),
+                                                  tuple(self._scales)))
+        self._state: tuple | None = None  # the fused step's StepState, built at each reset
 
     # ------------------------------------------------------------------ reset
     def reset(self, mask: np.ndarray, rngs: Sequence[np.random.Generator], options: Mapping[str, Any] | None) -> None:
@@ -103,12 +127,34 @@ class PlatoonTask:
         loop.reset(episodes.leader_speed[:, 0], episodes.leader_accel[:, 0], mask=mask,
                    setting=episodes.initial_setting[:, None], noise_key=episodes.noise_keys,
                    dropout_probability=episodes.dropout_probability)
-        loop.platoon.set_v2v(loop.degradation.v2v_up(loop.ticks), mask=mask)  # the others keep their last tick's
+        loop.platoon.set_v2v(self._v2v_during(loop.ticks), mask=mask)  # the others keep their last tick's
         self._previous_accel[mask] = loop.platoon.a[mask, 1:]
         self._accel_envelope[mask] = np.abs(loop.platoon.a[mask])
         self._readouts.min_ttc[mask] = np.inf
         self._readouts.jerk_squared[mask] = 0.0
         self.totals.restart(mask)
+        observe_into(self._follower_state(), self._scales, self._observation, mask)
+        self._state = self._step_state()
+
+    def _v2v_during(self, ticks: np.ndarray) -> np.ndarray:
+        """Each follower's V2V flag during tick ``ticks`` (..., n_envs) since reset: down while a degradation takes it
+        down, and always without V2V (``platoon.v2v`` False)."""
+        return self.loop.degradation.v2v_up(ticks) & self.config.platoon.v2v
+
+    def _step_state(self) -> tuple:
+        """The fused step's :class:`~timegap_env.envs.step_kernel.StepState`: the objects' own arrays."""
+        loop, episodes, result = self.loop, self.episodes, self._result
+        platoon_state, zoh, controller, faults = loop.platoon.kernel_args
+        noise, sensor_faults = loop.sensors.kernel_args
+        return tuple(StepState(
+            platoon=platoon_state, zoh=zoh, controller=controller, faults=faults, v2v_down=loop.degradation.v2v_down,
+            leader_speed=episodes.leader_speed, leader_accel=episodes.leader_accel,
+            episode_ticks=episodes.episode_ticks, noise=noise, sensor_faults=sensor_faults,
+            monitor=loop.monitor.kernel_args, chart=loop.chart.kernel_args, readouts=tuple(self._readouts),
+            previous_accel=self._previous_accel, envelope=self._accel_envelope, totals=tuple(self.totals),
+            changed=self._changed, term_rows=result.term_rows, terms=tuple(result.term_rows), reward=result.reward, terminated=result.terminated,
+            truncated=result.truncated, observation=self._observation,
+        ))
 
     def start_trace(self) -> Trace:
         """Record env 0 at every tick from now on (cleared at each reset by the env); returns the trace."""
@@ -117,12 +163,27 @@ class PlatoonTask:
 
     # ------------------------------------------------------------------ step
     def step(self, action: np.ndarray) -> StepResult:
-        """Apply the action, run one decision interval of ticks, and score it."""
+        """Apply the action (checked against the action space), run one decision interval of ticks, and score it."""
+        return self.run_step(self.ladder.check(action))
+
+    def run_step(self, action: np.ndarray) -> StepResult:
+        """:meth:`step` for an action already checked, as :meth:`SettingLadder.check` returns it."""
+        if self._state is None:
+            raise RuntimeError("PlatoonTask.step() before reset(): reset every env first")
+        if self.fused and self.trace is None:
+            fused_step(self._state, self._rules, action)
+            self.loop.monitor.posterior_written()
+        else:
+            self._staged_step(action)
+        return self._result
+
+    def _staged_step(self, action: np.ndarray) -> None:
+        """:meth:`run_step`, stage by stage through the objects' methods."""
         cfg, loop, platoon = self.config, self.loop, self.loop.platoon
-        changed = loop.change_setting(self.ladder.settings(action, platoon.setting))
+        changed = loop.change_setting(self.ladder.settings(action.reshape(self.ladder.shape), platoon.setting))
         ticks = loop.ticks + np.arange(self.ticks_per_decision)[:, None]  # (n_ticks, n_envs), before each tick
         leader_speed, leader_accel = self.episodes.leader_at(ticks + 1)
-        block = loop.run(leader_speed, leader_accel, loop.degradation.v2v_up(ticks))
+        block = loop.run(leader_speed, leader_accel, self._v2v_during(ticks))
         physics, chart = block.physics, block.chart
         if self.trace is not None:
             self.trace.add(TraceArrays((ticks[:, 0] + 1) * cfg.platoon.dt, block.tau_mean[:, 0], chart.center[:, 0]))
@@ -135,10 +196,12 @@ class PlatoonTask:
         score = score_step(step, self._previous_accel, self._accel_envelope, platoon.setting, changed,
                            self._reward_constants, self._weights, self._readouts)
         self.totals.add_step(self._readouts, platoon.setting, changed, self._reward_constants.gap_per_vehicle)
-        self._previous_accel = physics.accel[-1].copy()
-        terminated = platoon.collided.any(axis=1)
-        truncated = (loop.ticks >= self.episodes.episode_ticks) & ~terminated
-        return StepResult(reward=score.reward, terms=score.terms._asdict(), terminated=terminated, truncated=truncated)
+        self._previous_accel[:] = physics.accel[-1]
+        result = self._result
+        result.reward[:], result.term_rows[:], self._changed[:] = score.reward, score.terms, changed
+        np.any(platoon.collided, axis=1, out=result.terminated)
+        result.truncated[:] = (loop.ticks >= self.episodes.episode_ticks) & ~result.terminated
+        observe_into(self._follower_state(), self._scales, self._observation, np.ones(self.n_envs, dtype=bool))
 
     # ------------------------------------------------------------------ read-outs
     @property
@@ -147,14 +210,17 @@ class PlatoonTask:
         return self.episodes.scenario
 
     def observation(self) -> np.ndarray:
-        """Observations (n_envs, n_followers, len(FEATURES)) float32, the features in FEATURES order."""
+        """Observations (n_envs, n_followers, len(FEATURES)) float32, the features in FEATURES order (a copy)."""
+        return self._observation.copy()
+
+    def _follower_state(self) -> FollowerState:
+        """What the observation reads now (:mod:`~timegap_env.envs.observation`)."""
         moments, chart, platoon = self.loop.monitor.moments, self.loop.chart, self.loop.platoon
-        state = FollowerState(
+        return FollowerState(
             tau_mean=moments.mean_tau, tau_var=moments.var_tau, center=chart.center, side=chart.side,
             exceedances_in_window=chart.exceedances_in_window, run_length=chart.run_length, setting=platoon.setting,
             speed=platoon.v[:, 1:], v2v=platoon.v2v,
         )
-        return observe(state, self._scales)
 
     def monitor_info(self) -> dict[str, np.ndarray]:
         """Per-step diagnostics, each (n_envs, n_followers) unless noted."""
@@ -186,7 +252,7 @@ class PlatoonTask:
         arrays (n_envs, n_followers) (:meth:`~timegap_env.sim.degradation.DegradationTable.truth`): for
         oracles and evaluation, never in the observation."""
         loop = self.loop
-        return loop.degradation.truth(loop.ticks, loop.degradation.v2v_up(loop.ticks) & self.config.platoon.v2v)
+        return loop.degradation.truth(loop.ticks, self._v2v_during(loop.ticks))
 
     def episode_summary(self) -> dict[str, np.ndarray]:
         """Episode statistics so far, each (n_envs,)."""

@@ -69,26 +69,32 @@ class EpisodeTotals(NamedTuple):
 @numba.njit(cache=True)
 def _add_step(totals, readouts, setting, changed, gap_per_vehicle):  # noqa: ANN001, ANN202
     """:meth:`EpisodeTotals.add_step`; the structures come as plain tuples (see :mod:`timegap_env.sim.platoon`)."""
+    for e in range(setting.shape[0]):
+        add_step_env(totals, readouts, setting, changed, gap_per_vehicle, e)
+
+
+@numba.njit(cache=True)
+def add_step_env(totals, readouts, setting, changed, gap_per_vehicle, e):  # noqa: ANN001, ANN201, PLR0913
+    """Env ``e``'s part of :func:`_add_step`."""
     totals, readouts = EpisodeTotals(*totals), StepReadouts(*readouts)
-    n_envs, n_followers = setting.shape
-    for e in range(n_envs):
-        jerk_squared = switches = setting_sum = capacity = 0.0
-        min_ttc = np.inf
-        for f in range(n_followers):
-            v = readouts.final_speed[e, f]  # [m/s]
-            jerk_squared += readouts.jerk_squared[e, f]
-            switches += changed[e, f]
-            setting_sum += setting[e, f]
-            capacity += 3600.0 * v / (v * setting[e, f] + gap_per_vehicle)  # [veh/h] at the current speed
-            min_ttc = min(min_ttc, readouts.min_ttc[e, f])
-        totals.steps[e] += 1
-        totals.gap_deviation[e] += readouts.gap_deviation_sum[e]
-        totals.alarm_ticks[e] += readouts.alarm_ticks[e]
-        totals.exceedances[e] += readouts.exceedances[e]
-        totals.max_deviation[e] = max(totals.max_deviation[e], readouts.max_deviation[e])
-        totals.jerk_squared[e] += jerk_squared / n_followers
-        totals.switches[e] += switches
-        totals.setting[e] += setting_sum / n_followers
-        totals.capacity[e] += capacity / n_followers
-        totals.collision[e] = max(totals.collision[e], 1.0 if readouts.collided[e] else 0.0)
-        totals.min_ttc[e] = min(totals.min_ttc[e], min_ttc)
+    n_followers = setting.shape[1]
+    jerk_squared = switches = setting_sum = capacity = 0.0
+    min_ttc = np.inf
+    for f in range(n_followers):
+        v = readouts.final_speed[e, f]  # [m/s]
+        jerk_squared += readouts.jerk_squared[e, f]
+        switches += changed[e, f]
+        setting_sum += setting[e, f]
+        capacity += 3600.0 * v / (v * setting[e, f] + gap_per_vehicle)  # [veh/h] at the current speed
+        min_ttc = min(min_ttc, readouts.min_ttc[e, f])
+    totals.steps[e] += 1
+    totals.gap_deviation[e] += readouts.gap_deviation_sum[e]
+    totals.alarm_ticks[e] += readouts.alarm_ticks[e]
+    totals.exceedances[e] += readouts.exceedances[e]
+    totals.max_deviation[e] = max(totals.max_deviation[e], readouts.max_deviation[e])
+    totals.jerk_squared[e] += jerk_squared / n_followers
+    totals.switches[e] += switches
+    totals.setting[e] += setting_sum / n_followers
+    totals.capacity[e] += capacity / n_followers
+    totals.collision[e] = max(totals.collision[e], 1.0 if readouts.collided[e] else 0.0)
+    totals.min_ttc[e] = min(totals.min_ttc[e], min_ttc)

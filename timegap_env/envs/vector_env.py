@@ -135,7 +135,7 @@ class TimeGapMonitorVectorEnv(VectorEnv):
         self._steps += 1
         done = (result.terminated | result.truncated | (self._steps >= self.max_episode_steps)) & ~restarting
         terminated, truncated = result.terminated & done, ~result.terminated & done
-        reward, terms = result.reward, result.terms
+        reward, terms = result.reward.copy(), result.terms
         if restarting.any():  # next_step: their step above ran past the episode's end and is dropped
             self.task.reset(restarting, self._rngs, None)
             self._steps[restarting] = 0

@@ -115,6 +115,8 @@ class ControlChart:
     )
     run_length = property(lambda self: self._memory.run_length, doc="Ticks since the last alarm or (re)start.")
     hold_off = property(lambda self: self._memory.hold_off, doc="Ticks left in which alarms are held off.")
+    kernel_args = property(lambda self: (self._memory_args, self.center, self.statistic, self._tick),
+                           doc="(memory, center, statistic, tick): the chart's own arrays, as a fused step takes them.")
 
     @property
     def alarm(self) -> np.ndarray:

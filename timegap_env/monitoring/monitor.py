@@ -123,6 +123,7 @@ class TimeGapMonitor:
         # each env's slot of its next measurement, p, counted from its reset (so an env's sums do not depend on
         # when other envs reset, nor on earlier episodes); -1: no window
         self._slot = np.full(n_envs, 0 if W else -1, dtype=np.int64)
+        self._posterior = Moments(*np.zeros((len(Moments._fields),) + self.shape))  # written by every block of ticks
         self._moments: Moments | None = None  # the posterior after the last tick; None: recompute when read
         self.reset(None, setting)
 
@@ -147,11 +148,21 @@ class TimeGapMonitor:
             )
         ticks = MonitorTicks(used=np.empty(speed.shape, dtype=bool), tau_mean=np.empty(speed.shape),
                              tau_var=np.empty(speed.shape))
-        moments = Moments(*np.empty((len(Moments._fields),) + self.shape))  # the posterior after the last tick
         memory, rule, prior = self._kernel_args
-        _update_kernel(speed, spacing, memory, self._slot, rule, prior, tuple(ticks), tuple(moments))
-        self._moments = moments
+        _update_kernel(speed, spacing, memory, self._slot, rule, prior, tuple(ticks), tuple(self._posterior))
+        self._moments = self._posterior
         return ticks
+
+    @property
+    def kernel_args(self) -> tuple[tuple, np.ndarray, tuple, tuple, tuple]:
+        """(memory, slot, rule, prior, posterior): the monitor's own arrays as :func:`update_env` takes them. A caller
+        that runs ``update_env`` itself then calls :meth:`posterior_written`."""
+        memory, rule, prior = self._kernel_args
+        return memory, self._slot, rule, prior, tuple(self._posterior)
+
+    def posterior_written(self) -> None:
+        """Every env's posterior after its last tick is in the arrays of :attr:`kernel_args` (see there)."""
+        self._moments = self._posterior
 
     # ---- changes of setting ------------------------------------------------------------------
 

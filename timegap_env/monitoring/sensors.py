@@ -88,6 +88,8 @@ class Sensors:
     dropout_probability = property(
         lambda self: self.noise.dropout_probability, doc="Each env's dropout probability (n_envs,); write in place."
     )
+    kernel_args = property(lambda self: (self._noise_args, self._fault_args),
+                           doc="(noise, faults): the sensors' own arrays as :func:`measure_env` takes them.")
 
     def measure(self, true: Readings, ticks_before: np.ndarray) -> Readings:
         """Readings of the ``true`` spacings and speeds of a block of ticks; env e's block starts after

@@ -282,6 +282,12 @@ class Platoon:
     faults = property(lambda self: self._faults, doc="Each follower's :class:`FollowerFaults` (arrays change in place).")
 
     @property
+    def kernel_args(self) -> tuple[tuple, tuple, tuple, tuple]:
+        """(state, zoh, controller, faults): the platoon's own arrays and constants as :func:`advance_env` takes them."""
+        state, controller = self._kernel_args
+        return state, self._zoh_args, controller, self._fault_args
+
+    @property
     def spacing(self) -> np.ndarray:
         """Bumper-to-bumper gap of each follower to its predecessor, (n_envs, n_followers) [m]."""
         return self.x[:, :-1] - self.x[:, 1:] - self.config.vehicle_length

@@ -1,0 +1,248 @@
+"""The env step as one compiled call: action -> settings -> physics -> sensors -> monitor -> chart -> reward ->
+observation, env by env, over state that lives in preallocated arrays.
+
+:func:`fused_step` runs, for each env in turn, what the staged path of
+:class:`~timegap_env.envs.task.PlatoonTask` runs stage by stage over every env: the action becomes
+settings (:class:`~timegap_env.envs.action.SettingLadder`), a changed setting ramps in the physics and
+re-centres that follower's prior and chart (:meth:`~timegap_env.monitoring.loop.MonitoredPlatoon.change_setting`),
+then the decision's ticks go through the platoon, the sensors, the monitor and the chart, and the step is
+scored, added to the episode totals and observed. Each stage is the same compiled function the staged
+path calls (``advance_env``, ``measure_env``, ``update_env``, ``count_excursions_env``, ``env_readouts``,
+...), so the arithmetic has one source; what is written here again is the glue the staged path does in
+NumPy (the ladder, re-centring, the charts' statistics, the leader's and V2V's ticks), and the tests
+check the two paths against each other bit for bit.
+
+Working env by env keeps each env's state in cache while all its stages run, and re-centres only the
+followers whose setting changed. The kernel takes two structures, :class:`StepState` (every array it
+reads or writes, the objects' own) and :class:`StepRules` (the config's constants), as plain tuples
+(see :mod:`timegap_env.sim.platoon`).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numba
+import numpy as np
+
+from timegap_env.config import EnvConfig
+from timegap_env.envs.action import RELATIVE_STEPS
+from timegap_env.envs.observation import FollowerState, encode_env
+from timegap_env.envs.reward import (
+    RewardConstants, RewardTerms, StepReadouts, StepTicks, env_readouts, env_reward_terms, env_weighted_sum,
+)
+from timegap_env.envs.totals import add_step_env
+from timegap_env.monitoring.charts import CHARTS, ChartMemory, ChartState, count_excursions_env
+from timegap_env.monitoring.loop import SAME_SETTING
+from timegap_env.monitoring.monitor import MonitorTicks, WindowMemory, update_env
+from timegap_env.monitoring.posterior import Moments
+from timegap_env.monitoring.sensors import Readings, measure_env
+from timegap_env.sim.platoon import Controller, LeaderTicks, PlatoonState, PlatoonTicks, advance_env
+
+ACTION_MODES = ("platoon", "per_vehicle", "relative")  # StepRules.action_mode indexes this
+CHART_KINDS = tuple(CHARTS)  # StepRules.chart_kind indexes this: shewhart, ewma, cusum
+
+
+class StepState(NamedTuple):
+    """Every array the step reads or writes, the objects' own (in place); env arrays lead with n_envs."""
+
+    platoon: tuple  # PlatoonState
+    zoh: tuple  # ZOHCoefficients, nominal
+    controller: tuple  # Controller
+    faults: tuple  # FollowerFaults (kernel tuple)
+    v2v_down: np.ndarray  # (n_envs, n_followers) the follower's degradation takes V2V down while it acts [bool]
+    leader_speed: np.ndarray  # (n_envs, max_ticks + 1) the leader's speed at every tick [m/s]
+    leader_accel: np.ndarray  # (n_envs, max_ticks + 1) [m/s^2]
+    episode_ticks: np.ndarray  # (n_envs,) ticks in each env's episode
+    noise: tuple  # NoiseModel
+    sensor_faults: tuple  # SensorFaults
+    monitor: tuple  # (WindowMemory, slot, WindowRule, Prior, Moments) of TimeGapMonitor.kernel_args
+    chart: tuple  # (ChartMemory, center, statistic, tick) of ControlChart.kernel_args
+    readouts: tuple  # StepReadouts of the last step
+    previous_accel: np.ndarray  # (n_envs, n_followers) acceleration before the step's first tick [m/s^2]
+    envelope: np.ndarray  # (n_envs, 1 + n_followers) acceleration envelopes, the leader first [m/s^2]
+    totals: tuple  # EpisodeTotals
+    changed: np.ndarray  # (n_envs, n_followers) the step changed the follower's setting [bool]
+    term_rows: np.ndarray  # (n_terms, n_envs) the reward terms, REWARD_TERMS order
+    terms: tuple  # RewardTerms: the rows of term_rows, by name
+    reward: np.ndarray  # (n_envs,)
+    terminated: np.ndarray  # (n_envs,) a collision ended the episode [bool]
+    truncated: np.ndarray  # (n_envs,) the episode ran out of time or leader profile [bool]
+    observation: np.ndarray  # (n_envs, n_followers, n_features) float32
+
+
+class StepRules(NamedTuple):
+    """The config's constants of a step."""
+
+    action_mode: int  # index of ACTION_MODES
+    levels: np.ndarray  # the setting ladder [s]
+    relative_steps: np.ndarray  # int64 levels moved by each relative action [-]
+    v2v_enabled: bool  # PlatoonConfig.v2v: False keeps every follower in ACC
+    ticks_per_step: int
+    settle_ticks: int  # alarms wait this long after a change has ramped in [ticks]
+    chart_kind: int  # index of CHART_KINDS
+    half_width: float  # the charted statistic's limits are centre -/+ this [s]
+    ewma_lambda: float  # [-]
+    baseline_std: float  # sigma_desired [s]
+    cusum_k: float  # [sigma_desired]
+    cusum_h: float  # [sigma_desired]
+    reward: tuple  # RewardConstants
+    weights: np.ndarray  # (n_terms,) the reward weights, REWARD_TERMS order
+    scales: tuple  # ObservationScales
+
+    @classmethod
+    def from_config(cls, config: EnvConfig, chart_half_width: float, reward: tuple, weights: np.ndarray,
+                    scales: tuple) -> StepRules:
+        """The rules of ``config``; ``chart_half_width`` [s] is the chart's (an EWMA's differs from the config's)."""
+        chart, dt = config.chart, config.platoon.dt
+        return cls(
+            action_mode=ACTION_MODES.index(config.action_mode), levels=np.asarray(config.setting_levels, dtype=float),
+            relative_steps=np.asarray(RELATIVE_STEPS, dtype=np.int64), v2v_enabled=bool(config.platoon.v2v),
+            ticks_per_step=int(config.ticks_per_decision), settle_ticks=int(round(chart.settle_time / dt)),
+            chart_kind=CHART_KINDS.index(chart.kind), half_width=float(chart_half_width),
+            ewma_lambda=float(chart.ewma_lambda), baseline_std=float(chart.baseline_std),
+            cusum_k=float(chart.cusum_k), cusum_h=float(chart.cusum_h),
+            reward=reward, weights=weights, scales=scales,
+        )
+
+
+@numba.njit(cache=True)
+def fused_step(state, rules, action):  # noqa: ANN001, ANN201
+    """One decision step of every env: ``action`` (n_envs, 1) ladder indices or relative steps, or (n_envs,
+    n_followers) indices per follower, int64; ``state`` (:class:`StepState`) is updated in place under
+    ``rules`` (:class:`StepRules`)."""
+    state, rules = StepState(*state), StepRules(*rules)
+    platoon = PlatoonState(*state.platoon)
+    n_envs, n_followers = platoon.setting.shape
+    n_ticks = rules.ticks_per_step
+    block = (n_ticks, 1, n_followers)  # one env's ticks, the layout of the staged path's blocks
+    leader = LeaderTicks(np.empty((n_ticks, 1)), np.empty((n_ticks, 1)), np.empty(block, dtype=np.bool_))
+    physics = PlatoonTicks(np.empty(block), np.empty(block), np.empty(block), np.empty(block),
+                           np.empty(block, dtype=np.bool_))
+    measured = Readings(np.empty(block), np.empty(block))
+    estimates = MonitorTicks(np.empty(block, dtype=np.bool_), np.empty(block), np.empty(block))
+    charted = ChartState(physics.applied_setting, np.empty(block, dtype=np.bool_), np.empty(block, dtype=np.int8),
+                         np.empty(block, dtype=np.bool_), np.empty(block, dtype=np.int64),
+                         np.empty(block, dtype=np.int64))
+    ticks = StepTicks(estimates.tau_mean, charted.center, physics.applied_setting, charted.alarm, charted.exceedance,
+                      physics.collisions, leader.speed, leader.accel, physics.speed, physics.spacing, physics.accel)
+    memory, slot, rule, prior, posterior = state.monitor
+    chart_memory, center, statistic, chart_tick = state.chart
+    chart, moments = ChartMemory(*chart_memory), Moments(*posterior)
+    follower = FollowerState(moments.mean_tau, moments.var_tau, center, chart.side, chart.exceedances_in_window,
+                             chart.run_length, platoon.setting, platoon.v[:, 1:], platoon.v2v)
+    terms, readouts = RewardTerms(*state.terms), StepReadouts(*state.readouts)
+    constants = RewardConstants(*rules.reward)
+    for e in range(n_envs):
+        _change_settings(state, rules, action, e)
+        ticks_before = platoon.ticks[e]
+        _leader_ticks(state, rules, leader, e)
+        advance_env(state.platoon, leader, state.zoh, state.controller, state.faults, physics, e, 0)
+        platoon.v2v[e] = leader.v2v[n_ticks - 1, 0]
+        measure_env((physics.spacing, physics.speed), ticks_before, state.noise, state.sensor_faults, measured, e, 0)
+        update_env(measured.speed, measured.spacing, memory, slot, rule, prior, estimates, posterior, e, 0)
+        _chart_sides(rules, estimates.tau_mean, physics.applied_setting, statistic, charted.side, e)
+        count_excursions_env(chart_memory, chart_tick[0], charted, e, 0)
+        center[e] = physics.applied_setting[n_ticks - 1, 0]
+        env_readouts(ticks, 0, state.previous_accel, state.envelope, constants, readouts, e)
+        env_reward_terms(readouts, platoon.setting, state.changed, constants, terms, e)
+        env_weighted_sum(state.term_rows, rules.weights, state.reward, e)
+        add_step_env(state.totals, state.readouts, platoon.setting, state.changed, constants.gap_per_vehicle, e)
+        state.previous_accel[e] = physics.accel[n_ticks - 1, 0]
+        collided = False
+        for f in range(n_followers):
+            collided = collided or platoon.collided[e, f]
+        state.terminated[e] = collided
+        state.truncated[e] = platoon.ticks[e] >= state.episode_ticks[e] and not collided
+        encode_env(follower, rules.scales, state.observation, e)
+    chart_tick[0] += n_ticks
+
+
+@numba.njit(cache=True)
+def _change_settings(state, rules, action, e):  # noqa: ANN001, ANN202
+    """Env ``e``'s new settings from its action; a follower whose setting changes ramps to it, its prior and chart
+    are re-centred (the window's data and the chart's history cleared) and its alarms held off while it ramps and
+    settles (see :meth:`~timegap_env.monitoring.loop.MonitoredPlatoon.change_setting`)."""
+    platoon, controller = PlatoonState(*state.platoon), Controller(*state.controller)
+    memory = WindowMemory(*state.monitor[0])
+    chart_memory, center, statistic, chart_tick = state.chart
+    chart_memory = ChartMemory(*chart_memory)
+    levels = rules.levels
+    n_followers = platoon.setting.shape[1]
+    level = 0
+    if rules.action_mode == 2:  # relative: from the ladder level nearest the platoon's largest setting
+        largest = platoon.setting[e, 0]
+        for f in range(1, n_followers):
+            largest = max(largest, platoon.setting[e, f])
+        for i in range(1, levels.size):
+            if abs(levels[i] - largest) < abs(levels[level] - largest):
+                level = i
+        level = min(max(level + rules.relative_steps[action[e, 0]], 0), levels.size - 1)
+    for f in range(n_followers):
+        if rules.action_mode == 1:
+            level = action[e, f]
+        elif rules.action_mode == 0:
+            level = action[e, 0]
+        setting = levels[level]
+        changed = not abs(setting - platoon.setting[e, f]) <= SAME_SETTING
+        state.changed[e, f] = changed
+        if not changed:
+            continue
+        platoon.setting[e, f] = setting
+        memory.prior_tau[e, f] = setting
+        memory.block_sum[e, f] = 0.0
+        memory.window_sums[e, f] = 0.0
+        memory.slots[e, f] = 0.0
+        applied = platoon.applied_setting[e, f]
+        center[e, f] = applied
+        chart_memory.side[e, f], chart_memory.exceedance[e, f] = 0, False
+        chart_memory.exceedances_in_window[e, f], chart_memory.run_length[e, f] = 0, 0
+        chart_memory.restarted[e, f] = chart_tick[0]
+        if rules.chart_kind == 1:  # EWMA restarts at the centre line
+            statistic[e, f, 0] = applied
+        elif rules.chart_kind == 2:  # CUSUM sums restart at 0
+            statistic[e, f, 0] = statistic[e, f, 1] = 0.0
+        ramp_ticks = math.ceil(abs(setting - applied) / controller.max_setting_change)
+        chart_memory.hold_off[e, f] = int(ramp_ticks + rules.settle_ticks)
+
+
+@numba.njit(cache=True)
+def _leader_ticks(state, rules, leader, e):  # noqa: ANN001, ANN202
+    """Env ``e``'s leader at the end of each tick of the step (held after its episode) and each follower's V2V flag
+    during the tick: down while a degradation that takes it down acts, or always without V2V."""
+    platoon, faults = PlatoonState(*state.platoon), state.faults
+    start, end = faults[0], faults[1]
+    for k in range(rules.ticks_per_step):
+        tick = platoon.ticks[e] + k
+        sample = min(tick + 1, state.episode_ticks[e])
+        leader.speed[k, 0], leader.accel[k, 0] = state.leader_speed[e, sample], state.leader_accel[e, sample]
+        for f in range(platoon.setting.shape[1]):
+            down = start[e, f] <= tick < end[e, f] and state.v2v_down[e, f]
+            leader.v2v[k, 0, f] = rules.v2v_enabled and not down
+
+
+@numba.njit(cache=True)
+def _chart_sides(rules, estimates, centers, statistic, sides, e):  # noqa: ANN001, ANN202
+    """The side (-1, 0, +1) of each tick's charted statistic against its limits, for env ``e``, into ``sides``
+    (column 0); EWMA and CUSUM statistics carry on in ``statistic`` (the charts' ``_sides``, tick by tick)."""
+    n_ticks, n_followers = estimates.shape[0], estimates.shape[2]
+    for k in range(n_ticks):
+        for f in range(n_followers):
+            estimate, line = estimates[k, 0, f], centers[k, 0, f]
+            if rules.chart_kind == 2:  # CUSUM of the standardised deviation
+                y = (estimate - line) / rules.baseline_std
+                upper = statistic[e, f, 0] = max(0.0, statistic[e, f, 0] + y - rules.cusum_k)
+                lower = statistic[e, f, 1] = max(0.0, statistic[e, f, 1] - y - rules.cusum_k)
+                above = upper > rules.cusum_h and upper >= lower
+                below = lower > rules.cusum_h and not above
+                sides[k, 0, f] = int(above) - int(below)
+                continue
+            value = estimate
+            if rules.chart_kind == 1:  # EWMA of the estimate
+                value = statistic[e, f, 0] = rules.ewma_lambda * estimate + (1.0 - rules.ewma_lambda) * statistic[e, f, 0]
+            low, high = line - rules.half_width, line + rules.half_width
+            sides[k, 0, f] = 1 if value > high else (-1 if value < low else 0)
+
+
+__all__ = ["ACTION_MODES", "CHART_KINDS", "StepRules", "StepState", "fused_step"]
