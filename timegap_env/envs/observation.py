@@ -101,14 +101,14 @@ def observe_into(state: FollowerState, scales: ObservationScales, out: np.ndarra
     _encode_envs(tuple(state), tuple(scales), out, np.flatnonzero(mask))
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def _encode_envs(state, scales, out, envs):  # noqa: ANN001, ANN202
     """:func:`_encode` for the envs ``envs`` only."""
     for e in envs:
         encode_env(state, scales, out, e)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def _encode(state, scales, out):  # noqa: ANN001, ANN202
     """Fill ``out`` (n_envs, n_followers, len(FEATURES)) float32 with the features of ``state``
     (:class:`FollowerState`) under ``scales`` (:class:`ObservationScales`), both plain tuples (see
@@ -117,7 +117,7 @@ def _encode(state, scales, out):  # noqa: ANN001, ANN202
         encode_env(state, scales, out, e)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def encode_env(state, scales, out, e):  # noqa: ANN001, ANN201
     """Env ``e``'s row of :func:`_encode`."""
     state, scales = FollowerState(*state), ObservationScales(*scales)

@@ -192,7 +192,7 @@ def score_step(
     return score
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def _score(step, previous_accel, envelope, setting, changed, constants, weights, readouts, terms, term_rows, reward):  # noqa: ANN001, ANN202, PLR0913
     """:func:`score_step`; the structures come as plain tuples (see :mod:`timegap_env.sim.platoon`); ``terms``
     are the rows of ``term_rows`` (n_terms, n_envs), written by name and summed by row against ``weights``
@@ -203,13 +203,13 @@ def _score(step, previous_accel, envelope, setting, changed, constants, weights,
     _weighted_sum(term_rows, weights, reward)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def _step_readouts(step, previous_accel, envelope, constants, out):  # noqa: ANN001, ANN202
     for e in range(step.speed.shape[1]):
         env_readouts(step, e, previous_accel, envelope, constants, out, e)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def env_readouts(step, column, previous_accel, envelope, constants, out, e):  # noqa: ANN001, ANN201, PLR0913
     """Env ``e``'s read-outs (into ``out``, a :class:`StepReadouts`) of column ``column`` of ``step`` (a
     :class:`StepTicks`); its acceleration envelopes are updated in place."""
@@ -254,13 +254,13 @@ def env_readouts(step, column, previous_accel, envelope, constants, out, e):  # 
         out.final_speed[e, f] = step.speed[n_ticks - 1, c, f]
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def _reward_terms(readouts, setting, changed, constants, out):  # noqa: ANN001, ANN202
     for e in range(setting.shape[0]):
         env_reward_terms(readouts, setting, changed, constants, out, e)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def env_reward_terms(readouts, setting, changed, constants, out, e):  # noqa: ANN001, ANN201, PLR0913
     """Env ``e``'s terms (into ``out``, a :class:`RewardTerms` of (n_envs,) arrays) from its read-outs."""
     n_followers = setting.shape[1]
@@ -286,14 +286,14 @@ def env_reward_terms(readouts, setting, changed, constants, out, e):  # noqa: AN
     out.switching[e] = -(switching / n_followers)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def _weighted_sum(terms, weights, out):  # noqa: ANN001, ANN202
     """``out`` (n_envs,) = sum over t of weights[t] terms[t], ``terms`` (n_terms, n_envs), in row order."""
     for e in range(out.size):
         env_weighted_sum(terms, weights, out, e)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def env_weighted_sum(terms, weights, out, e):  # noqa: ANN001, ANN201
     """``out[e]`` of :func:`_weighted_sum`."""
     out[e] = 0.0

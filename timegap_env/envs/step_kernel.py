@@ -107,7 +107,7 @@ class StepRules(NamedTuple):
         )
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def fused_step(state, rules, action):  # noqa: ANN001, ANN201
     """One decision step of every env: ``action`` (n_envs, 1) ladder indices or relative steps, or (n_envs,
     n_followers) indices per follower, int64; ``state`` (:class:`StepState`) is updated in place under
@@ -134,39 +134,47 @@ def fused_step(state, rules, action):  # noqa: ANN001, ANN201
                              chart.run_length, platoon.setting, platoon.v[:, 1:], platoon.v2v)
     terms, readouts = RewardTerms(*state.terms), StepReadouts(*state.readouts)
     constants = RewardConstants(*rules.reward)
+    faults_start, faults_end = state.faults[0], state.faults[1]
+    last = n_ticks - 1
     for e in range(n_envs):
-        _change_settings(state, rules, action, e)
+        _change_settings(state.platoon, state.controller, memory, state.chart, rules, action, state.changed, e)
         ticks_before = platoon.ticks[e]
-        _leader_ticks(state, rules, leader, e)
+        for k in range(n_ticks):  # the leader at the end of each tick (held after its episode), V2V during it
+            tick = ticks_before + k
+            sample = min(tick + 1, state.episode_ticks[e])
+            leader.speed[k, 0], leader.accel[k, 0] = state.leader_speed[e, sample], state.leader_accel[e, sample]
+            for f in range(n_followers):
+                down = faults_start[e, f] <= tick < faults_end[e, f] and state.v2v_down[e, f]
+                leader.v2v[k, 0, f] = rules.v2v_enabled and not down
         advance_env(state.platoon, leader, state.zoh, state.controller, state.faults, physics, e, 0)
-        platoon.v2v[e] = leader.v2v[n_ticks - 1, 0]
         measure_env((physics.spacing, physics.speed), ticks_before, state.noise, state.sensor_faults, measured, e, 0)
         update_env(measured.speed, measured.spacing, memory, slot, rule, prior, estimates, posterior, e, 0)
         _chart_sides(rules, estimates.tau_mean, physics.applied_setting, statistic, charted.side, e)
         count_excursions_env(chart_memory, chart_tick[0], charted, e, 0)
-        center[e] = physics.applied_setting[n_ticks - 1, 0]
         env_readouts(ticks, 0, state.previous_accel, state.envelope, constants, readouts, e)
+        collided = False
+        for f in range(n_followers):  # element by element: an array assignment compiles its error messages
+            platoon.v2v[e, f] = leader.v2v[last, 0, f]
+            center[e, f] = physics.applied_setting[last, 0, f]
+            state.previous_accel[e, f] = physics.accel[last, 0, f]
+            collided = collided or platoon.collided[e, f]
         env_reward_terms(readouts, platoon.setting, state.changed, constants, terms, e)
         env_weighted_sum(state.term_rows, rules.weights, state.reward, e)
         add_step_env(state.totals, state.readouts, platoon.setting, state.changed, constants.gap_per_vehicle, e)
-        state.previous_accel[e] = physics.accel[n_ticks - 1, 0]
-        collided = False
-        for f in range(n_followers):
-            collided = collided or platoon.collided[e, f]
         state.terminated[e] = collided
         state.truncated[e] = platoon.ticks[e] >= state.episode_ticks[e] and not collided
         encode_env(follower, rules.scales, state.observation, e)
     chart_tick[0] += n_ticks
 
 
-@numba.njit(cache=True)
-def _change_settings(state, rules, action, e):  # noqa: ANN001, ANN202
-    """Env ``e``'s new settings from its action; a follower whose setting changes ramps to it, its prior and chart
-    are re-centred (the window's data and the chart's history cleared) and its alarms held off while it ramps and
-    settles (see :meth:`~timegap_env.monitoring.loop.MonitoredPlatoon.change_setting`)."""
-    platoon, controller = PlatoonState(*state.platoon), Controller(*state.controller)
-    memory = WindowMemory(*state.monitor[0])
-    chart_memory, center, statistic, chart_tick = state.chart
+@numba.njit(cache=True, error_model="numpy")
+def _change_settings(platoon, controller, memory, chart, rules, action, changed, e):  # noqa: ANN001, ANN202, PLR0913
+    """Env ``e``'s new settings from its action; a follower whose setting changes (``changed``) ramps to it, its
+    prior and chart are re-centred (the window's data and the chart's history cleared) and its alarms held off
+    while it ramps and settles (see :meth:`~timegap_env.monitoring.loop.MonitoredPlatoon.change_setting`).
+    ``platoon``, ``controller``, ``memory`` (:class:`WindowMemory`) and ``chart`` are :class:`StepState`'s."""
+    platoon, controller, memory = PlatoonState(*platoon), Controller(*controller), WindowMemory(*memory)
+    chart_memory, center, statistic, chart_tick = chart
     chart_memory = ChartMemory(*chart_memory)
     levels = rules.levels
     n_followers = platoon.setting.shape[1]
@@ -185,15 +193,16 @@ def _change_settings(state, rules, action, e):  # noqa: ANN001, ANN202
         elif rules.action_mode == 0:
             level = action[e, 0]
         setting = levels[level]
-        changed = not abs(setting - platoon.setting[e, f]) <= SAME_SETTING
-        state.changed[e, f] = changed
-        if not changed:
+        changed[e, f] = not abs(setting - platoon.setting[e, f]) <= SAME_SETTING
+        if not changed[e, f]:
             continue
         platoon.setting[e, f] = setting
         memory.prior_tau[e, f] = setting
-        memory.block_sum[e, f] = 0.0
-        memory.window_sums[e, f] = 0.0
-        memory.slots[e, f] = 0.0
+        window = memory.slots[e, f]  # (W + 1, N_SUMS)
+        for n in range(window.shape[1]):
+            memory.block_sum[e, f, n] = memory.window_sums[e, f, n] = 0.0
+            for m in range(window.shape[0]):
+                window[m, n] = 0.0
         applied = platoon.applied_setting[e, f]
         center[e, f] = applied
         chart_memory.side[e, f], chart_memory.exceedance[e, f] = 0, False
@@ -207,22 +216,7 @@ def _change_settings(state, rules, action, e):  # noqa: ANN001, ANN202
         chart_memory.hold_off[e, f] = int(ramp_ticks + rules.settle_ticks)
 
 
-@numba.njit(cache=True)
-def _leader_ticks(state, rules, leader, e):  # noqa: ANN001, ANN202
-    """Env ``e``'s leader at the end of each tick of the step (held after its episode) and each follower's V2V flag
-    during the tick: down while a degradation that takes it down acts, or always without V2V."""
-    platoon, faults = PlatoonState(*state.platoon), state.faults
-    start, end = faults[0], faults[1]
-    for k in range(rules.ticks_per_step):
-        tick = platoon.ticks[e] + k
-        sample = min(tick + 1, state.episode_ticks[e])
-        leader.speed[k, 0], leader.accel[k, 0] = state.leader_speed[e, sample], state.leader_accel[e, sample]
-        for f in range(platoon.setting.shape[1]):
-            down = start[e, f] <= tick < end[e, f] and state.v2v_down[e, f]
-            leader.v2v[k, 0, f] = rules.v2v_enabled and not down
-
-
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def _chart_sides(rules, estimates, centers, statistic, sides, e):  # noqa: ANN001, ANN202
     """The side (-1, 0, +1) of each tick's charted statistic against its limits, for env ``e``, into ``sides``
     (column 0); EWMA and CUSUM statistics carry on in ``statistic`` (the charts' ``_sides``, tick by tick)."""

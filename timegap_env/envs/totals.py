@@ -66,14 +66,14 @@ class EpisodeTotals(NamedTuple):
         }
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def _add_step(totals, readouts, setting, changed, gap_per_vehicle):  # noqa: ANN001, ANN202
     """:meth:`EpisodeTotals.add_step`; the structures come as plain tuples (see :mod:`timegap_env.sim.platoon`)."""
     for e in range(setting.shape[0]):
         add_step_env(totals, readouts, setting, changed, gap_per_vehicle, e)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def add_step_env(totals, readouts, setting, changed, gap_per_vehicle, e):  # noqa: ANN001, ANN201, PLR0913
     """Env ``e``'s part of :func:`_add_step`."""
     totals, readouts = EpisodeTotals(*totals), StepReadouts(*readouts)

@@ -296,14 +296,14 @@ class CusumChart(ControlChart):
         self.lower_sum[mask] = 0.0
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def _count_excursions(memory, first_tick, block):  # noqa: ANN001, ANN202
     """What every chart does with its statistic's sides, env by env (:func:`count_excursions_env`), in place."""
     for e in range(block[2].shape[1]):
         count_excursions_env(memory, first_tick, block, e, e)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def count_excursions_env(memory, first_tick, block, e, column):  # noqa: ANN001, ANN201
     """What every chart does with its statistic's sides, tick by tick, for env ``e``, in place.
 

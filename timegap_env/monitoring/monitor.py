@@ -270,7 +270,7 @@ class TimeGapMonitor:
         return outside_probability(moments.mean_tau, moments.var_tau, low, high)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def _update_kernel(speed, spacing, memory, slot, rule, prior, out, out_moments):  # noqa: ANN001, ANN202
     """:meth:`TimeGapMonitor.update_block`, env by env (:func:`update_env`), in place.
 
@@ -284,7 +284,7 @@ def _update_kernel(speed, spacing, memory, slot, rule, prior, out, out_moments):
         update_env(speed, spacing, memory, slot, rule, prior, out, out_moments, e, e)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def update_env(speed, spacing, memory, slot, rule, prior, out, out_moments, e, column):  # noqa: ANN001, ANN201, PLR0913
     """Env ``e``'s vehicles through a block of measurements, column ``column`` of ``speed``, ``spacing`` and
     ``out`` (the arguments of :func:`_update_kernel`), tick by tick and vehicle by vehicle, in place.

@@ -158,7 +158,7 @@ def prior_precision(Sigma_b: ArrayLike) -> np.ndarray:
     return 0.5 * (precision + precision.T)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def posterior_moments(sums, prior_tau, prior):  # noqa: ANN001, ANN201
     """The posterior (:class:`Moments`) from :class:`WindowSums` ``sums``, the prior mean of tau
     ``prior_tau`` [s] and the rest of the :class:`Prior`; scalars or arrays of one shape.

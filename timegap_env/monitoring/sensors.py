@@ -105,14 +105,14 @@ class Sensors:
         return measured
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def _measure(true, ticks_before, noise, faults, out):  # noqa: ANN001, ANN202
     """:meth:`Sensors.measure`, env by env (:func:`measure_env`)."""
     for e in range(true[0].shape[1]):
         measure_env(true, ticks_before[e], noise, faults, out, e, e)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def measure_env(true, ticks_before, noise, faults, out, e, column):  # noqa: ANN001, ANN201, PLR0913
     """Fill column ``column`` of ``out`` (:class:`Readings`) from that of ``true`` for env ``e``, whose block starts
     after ``ticks_before`` ticks since its reset, under ``noise`` (:class:`NoiseModel`) and ``faults``
@@ -139,7 +139,7 @@ def measure_env(true, ticks_before, noise, faults, out, e, column):  # noqa: ANN
             out.speed[k, c, f] = true.speed[k, c, f] + noise.speed_noise_std * radius * np.sin(angle)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def _uniform(key, tick, follower, stream, n_followers):  # noqa: ANN001, ANN202
     """The uniform in (0, 1) of counter tick * 3 n_followers + 3 follower + stream under the env's key."""
     counter = np.uint64(tick) * np.uint64(_UNIFORM_STREAMS * n_followers) + np.uint64(_UNIFORM_STREAMS * follower + stream)

@@ -15,14 +15,14 @@ _SPLITMIX_INCREMENT = np.uint64(0x9E3779B97F4A7C15)  # SplitMix64 constants (Ste
 _SPLITMIX_MULTIPLIERS = (np.uint64(0xBF58476D1CE4E5B9), np.uint64(0x94D049BB133111EB))
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def counter_uniform(key, counter):  # noqa: ANN001, ANN201
     """The uniform in (0, 1) of the uint64 ``counter`` under the uint64 ``key``."""
     bits = _splitmix64(_splitmix64(counter * _SPLITMIX_INCREMENT + key))
     return (float(bits >> np.uint64(11)) + 0.5) * 2.0**-53
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def _splitmix64(x):  # noqa: ANN001, ANN202
     """SplitMix64 finaliser: a well-mixed uint64 hash of the uint64 ``x``."""
     x = (x ^ (x >> np.uint64(30))) * _SPLITMIX_MULTIPLIERS[0]

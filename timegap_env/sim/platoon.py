@@ -86,7 +86,7 @@ class ZOHCoefficients(NamedTuple):
         return glvd_tick(x, v, a, u, self)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def glvd_tick(x, v, a, u, zoh):  # noqa: ANN001, ANN201
     """The transition of :class:`ZOHCoefficients` ``zoh``, for scalars (inside the kernel) or arrays."""
     x_next = x + zoh.dt * v + zoh.x_from_a * a + zoh.x_from_u * u
@@ -101,7 +101,7 @@ def actual_time_gap(spacing: np.ndarray, speed: np.ndarray, standstill_spacing: 
         return (spacing - standstill_spacing) / speed
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def cth_command(spacing, speed, predecessor_speed, accel, feedforward, setting, controller):  # noqa: ANN001, ANN201
     """The CTH controller's command [m/s^2], clipped to the controller's bounds, for a follower at ``spacing`` [m]
     and ``speed`` [m/s] with acceleration ``accel`` [m/s^2] behind a predecessor at ``predecessor_speed`` [m/s],
@@ -117,7 +117,7 @@ def cth_command(spacing, speed, predecessor_speed, accel, feedforward, setting, 
     return min(max(command, controller.accel_min), controller.accel_max)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def follower_tick(x, v, a, command, zoh):  # noqa: ANN001, ANN201
     """:func:`glvd_tick` of one follower (scalars), which does not reverse: below 0 m/s it stays at standstill."""
     x_next, v_next, a_next = glvd_tick(x, v, a, command, zoh)
@@ -126,7 +126,7 @@ def follower_tick(x, v, a, command, zoh):  # noqa: ANN001, ANN201
     return x_next, v_next, a_next
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def ramp_toward(applied, setting, max_change):  # noqa: ANN001, ANN201
     """The applied setting [s] one tick later: it moves towards ``setting`` [s] by at most ``max_change`` [s]."""
     return applied + min(max(setting - applied, -max_change), max_change)
@@ -428,7 +428,7 @@ def per_env(name: str, value: np.ndarray | float, n_envs: int) -> np.ndarray:
     return array
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def _advance(state, leader, zoh, controller, faults, out):  # noqa: ANN001, ANN202
     """The physics of :meth:`Platoon.advance`, env by env (:func:`advance_env`), in place.
 
@@ -441,7 +441,7 @@ def _advance(state, leader, zoh, controller, faults, out):  # noqa: ANN001, ANN2
         advance_env(state, leader, zoh, controller, faults, out, e, e)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def advance_env(state, leader, zoh, controller, faults, out, e, column):  # noqa: ANN001, ANN201, PLR0913
     """Env ``e``'s platoon through the block's ticks, in place; its leader and V2V flags are column ``column`` of
     ``leader``'s arrays and its records go to column ``column`` of ``out``'s (the structures of :func:`_advance`,
