@@ -4,7 +4,8 @@ A :class:`LeaderProfile` is a speed series [m/s] with its acceleration [m/s^2]
 sampled every ``dt`` [s]. Sources:
 
 - ``LeaderProfile.from_acceleration``: integrate an acceleration profile from an
-  initial speed, kept within a speed band (the paper's method);
+  initial speed, kept within a speed band (the paper's method); :class:`LeaderProfiles` does it for
+  many profiles of one length at once (a batched reset);
 - ``LeaderProfile.from_speed`` / ``LeaderProfile.from_csv``: the user's own data;
 - the seeded synthetic families of :mod:`timegap_env.leaders.synthetic`, real NGSIM
   I-80 vehicles (:mod:`timegap_env.leaders.ngsim`) and highway-env's IDM driver
@@ -150,11 +151,7 @@ class LeaderProfile:
         Where the band stops the integration the realised acceleration is the
         clipped one, so speed and acceleration stay consistent.
         """
-        accel = _series("accel", accel)
-        speed = _integrate_in_band(accel, leader.initial_speed, leader.dt, *leader.speed_band)  # one sample longer
-        realised = np.diff(speed) / leader.dt
-        speed = speed[:-1]
-        return cls(speed=speed, accel=realised, dt=leader.dt, name=name)
+        return LeaderProfiles.from_acceleration(_series("accel", accel)[None], leader, name).profile(0)
 
     @classmethod
     def from_csv(cls, path: str | Path, dt: float = LeaderConfig.dt, name: str | None = None) -> LeaderProfile:
@@ -203,12 +200,72 @@ class LeaderProfile:
         return cls.from_speed(data["speed"], dt=dt, name=name)
 
 
+@dataclasses.dataclass(frozen=True)
+class LeaderProfiles:
+    """Leader profiles of one length, a row each: what a batched reset draws and loads at once.
+
+    Checked as :class:`LeaderProfile` checks one (finite, speed >= 0), for all rows in one pass;
+    ``profile(i)`` is row i as a :class:`LeaderProfile`.
+    """
+
+    speed: np.ndarray  # (n_profiles, n) [m/s]
+    accel: np.ndarray  # (n_profiles, n) [m/s^2]
+    dt: float  # [s]
+    name: str = "custom"
+
+    def __post_init__(self) -> None:
+        if not (isinstance(self.dt, (int, float)) and math.isfinite(self.dt) and self.dt > 0):
+            raise ValueError(f"LeaderProfiles.dt = {self.dt!r}: must be a finite number > 0")
+        for field in ("speed", "accel"):
+            values = np.asarray(getattr(self, field), dtype=float)
+            if values.ndim != 2 or values.shape[1] < 2:
+                raise ValueError(f"LeaderProfiles.{field} has shape {values.shape}: must be (n_profiles, n >= 2)")
+            bad = np.argwhere(~np.isfinite(values))
+            if bad.size:
+                row, k = bad[0]
+                raise ValueError(f"LeaderProfiles.{field}[{row}, {k}] = {values[row, k]}: every sample must be finite")
+            object.__setattr__(self, field, values)
+        if self.speed.shape != self.accel.shape:
+            raise ValueError(
+                f"LeaderProfiles.accel has shape {self.accel.shape}, speed has {self.speed.shape}: must match"
+            )
+        negative = np.argwhere(self.speed < 0)
+        if negative.size:
+            row, k = negative[0]
+            raise ValueError(f"LeaderProfiles.speed[{row}, {k}] = {self.speed[row, k]}: must be >= 0")
+
+    def __len__(self) -> int:
+        return self.speed.shape[0]
+
+    def profile(self, row: int) -> LeaderProfile:
+        """Row ``row`` as a :class:`LeaderProfile` (copies)."""
+        return LeaderProfile(speed=self.speed[row], accel=self.accel[row], dt=self.dt, name=self.name)
+
+    @classmethod
+    def of(cls, profile: LeaderProfile) -> LeaderProfiles:
+        """One profile as a batch of one."""
+        return cls(speed=profile.speed[None], accel=profile.accel[None], dt=profile.dt, name=profile.name)
+
+    @classmethod
+    def from_acceleration(cls, accel: np.ndarray, leader: LeaderConfig = LeaderConfig(),
+                          name: str = "integrated") -> LeaderProfiles:
+        """:meth:`LeaderProfile.from_acceleration` of each row of ``accel`` (n_profiles, n) [m/s^2]."""
+        accel = np.ascontiguousarray(accel, dtype=float)
+        if accel.ndim != 2 or accel.shape[1] < 2:
+            raise ValueError(f"accel has shape {accel.shape}: must be (n_profiles, n >= 2)")
+        speed = _integrate_in_band(accel, leader.initial_speed, leader.dt, *leader.speed_band)  # one sample longer
+        realised = np.diff(speed, axis=1) / leader.dt
+        return cls(speed=speed[:, :-1], accel=realised, dt=leader.dt, name=name)
+
+
 # Runs in order: every step depends on the speed reached so far.
 @numba.njit(cache=True)
 def _integrate_in_band(accel, initial_speed, dt, low, high):  # noqa: ANN001, ANN202
-    """Speeds [m/s] (accel.size + 1) integrated from ``initial_speed``, each step clipped to [low, high]."""
-    speed = np.empty(accel.size + 1)
-    speed[0] = initial_speed
-    for k in range(accel.size):
-        speed[k + 1] = min(max(speed[k] + accel[k] * dt, low), high)
+    """Speeds [m/s] (n_profiles, n + 1) integrated from ``initial_speed`` along each row of ``accel`` (n_profiles,
+    n) [m/s^2], each step clipped to [low, high]."""
+    speed = np.empty((accel.shape[0], accel.shape[1] + 1))
+    for row in range(accel.shape[0]):
+        speed[row, 0] = initial_speed
+        for k in range(accel.shape[1]):
+            speed[row, k + 1] = min(max(speed[row, k] + accel[row, k] * dt, low), high)
     return speed

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Sequence
 from typing import NamedTuple
 
 import numba
@@ -40,7 +41,9 @@ from timegap_env.config import (
     SinusoidConfig,
     StochasticHumanConfig,
 )
-from timegap_env.leaders.profile import LeaderProfile
+from timegap_env.leaders.profile import LeaderProfile, LeaderProfiles
+
+DRAWS_PER_PHASE = 3  # uniform numbers an aggressive cycle's phase draws: duration, magnitude, cruise or not
 
 
 def aggressive_cycles(
@@ -54,64 +57,87 @@ def aggressive_cycles(
     would drive the speed out of the band takes the other sign, and is cut
     short where it would still leave the band.
     """
-    rng = np.random.default_rng(seed)
+    return aggressive_cycles_batch([seed], params, leader).profile(0)
+
+
+def aggressive_cycles_batch(
+    seeds: Sequence[int | None],
+    params: AggressiveCyclesConfig = AggressiveCyclesConfig(),
+    leader: LeaderConfig = LeaderConfig(),
+) -> LeaderProfiles:
+    """:func:`aggressive_cycles` of each seed, a row each.
+
+    Each seed's generator gives the first phase's sign, then three numbers per phase (its
+    duration, its magnitude, whether it is a cruise), all uniform draws: they are drawn in bulk
+    and the phases laid out by :func:`_cycle_phases`, with more draws if the profile needs them.
+    """
     low, high = leader.speed_band
-    jerk_step = params.max_jerk * leader.dt  # largest change of acceleration in one tick [m/s^2]
-    accel = np.zeros(leader.n_samples)
-    sign = rng.choice([-1.0, 1.0])
-    speed, current, k = leader.initial_speed, 0.0, 0
-    while k < leader.n_samples:  # phase by phase, then tick by tick: each phase depends on the speed reached
-        length = int(round(rng.uniform(*params.phase_duration_range) / leader.dt))
-        magnitude = rng.uniform(*params.accel_range)
-        target = 0.0
-        if rng.random() >= params.cruise_probability:
-            if not low <= speed + sign * magnitude * length * leader.dt <= high:
-                sign = -sign
-            ramp_margin = (magnitude + abs(current)) ** 2 / params.max_jerk  # gained while ramping in and out [m/s]
-            room = (high - speed if sign > 0 else speed - low) - ramp_margin  # [m/s]
-            length = max(1, min(length, int(room / (magnitude * leader.dt))))
-            target = sign * magnitude
-            sign = -sign
-        ticks = min(length, leader.n_samples - k)
-        current, speed = _jerk_limited_phase(accel[k : k + ticks], current, target, jerk_step, speed, leader.dt)
-        k += ticks
-    return LeaderProfile.from_acceleration(accel, leader, name="aggressive_cycles")
+    constants = _CycleConstants(
+        *(float(value) for value in (*params.phase_duration_range, *params.accel_range, params.cruise_probability,
+                                     params.max_jerk, params.max_jerk * leader.dt, leader.initial_speed, low, high,
+                                     leader.dt, 2.0)))
+    accel = np.zeros((len(seeds), leader.n_samples))
+    n_draws = DRAWS_PER_PHASE * (math.ceil(leader.n_samples * leader.dt / params.phase_duration_range[0]) + 16)
+    for row, seed in enumerate(seeds):
+        rng = np.random.default_rng(seed)
+        sign = float(rng.choice([-1.0, 1.0]))
+        draws = rng.random(n_draws)
+        while _cycle_phases(accel[row], sign, draws, tuple(constants)) < 0:  # ran out: draw as many again
+            draws = np.concatenate((draws, rng.random(draws.size)))
+    return LeaderProfiles.from_acceleration(accel, leader, name="aggressive_cycles")
 
 
 def sinusoid(
     seed: int | None, params: SinusoidConfig = SinusoidConfig(), leader: LeaderConfig = LeaderConfig()
 ) -> LeaderProfile:
     """Speed oscillation around the initial speed with a seeded amplitude, period and phase, inside the band."""
-    rng = np.random.default_rng(seed)
+    return sinusoid_batch([seed], params, leader).profile(0)
+
+
+def sinusoid_batch(
+    seeds: Sequence[int | None], params: SinusoidConfig = SinusoidConfig(), leader: LeaderConfig = LeaderConfig()
+) -> LeaderProfiles:
+    """:func:`sinusoid` of each seed, a row each."""
     low, high = leader.speed_band
-    amplitude = min(rng.uniform(*params.amplitude_range), 0.5 * (high - low))
-    period = rng.uniform(*params.period_range)
-    phase = rng.uniform(0.0, 2.0 * np.pi)
-    mean = min(max(leader.initial_speed, low + amplitude), high - amplitude)
+    drawn = np.empty((3, len(seeds)))  # amplitude [m/s], period [s], phase [rad] per seed
+    for row, seed in enumerate(seeds):
+        rng = np.random.default_rng(seed)
+        amplitude = min(rng.uniform(*params.amplitude_range), 0.5 * (high - low))
+        drawn[:, row] = amplitude, rng.uniform(*params.period_range), rng.uniform(0.0, 2.0 * np.pi)
+    amplitude, period, phase = drawn[:, :, None]
+    mean = np.minimum(np.maximum(leader.initial_speed, low + amplitude), high - amplitude)
     omega = 2.0 * np.pi / period
     t = np.arange(leader.n_samples) * leader.dt
     speed = mean + amplitude * np.sin(omega * t + phase)
     accel = amplitude * omega * np.cos(omega * t + phase)
-    return LeaderProfile(speed=speed, accel=accel, dt=leader.dt, name="sinusoid")
+    return LeaderProfiles(speed=speed, accel=accel, dt=leader.dt, name="sinusoid")
 
 
 def hard_braking(
     seed: int | None, params: HardBrakingConfig = HardBrakingConfig(), leader: LeaderConfig = LeaderConfig()
 ) -> LeaderProfile:
     """Cruise at the initial speed, brake hard ``n_events`` times at seeded moments, recover each time."""
-    rng = np.random.default_rng(seed)
-    accel = np.zeros(leader.n_samples)
+    return hard_braking_batch([seed], params, leader).profile(0)
+
+
+def hard_braking_batch(
+    seeds: Sequence[int | None], params: HardBrakingConfig = HardBrakingConfig(), leader: LeaderConfig = LeaderConfig()
+) -> LeaderProfiles:
+    """:func:`hard_braking` of each seed, a row each."""
+    accel = np.zeros((len(seeds), leader.n_samples))
     slot = leader.n_samples // params.n_events  # one event per slot, so events never overlap
-    for event in range(params.n_events):
-        decel = rng.uniform(*params.decel_range)
-        drop = min(rng.uniform(*params.speed_drop_range), leader.initial_speed - leader.speed_band[0])
-        brake_ticks = int(round(drop / decel / leader.dt))
-        recover_ticks = int(round(drop / params.recovery_accel / leader.dt))
-        latest_start = max(slot - brake_ticks - recover_ticks, 1)
-        start = event * slot + int(rng.integers(0, latest_start))
-        accel[start : start + brake_ticks] = -decel
-        accel[start + brake_ticks : start + brake_ticks + recover_ticks] = params.recovery_accel
-    return LeaderProfile.from_acceleration(accel, leader, name="hard_braking")
+    for row, seed in enumerate(seeds):
+        rng = np.random.default_rng(seed)
+        for event in range(params.n_events):
+            decel = rng.uniform(*params.decel_range)
+            drop = min(rng.uniform(*params.speed_drop_range), leader.initial_speed - leader.speed_band[0])
+            brake_ticks = int(round(drop / decel / leader.dt))
+            recover_ticks = int(round(drop / params.recovery_accel / leader.dt))
+            latest_start = max(slot - brake_ticks - recover_ticks, 1)
+            start = event * slot + int(rng.integers(0, latest_start))
+            accel[row, start : start + brake_ticks] = -decel
+            accel[row, start + brake_ticks : start + brake_ticks + recover_ticks] = params.recovery_accel
+    return LeaderProfiles.from_acceleration(accel, leader, name="hard_braking")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -188,7 +214,19 @@ def stop_and_go(
     Every speed change is a jerk-limited trapezoid (:func:`_speed_change`). Speeds lie in
     [0, speed_band[1]]; with the defaults a 250 s profile holds at least two crawls.
     """
-    rng = np.random.default_rng(seed)
+    return stop_and_go_batch([seed], params, leader).profile(0)
+
+
+def stop_and_go_batch(
+    seeds: Sequence[int | None], params: StopAndGoConfig = StopAndGoConfig(), leader: LeaderConfig = LeaderConfig()
+) -> LeaderProfiles:
+    """:func:`stop_and_go` of each seed, a row each."""
+    accel = np.stack([_stop_and_go_accel(np.random.default_rng(seed), params, leader) for seed in seeds])
+    return LeaderProfiles.from_acceleration(accel, _down_to_standstill(leader), name="stop_and_go")
+
+
+def _stop_and_go_accel(rng: np.random.Generator, params: StopAndGoConfig, leader: LeaderConfig) -> np.ndarray:
+    """The accelerations [m/s^2] of one :func:`stop_and_go` profile drawn from ``rng``."""
     cruise = min(rng.uniform(*params.cruise_speed_range), leader.speed_band[1])
     start = _speed_change(cruise - leader.initial_speed, rng.uniform(*params.accel_range), params.max_jerk, leader.dt)
     segments, length = [start], start.size
@@ -202,8 +240,7 @@ def stop_and_go(
         )
         segments.extend(wave)
         length += sum(segment.size for segment in wave)
-    accel = np.concatenate(segments)[: leader.n_samples]
-    return LeaderProfile.from_acceleration(accel, _down_to_standstill(leader), name="stop_and_go")
+    return np.concatenate(segments)[: leader.n_samples]
 
 
 def emergency_braking(
@@ -217,7 +254,22 @@ def emergency_braking(
     before the stops and after the last. Stops that do not fit in the profile are dropped, last first.
     Speeds lie in [0, speed_band[1]].
     """
-    rng = np.random.default_rng(seed)
+    return emergency_braking_batch([seed], params, leader).profile(0)
+
+
+def emergency_braking_batch(
+    seeds: Sequence[int | None],
+    params: EmergencyBrakingConfig = EmergencyBrakingConfig(),
+    leader: LeaderConfig = LeaderConfig(),
+) -> LeaderProfiles:
+    """:func:`emergency_braking` of each seed, a row each."""
+    accel = np.stack([_emergency_braking_accel(np.random.default_rng(seed), params, leader) for seed in seeds])
+    return LeaderProfiles.from_acceleration(accel, _down_to_standstill(leader), name="emergency_braking")
+
+
+def _emergency_braking_accel(rng: np.random.Generator, params: EmergencyBrakingConfig,
+                             leader: LeaderConfig) -> np.ndarray:
+    """The accelerations [m/s^2] of one :func:`emergency_braking` profile drawn from ``rng``."""
     cruise = min(rng.uniform(*params.cruise_speed_range), leader.speed_band[1])
     start = _speed_change(cruise - leader.initial_speed, rng.uniform(*params.recovery_accel_range), params.max_jerk,
                           leader.dt)
@@ -241,7 +293,7 @@ def emergency_braking(
     accel = np.zeros(leader.n_samples)
     body = np.concatenate(segments)
     accel[: body.size] = body
-    return LeaderProfile.from_acceleration(accel, _down_to_standstill(leader), name="emergency_braking")
+    return accel
 
 
 def _ticks(duration: float, dt: float) -> int:
@@ -270,11 +322,11 @@ def _speed_change(change: float, magnitude: float, max_jerk: float, dt: float) -
 
 
 class _HumanDraws(NamedTuple):
-    """The stochastic human's random draws, one per tick."""
+    """The stochastic human's random draws, one per tick, a row per profile."""
 
-    innovations: np.ndarray  # (n,) innovations of the AR(1) acceleration noise [m/s^2]
-    target_changes: np.ndarray  # (n,) the target speed changes at this tick [bool]
-    new_targets: np.ndarray  # (n,) the target speed if it changes [m/s]
+    innovations: np.ndarray  # (n_profiles, n) innovations of the AR(1) acceleration noise [m/s^2]
+    target_changes: np.ndarray  # (n_profiles, n) the target speed changes at this tick [bool]
+    new_targets: np.ndarray  # (n_profiles, n) the target speed if it changes [m/s]
 
 
 class _HumanMotion(NamedTuple):
@@ -297,42 +349,93 @@ def stochastic_human(
 
     acceleration = speed_gain (target - v) + eta, eta an Ornstein-Uhlenbeck process.
     """
-    rng = np.random.default_rng(seed)
+    return stochastic_human_batch([seed], params, leader).profile(0)
+
+
+def stochastic_human_batch(
+    seeds: Sequence[int | None],
+    params: StochasticHumanConfig = StochasticHumanConfig(),
+    leader: LeaderConfig = LeaderConfig(),
+) -> LeaderProfiles:
+    """:func:`stochastic_human` of each seed, a row each."""
     low, high = leader.speed_band
     n, dt = leader.n_samples, leader.dt
     decay = np.exp(-dt / params.accel_correlation_time)
-    draws = _HumanDraws(
-        innovations=params.accel_std * np.sqrt(1.0 - decay**2) * rng.standard_normal(n),
-        target_changes=rng.random(n) < dt / params.target_change_interval,
-        new_targets=rng.uniform(low, high, size=n),
-    )
+    draws = _HumanDraws(np.empty((len(seeds), n)), np.empty((len(seeds), n), dtype=bool), np.empty((len(seeds), n)))
+    for row, seed in enumerate(seeds):
+        rng = np.random.default_rng(seed)
+        draws.innovations[row] = params.accel_std * np.sqrt(1.0 - decay**2) * rng.standard_normal(n)
+        draws.target_changes[row] = rng.random(n) < dt / params.target_change_interval
+        draws.new_targets[row] = rng.uniform(low, high, size=n)
     motion = _HumanMotion(*(float(value) for value in (leader.initial_speed, decay, params.speed_gain, dt, low, high)))
-    return LeaderProfile.from_acceleration(_pursue_targets(tuple(draws), tuple(motion)), leader, name="stochastic_human")
+    return LeaderProfiles.from_acceleration(_pursue_targets(tuple(draws), tuple(motion)), leader,
+                                            name="stochastic_human")
+
+
+class _CycleConstants(NamedTuple):
+    """The aggressive cycles' constants."""
+
+    duration_low: float  # phase_duration_range [s]
+    duration_high: float  # [s]
+    accel_low: float  # accel_range [m/s^2]
+    accel_high: float  # [m/s^2]
+    cruise_probability: float  # [-]
+    max_jerk: float  # [m/s^3]
+    jerk_step: float  # largest change of acceleration in one tick [m/s^2]
+    initial_speed: float  # [m/s]
+    low: float  # speed band [m/s]
+    high: float  # [m/s]
+    dt: float  # [s]
+    square: float  # 2.0: the exponent of a square, passed in so that it is computed by libm's pow, as Python's
+    # float ** 2 is (pow differs from x * x in the last bit for about one value in a thousand)
 
 
 # Compiled loops; each runs in order because every step depends on the speed reached so far.
 @numba.njit(cache=True)
-def _jerk_limited_phase(accel, current, target, jerk_step, speed, dt):  # noqa: ANN001, ANN202
-    """Fill ``accel`` [m/s^2] moving from ``current`` towards ``target`` by at most ``jerk_step`` a tick;
-    returns the final acceleration and the speed [m/s] reached from ``speed``."""
-    for k in range(accel.size):
-        current += min(max(target - current, -jerk_step), jerk_step)
-        accel[k] = current
-        speed += current * dt
-    return current, speed
+def _cycle_phases(accel, sign, draws, constants):  # noqa: ANN001, ANN202
+    """Fill ``accel`` [m/s^2] with aggressive cycles phase by phase, the first phase's sign ``sign`` (+/-1), each
+    phase taking three uniform numbers of ``draws`` in [0, 1) (its duration, magnitude and whether it is a cruise:
+    a uniform draw of numpy's Generator is low + (high - low) u); ``constants`` is a :class:`_CycleConstants`
+    tuple. Returns the draws used, or -1 if ``draws`` ran out first."""
+    c = _CycleConstants(*constants)
+    speed, current, k, used = c.initial_speed, 0.0, 0, 0
+    while k < accel.size:
+        if used + DRAWS_PER_PHASE > draws.size:
+            return -1
+        length = int(np.rint((c.duration_low + (c.duration_high - c.duration_low) * draws[used]) / c.dt))
+        magnitude = c.accel_low + (c.accel_high - c.accel_low) * draws[used + 1]
+        cruise = draws[used + 2] < c.cruise_probability
+        used += DRAWS_PER_PHASE
+        target = 0.0
+        if not cruise:
+            if not c.low <= speed + sign * magnitude * length * c.dt <= c.high:
+                sign = -sign
+            ramp_margin = (magnitude + abs(current)) ** c.square / c.max_jerk  # gained while ramping in and out [m/s]
+            room = (c.high - speed if sign > 0 else speed - c.low) - ramp_margin  # [m/s]
+            length = max(1, min(length, int(room / (magnitude * c.dt))))
+            target = sign * magnitude
+            sign = -sign
+        for _ in range(min(length, accel.size - k)):  # the phase: towards target, jerk-limited
+            current += min(max(target - current, -c.jerk_step), c.jerk_step)
+            accel[k] = current
+            speed += current * c.dt
+            k += 1
+    return used
 
 
 @numba.njit(cache=True)
 def _pursue_targets(draws, motion):  # noqa: ANN001, ANN202
-    """The stochastic human's acceleration [m/s^2]: speed_gain (target - v) plus an AR(1) noise; ``draws``
-    (:class:`_HumanDraws`) and ``motion`` (:class:`_HumanMotion`) come as plain tuples, as in every kernel."""
+    """The stochastic human's accelerations [m/s^2] (n_profiles, n): speed_gain (target - v) plus an AR(1) noise;
+    ``draws`` (:class:`_HumanDraws`) and ``motion`` (:class:`_HumanMotion`) come as plain tuples, as in every
+    kernel."""
     draws, motion = _HumanDraws(*draws), _HumanMotion(*motion)
-    accel = np.empty(draws.innovations.size)
-    speed, target, noise = motion.initial_speed, motion.initial_speed, 0.0
-    for k in range(draws.innovations.size):
-        if draws.target_changes[k]:
-            target = draws.new_targets[k]
-        noise = motion.noise_decay * noise + draws.innovations[k]
-        accel[k] = motion.speed_gain * (target - speed) + noise
-        speed = min(max(speed + accel[k] * motion.dt, motion.low), motion.high)
+    accel = np.empty(draws.innovations.shape)
+    for row in range(accel.shape[0]):
+        speed, target, noise = motion.initial_speed, motion.initial_speed, 0.0
+        for k in range(accel.shape[1]):
+            if draws.target_changes[row, k]:
+                target = draws.new_targets[row, k]
+            noise = motion.noise_decay * noise + draws.innovations[row, k]
+            accel[row, k] = motion.speed_gain * (target - speed) + noise
+            speed = min(max(speed + accel[row, k] * motion.dt, motion.low), motion.high)
     return accel
