@@ -60,8 +60,8 @@ def test_the_first_import_says_the_kernels_will_compile_once(tmp_path):
     empty = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
                            env={**os.environ, "NUMBA_CACHE_DIR": str(tmp_path)})
     assert "compiles the simulator's kernels" in empty.stderr
-    (tmp_path / "monitoring_0").mkdir()
-    (tmp_path / "monitoring_0" / "monitor._update_kernel-123.py311.nbi").write_bytes(b"")
+    (tmp_path / "envs_0").mkdir()
+    (tmp_path / "envs_0" / "step_kernel.fused_step-123.py311.nbi").write_bytes(b"")
     cached = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
                             env={**os.environ, "NUMBA_CACHE_DIR": str(tmp_path)})
     assert "compiles" not in cached.stderr

@@ -22,17 +22,17 @@ from gymnasium.envs.registration import register, registry
 def _say_when_compiling() -> None:
     """numba compiles the kernels at their first call and caches them where its locators say (``NUMBA_CACHE_DIR``;
     else ``__pycache__`` beside the sources, or numba's user-wide cache where those are read-only): say so while
-    the monitor's kernel is cached in none of them, so that the first run's wait is not a mystery."""
-    kernel = "monitor._update_kernel-*.nbi"
+    the env's fused step is cached in none of them, so that the first run's wait is not a mystery."""
+    kernel = "step_kernel.fused_step-*.nbi"
     if os.environ.get("NUMBA_CACHE_DIR"):
-        cached = Path(os.environ["NUMBA_CACHE_DIR"]).glob(f"monitoring_*/{kernel}")
+        cached = Path(os.environ["NUMBA_CACHE_DIR"]).glob(f"envs_*/{kernel}")
     else:
         from numba.misc.appdirs import AppDirs
 
         user_wide = Path(AppDirs(appname="numba", appauthor=False).user_cache_dir)
-        cached = (*Path(__file__).parent.glob(f"monitoring/__pycache__/{kernel}"), *user_wide.glob(f"monitoring_*/{kernel}"))
+        cached = (*Path(__file__).parent.glob(f"envs/__pycache__/{kernel}"), *user_wide.glob(f"envs_*/{kernel}"))
     if not any(cached):
-        print("timegap_env: the first run compiles the simulator's kernels (about 15 CPU-seconds, "
+        print("timegap_env: the first run compiles the simulator's kernels (about 10 CPU-seconds, "
               "cached for every later run)", file=sys.stderr)
 
 

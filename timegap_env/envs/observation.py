@@ -117,7 +117,7 @@ def _encode(state, scales, out):  # noqa: ANN001, ANN202
         encode_env(state, scales, out, e)
 
 
-@numba.njit(cache=True, error_model="numpy")
+@numba.njit(cache=True, error_model="numpy", inline="always")
 def encode_env(state, scales, out, e):  # noqa: ANN001, ANN201
     """Env ``e``'s row of :func:`_encode`."""
     state, scales = FollowerState(*state), ObservationScales(*scales)

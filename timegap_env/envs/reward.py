@@ -209,7 +209,7 @@ def _step_readouts(step, previous_accel, envelope, constants, out):  # noqa: ANN
         env_readouts(step, e, previous_accel, envelope, constants, out, e)
 
 
-@numba.njit(cache=True, error_model="numpy")
+@numba.njit(cache=True, error_model="numpy", inline="always")
 def env_readouts(step, column, previous_accel, envelope, constants, out, e):  # noqa: ANN001, ANN201, PLR0913
     """Env ``e``'s read-outs (into ``out``, a :class:`StepReadouts`) of column ``column`` of ``step`` (a
     :class:`StepTicks`); its acceleration envelopes are updated in place."""
@@ -260,7 +260,7 @@ def _reward_terms(readouts, setting, changed, constants, out):  # noqa: ANN001, 
         env_reward_terms(readouts, setting, changed, constants, out, e)
 
 
-@numba.njit(cache=True, error_model="numpy")
+@numba.njit(cache=True, error_model="numpy", inline="always")
 def env_reward_terms(readouts, setting, changed, constants, out, e):  # noqa: ANN001, ANN201, PLR0913
     """Env ``e``'s terms (into ``out``, a :class:`RewardTerms` of (n_envs,) arrays) from its read-outs."""
     n_followers = setting.shape[1]
@@ -293,7 +293,7 @@ def _weighted_sum(terms, weights, out):  # noqa: ANN001, ANN202
         env_weighted_sum(terms, weights, out, e)
 
 
-@numba.njit(cache=True, error_model="numpy")
+@numba.njit(cache=True, error_model="numpy", inline="always")
 def env_weighted_sum(terms, weights, out, e):  # noqa: ANN001, ANN201
     """``out[e]`` of :func:`_weighted_sum`."""
     out[e] = 0.0

@@ -167,7 +167,7 @@ def fused_step(state, rules, action):  # noqa: ANN001, ANN201
     chart_tick[0] += n_ticks
 
 
-@numba.njit(cache=True, error_model="numpy")
+@numba.njit(cache=True, error_model="numpy", inline="always")
 def _change_settings(platoon, controller, memory, chart, rules, action, changed, e):  # noqa: ANN001, ANN202, PLR0913
     """Env ``e``'s new settings from its action; a follower whose setting changes (``changed``) ramps to it, its
     prior and chart are re-centred (the window's data and the chart's history cleared) and its alarms held off
@@ -216,7 +216,7 @@ def _change_settings(platoon, controller, memory, chart, rules, action, changed,
         chart_memory.hold_off[e, f] = int(ramp_ticks + rules.settle_ticks)
 
 
-@numba.njit(cache=True, error_model="numpy")
+@numba.njit(cache=True, error_model="numpy", inline="always")
 def _chart_sides(rules, estimates, centers, statistic, sides, e):  # noqa: ANN001, ANN202
     """The side (-1, 0, +1) of each tick's charted statistic against its limits, for env ``e``, into ``sides``
     (column 0); EWMA and CUSUM statistics carry on in ``statistic`` (the charts' ``_sides``, tick by tick)."""

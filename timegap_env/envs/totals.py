@@ -73,7 +73,7 @@ def _add_step(totals, readouts, setting, changed, gap_per_vehicle):  # noqa: ANN
         add_step_env(totals, readouts, setting, changed, gap_per_vehicle, e)
 
 
-@numba.njit(cache=True, error_model="numpy")
+@numba.njit(cache=True, error_model="numpy", inline="always")
 def add_step_env(totals, readouts, setting, changed, gap_per_vehicle, e):  # noqa: ANN001, ANN201, PLR0913
     """Env ``e``'s part of :func:`_add_step`."""
     totals, readouts = EpisodeTotals(*totals), StepReadouts(*readouts)

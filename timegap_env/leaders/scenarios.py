@@ -1,7 +1,7 @@
 """Named scenarios: which leader family a name stands for.
 
-``make_leader(name, seed, leader)`` builds the leader profile of a scenario;
-``SCENARIOS`` lists them. ``paper`` is the paper's leader (aggressive
+``make_leader(name, seed, leader)`` builds the leader profile of a scenario, ``make_leaders(name,
+seeds, leader)`` those of many seeds at once (what a batched reset uses); ``SCENARIOS`` lists them. ``paper`` is the paper's leader (aggressive
 acceleration/deceleration cycles in 20-80 mph, 250 s at 0.1 s ticks); the rest of
 the paper's Table 1 (T = 0.45 s, K = 1, tau* = 1.6 s, s0 = 5 m, five followers) is
 the default :class:`~timegap_env.config.PlatoonConfig`.
@@ -14,16 +14,17 @@ from __future__ import annotations
 
 import dataclasses
 import functools
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import numpy as np
 
 from timegap_env.config import LeaderConfig
 from timegap_env.leaders import idm, ngsim, openacc, synthetic
-from timegap_env.leaders.profile import LeaderProfile
+from timegap_env.leaders.profile import LeaderProfile, LeaderProfiles
 
 LeaderFamily = Callable[[int | None, LeaderConfig], LeaderProfile]
+LeaderBatchFamily = Callable[[Sequence[int | None], LeaderConfig], LeaderProfiles]
 
 
 @functools.lru_cache(maxsize=2)
@@ -56,6 +57,17 @@ LEADER_FAMILIES: dict[str, LeaderFamily] = {
     "openacc": openacc.openacc_leader,  # the human-driven lead car of a real ACC platoon (OpenACC AstaZero)
     # highway-env's IDM driver reacting to scripted hard braking ahead of it
     "idm": lambda seed, leader: idm.idm_leader(synthetic.hard_braking(seed, leader=leader), seed=seed),
+}
+
+# The families that build many seeds' profiles at once (all of one length), each the batch its single-seed
+# function above builds from one seed.
+LEADER_BATCHES: dict[str, LeaderBatchFamily] = {
+    "aggressive_cycles": lambda seeds, leader: synthetic.aggressive_cycles_batch(seeds, leader=leader),
+    "sinusoid": lambda seeds, leader: synthetic.sinusoid_batch(seeds, leader=leader),
+    "hard_braking": lambda seeds, leader: synthetic.hard_braking_batch(seeds, leader=leader),
+    "stochastic_human": lambda seeds, leader: synthetic.stochastic_human_batch(seeds, leader=leader),
+    "stop_and_go": lambda seeds, leader: synthetic.stop_and_go_batch(seeds, leader=leader),
+    "emergency_braking": lambda seeds, leader: synthetic.emergency_braking_batch(seeds, leader=leader),
 }
 
 # Harsh leaders the default training mix (EnvConfig.scenario_weights) never draws: for held-out evaluation.
@@ -96,3 +108,13 @@ def make_leader(name: str, seed: int | None = 0, leader: LeaderConfig = LeaderCo
     """The leader profile of scenario ``name`` for ``seed`` (same seed, identical profile) with ``leader``'s
     tick, length and speed band."""
     return LEADER_FAMILIES[get_scenario(name).leader_family](seed, leader)
+
+
+def make_leaders(name: str, seeds: Sequence[int | None], leader: LeaderConfig = LeaderConfig()) -> list[LeaderProfiles]:
+    """The leader profiles of scenario ``name`` for each of ``seeds``, as :func:`make_leader` builds them, in
+    batches whose rows, batch after batch, are the seeds' profiles in order: one batch for a family of
+    LEADER_BATCHES, one per seed for the others (recorded leaders differ in length)."""
+    family = get_scenario(name).leader_family
+    if family in LEADER_BATCHES:
+        return [LEADER_BATCHES[family](list(seeds), leader)] if len(seeds) else []
+    return [LeaderProfiles.of(LEADER_FAMILIES[family](seed, leader)) for seed in seeds]

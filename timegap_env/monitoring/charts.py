@@ -303,7 +303,7 @@ def _count_excursions(memory, first_tick, block):  # noqa: ANN001, ANN202
         count_excursions_env(memory, first_tick, block, e, e)
 
 
-@numba.njit(cache=True, error_model="numpy")
+@numba.njit(cache=True, error_model="numpy", inline="always")
 def count_excursions_env(memory, first_tick, block, e, column):  # noqa: ANN001, ANN201
     """What every chart does with its statistic's sides, tick by tick, for env ``e``, in place.
 

@@ -200,8 +200,8 @@ class TimeGapMonitor:
         """The posterior after the last tick (or change of setting)."""
         if self._moments is None:
             memory = self._memory
-            self._moments = posterior_moments(WindowSums(*np.moveaxis(memory.window_sums, -1, 0)), memory.prior_tau,
-                                              self._prior)
+            _posterior_of_window(memory.window_sums, memory.prior_tau, tuple(self._prior), tuple(self._posterior))
+            self._moments = self._posterior
         return self._moments
 
     # ---- read-outs ----------------------------------------------------------------------------
@@ -284,7 +284,7 @@ def _update_kernel(speed, spacing, memory, slot, rule, prior, out, out_moments):
         update_env(speed, spacing, memory, slot, rule, prior, out, out_moments, e, e)
 
 
-@numba.njit(cache=True, error_model="numpy")
+@numba.njit(cache=True, error_model="numpy", inline="always")
 def update_env(speed, spacing, memory, slot, rule, prior, out, out_moments, e, column):  # noqa: ANN001, ANN201, PLR0913
     """Env ``e``'s vehicles through a block of measurements, column ``column`` of ``speed``, ``spacing`` and
     ``out`` (the arguments of :func:`_update_kernel`), tick by tick and vehicle by vehicle, in place.
@@ -339,3 +339,18 @@ def update_env(speed, spacing, memory, slot, rule, prior, out, out_moments, e, c
                         slots[i, m, n] = slots[i, m, n] * rule.age_weight[m] + slots[i, m + 1, n]
             block_sum[:, :] = 0.0
             slot[e] = 0
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _posterior_of_window(window_sums, prior_tau, prior, out):  # noqa: ANN001, ANN202
+    """Every vehicle's posterior (into ``out``, :class:`Moments` of (n_envs, n_vehicles) arrays) from its window sums
+    (n_envs, n_vehicles, N_SUMS) and prior mean of tau [s] under ``prior`` (:class:`Prior`), both plain tuples."""
+    prior, out = Prior(*prior), Moments(*out)
+    n_envs, n_vehicles = prior_tau.shape
+    for e in range(n_envs):
+        for i in range(n_vehicles):
+            sums = WindowSums(window_sums[e, i, 0], window_sums[e, i, 1], window_sums[e, i, 2], window_sums[e, i, 3],
+                              window_sums[e, i, 4])
+            moments = posterior_moments(sums, prior_tau[e, i], prior)
+            out.mean_s0[e, i], out.mean_tau[e, i], out.var_s0[e, i] = moments.mean_s0, moments.mean_tau, moments.var_s0
+            out.cov_s0_tau[e, i], out.var_tau[e, i] = moments.cov_s0_tau, moments.var_tau
