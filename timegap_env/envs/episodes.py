@@ -12,15 +12,15 @@ from __future__ import annotations
 
 import hashlib
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
 
 from timegap_env.config import EnvConfig
-from timegap_env.leaders.profile import LeaderProfile
-from timegap_env.leaders.scenarios import SCENARIOS, make_leader
-from timegap_env.sim.degradation import Degradation, draw_degradation, parse_degradations
+from timegap_env.leaders.profile import LeaderProfile, LeaderProfiles
+from timegap_env.leaders.scenarios import SCENARIOS, make_leaders
+from timegap_env.sim.degradation import Categorical, Degradation, draw_degradation, parse_degradations
 
 RESET_OPTIONS = ("leader_speed", "scenario", "degradation")  # the keys reset(options=...) takes
 PACKET_LOSS_STREAM = np.uint64(0x5DEECE66D)  # the packet-loss key is the noise key xor this (another stream)
@@ -61,9 +61,8 @@ class Episodes:
         self.initial_setting = np.full(n_envs, config.platoon.initial_setting)  # [s]
         self.noise_keys = np.zeros(n_envs, dtype=np.uint64)
         self.scenario = np.full(n_envs, "", dtype=object)
-        families = list(config.scenario_weights)
-        weights = np.array([config.scenario_weights[f] for f in families], dtype=float)
-        self._families, self._family_probabilities = families, weights / weights.sum()
+        self._families = list(config.scenario_weights)
+        self._family_draw = Categorical([config.scenario_weights[f] for f in self._families])
 
     def draw(self, env: int, rng: np.random.Generator, options: Mapping[str, Any]) -> None:
         """A new episode for ``env`` from ``rng``; ``options`` as checked by :func:`check_reset_options`.
@@ -73,35 +72,63 @@ class Episodes:
         holding its last speed); ``{"degradation": ...}`` pins the degradation (a dict of
         :data:`~timegap_env.sim.degradation.DESCRIPTION_KEYS`, a list of them, or None for none).
         """
-        cfg = self.config
-        if "leader_speed" in options:
-            profile = LeaderProfile.from_speed(np.asarray(options["leader_speed"], dtype=float), cfg.platoon.dt, "user")
-        else:
-            family = options.get("scenario") or self._families[rng.choice(len(self._families), p=self._family_probabilities)]
-            profile = make_leader(family, int(rng.integers(2**31)), cfg.leader)
-            if not math.isclose(profile.dt, cfg.platoon.dt, rel_tol=1e-9):
-                raise ValueError(f"scenario {family!r} has dt = {profile.dt} s; the env runs at {cfg.platoon.dt} s")
-        self._load_leader(env, profile)
-        n_followers, dt = cfg.platoon.n_followers, cfg.platoon.dt
-        drawn = draw_degradation(rng, cfg.degradation, n_followers, self.episode_ticks[env] * dt, dt)
-        self.degradations[env] = parse_degradations(options["degradation"], n_followers) if "degradation" in options else drawn
-        self.dropout_probability[env] = rng.uniform(*cfg.dropout_probability_range)
-        self.noise_keys[env] = rng.integers(0, 2**63, dtype=np.uint64)
-        if cfg.random_initial_setting:  # drawn last: the rest of the episode is the one it would be without
-            self.initial_setting[env] = cfg.setting_levels[int(rng.integers(len(cfg.setting_levels)))]
+        self.draw_many(np.array([env]), {env: rng}, options)
 
-    def _load_leader(self, env: int, profile: LeaderProfile) -> None:
-        """Put ``profile`` in env's leader buffer, cut to the episode and padded to whole decisions."""
+    def draw_many(self, envs: np.ndarray, rngs: Sequence[np.random.Generator] | Mapping[int, np.random.Generator],
+                  options: Mapping[str, Any]) -> None:
+        """:meth:`draw` for each env of ``envs`` (distinct indices) from its own generator ``rngs[env]``, the same
+        draws in the same order per env, with the leaders of each family built in one batch.
+
+        Per env, its generator draws the family (unless pinned) and the leader's seed, then (the leader
+        drawing from a generator of its own seed) the degradation, the dropout rate, the noise key and, with
+        ``random_initial_setting``, the initial setting.
+        """
+        cfg = self.config
+        envs = np.asarray(envs, dtype=np.intp)
+        n_followers, dt = cfg.platoon.n_followers, cfg.platoon.dt
+        pinned = parse_degradations(options["degradation"], n_followers) if "degradation" in options else None
+        if "leader_speed" in options:
+            profile = LeaderProfile.from_speed(np.asarray(options["leader_speed"], dtype=float), dt, "user")
+            self._load_leaders(envs, LeaderProfiles.of(profile))
+        else:
+            families: dict[str, tuple[list[int], list[int]]] = {}  # family -> its envs and their leaders' seeds
+            for env in envs.tolist():
+                rng = rngs[env]
+                family = options.get("scenario") or self._families[self._family_draw.draw(rng)]
+                members, seeds = families.setdefault(family, ([], []))
+                members.append(env)
+                seeds.append(int(rng.integers(2**31)))
+            for family, (members, seeds) in families.items():
+                loaded = 0
+                for batch in make_leaders(family, seeds, cfg.leader):
+                    if not math.isclose(batch.dt, dt, rel_tol=1e-9):
+                        raise ValueError(f"scenario {family!r} has dt = {batch.dt} s; the env runs at {dt} s")
+                    self._load_leaders(np.array(members[loaded : loaded + len(batch)]), batch)
+                    loaded += len(batch)
+        durations = self.episode_ticks * dt  # [s]
+        for env in envs.tolist():
+            rng = rngs[env]
+            drawn = draw_degradation(rng, cfg.degradation, n_followers, durations[env], dt)
+            self.degradations[env] = drawn if pinned is None else pinned
+            self.dropout_probability[env] = rng.uniform(*cfg.dropout_probability_range)
+            self.noise_keys[env] = rng.integers(0, 2**63, dtype=np.uint64)
+            if cfg.random_initial_setting:  # drawn last: the rest of the episode is the one it would be without
+                self.initial_setting[env] = cfg.setting_levels[int(rng.integers(len(cfg.setting_levels)))]
+
+    def _load_leaders(self, envs: np.ndarray, profiles: LeaderProfiles) -> None:
+        """Put ``profiles`` (a row per env of ``envs``, or one row for all) in the envs' leader buffers, cut to the
+        episode and padded to whole decisions."""
         tpd, capacity = self.ticks_per_decision, self.leader_speed.shape[1] - 1
-        ticks = min(profile.speed.size - 1, capacity)
+        length = profiles.speed.shape[1]
+        ticks = min(length - 1, capacity)
         ticks = -(-ticks // tpd) * tpd  # up to whole decisions
-        n = min(profile.speed.size, ticks + 1)
-        self.leader_speed[env, :n] = profile.speed[:n]
-        self.leader_speed[env, n:] = profile.speed[n - 1]
-        self.leader_accel[env, :n] = profile.accel[:n]
-        self.leader_accel[env, n:] = 0.0
-        self.episode_ticks[env] = ticks
-        self.scenario[env] = profile.name
+        n = min(length, ticks + 1)
+        self.leader_speed[envs, :n] = profiles.speed[:, :n]
+        self.leader_speed[envs, n:] = profiles.speed[:, n - 1 : n]
+        self.leader_accel[envs, :n] = profiles.accel[:, :n]
+        self.leader_accel[envs, n:] = 0.0
+        self.episode_ticks[envs] = ticks
+        self.scenario[envs] = profiles.name
 
     def leader_at(self, ticks: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The leader's speed [m/s] and acceleration [m/s^2] at ``ticks`` (n_ticks, n_envs), held after the episode."""

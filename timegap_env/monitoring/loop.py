@@ -5,11 +5,13 @@ once, a tick (:meth:`MonitoredPlatoon.tick`) or a block of ticks
 (:meth:`MonitoredPlatoon.run`, what an env step uses) at a time, with the same
 result. Changing a follower's time gap setting ramps it in the simulator and
 re-centres that follower's prior and chart on the new setting. :meth:`MonitoredPlatoon.degrade`
-degrades followers (:mod:`timegap_env.sim.degradation`) in the physics and the radar alike.
+(:meth:`MonitoredPlatoon.degrade_many` for many envs at once) degrades followers
+(:mod:`timegap_env.sim.degradation`) in the physics and the radar alike.
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import NamedTuple
 
 import numpy as np
@@ -67,12 +69,18 @@ class MonitoredPlatoon:
     def degrade(self, env: int, degradations: tuple[Degradation, ...], key: int) -> None:
         """Env ``env``'s followers take ``degradations`` (none: nominal) from the next tick on, in the physics
         and the radar; ``key`` (uint64) seeds the packet losses."""
+        self.degrade_many(np.array([env]), [degradations], np.array([key], dtype=np.uint64))
+
+    def degrade_many(self, envs: np.ndarray, degradations: Sequence[tuple[Degradation, ...]], keys: np.ndarray) -> None:
+        """:meth:`degrade` for each env of ``envs`` (distinct indices) with its entry of ``degradations`` and of
+        ``keys`` (uint64), at once."""
+        envs = np.asarray(envs, dtype=np.intp)
         table, faults = self.degradation, self.sensors.faults
-        table.set(env, degradations)
-        table.write_faults(self.platoon, env, key)
-        faults.start[env], faults.end[env], faults.spacing_bias[env] = table.start[env], table.end[env], table.radar_bias[env]
-        faults.spacing_noise_std[env] = np.where(np.isnan(table.radar_noise[env]), self.sensors.config.spacing_noise_std,
-                                                 table.radar_noise[env])
+        table.set_many(envs, degradations)
+        table.write_faults_many(self.platoon, envs, keys)
+        faults.start[envs], faults.end[envs], faults.spacing_bias[envs] = table.start[envs], table.end[envs], table.radar_bias[envs]
+        radar_noise = table.radar_noise[envs]
+        faults.spacing_noise_std[envs] = np.where(np.isnan(radar_noise), self.sensors.config.spacing_noise_std, radar_noise)
 
     def reset(
         self,

@@ -24,6 +24,7 @@ the true parameters and the smallest string-stable setting for them (:func:`smal
 
 from __future__ import annotations
 
+import bisect
 import dataclasses
 import functools
 import math
@@ -132,13 +133,38 @@ def parse_degradations(value: Any, n_followers: int) -> tuple[Degradation, ...]:
     return degradations
 
 
+class Categorical:
+    """Draws an index of ``weights`` (non-negative, not all 0) with chance proportional to its weight: exactly what
+    ``rng.choice(len(weights), p=weights / weights.sum())`` draws, and from the same one uniform number, without
+    checking ``p`` again at every draw.
+
+    numpy's ``Generator.choice`` with ``p`` takes the cumulative sum of ``p``, divides it by its last entry, draws
+    one ``random()`` and returns the first index whose cumulative probability exceeds it (a right-sided search).
+    """
+
+    def __init__(self, weights: Sequence[float]) -> None:
+        weights = np.array(weights, dtype=float)
+        cumulative = (weights / weights.sum()).cumsum()
+        cumulative /= cumulative[-1]
+        self._cumulative = cumulative.tolist()
+
+    def draw(self, rng: np.random.Generator) -> int:
+        """An index drawn from ``rng`` (one ``random()``)."""
+        return bisect.bisect_right(self._cumulative, rng.random())
+
+
+@functools.lru_cache(maxsize=16)
+def _kind_draw(kind_weights: tuple[tuple[str, float], ...]) -> tuple[tuple[str, ...], Categorical]:
+    """The kinds of ``kind_weights`` ((kind, weight) pairs) and the draw of one of them."""
+    return tuple(kind for kind, _ in kind_weights), Categorical([weight for _, weight in kind_weights])
+
+
 def draw_degradation(rng: np.random.Generator, config: DegradationConfig, n_followers: int,
                      duration: float, dt: float) -> tuple[Degradation, ...]:
     """The degradations of one episode of ``duration`` [s] at tick ``dt`` [s], drawn from ``rng`` (see
     :class:`~timegap_env.config.DegradationConfig`); () when it draws none."""
-    kinds = list(config.kind_weights)
-    weights = np.array([config.kind_weights[k] for k in kinds], dtype=float)
-    kind = kinds[rng.choice(len(kinds), p=weights / weights.sum())]
+    kinds, kind_draw = _kind_draw(tuple(config.kind_weights.items()))
+    kind = kinds[kind_draw.draw(rng)]
     hit = rng.random(n_followers) < config.follower_probability
     hit[rng.integers(n_followers)] = True  # at least one follower
     followers = tuple(int(f) + 1 for f in np.flatnonzero(hit))
@@ -232,32 +258,49 @@ class DegradationTable:
         self._stale = np.ones(n_envs, dtype=bool)  # envs whose ``stable`` entries are not found yet
         self._while_active, self._otherwise = np.zeros((2, len(TRUE_PARAMETERS), *shape))
         self.descriptions: list[tuple[Degradation, ...]] = [() for _ in range(n_envs)]
-        for env in range(n_envs):
-            self.set(env, ())
+        self.set_many(np.arange(n_envs), [()] * n_envs)
 
     def set(self, env: int, degradations: Sequence[Degradation]) -> None:
         """Env ``env``'s followers take ``degradations`` (from :func:`parse_degradations`); the others are nominal."""
+        self.set_many(np.array([env]), [degradations])
+
+    def set_many(self, envs: np.ndarray, degradations: Sequence[Sequence[Degradation]]) -> None:
+        """Each env of ``envs`` (distinct indices) takes its entry of ``degradations`` (as :meth:`set` does), all
+        in a few array operations: the envs' rows are made nominal, then every hit follower takes its
+        degradation's schedule and parameters."""
         cfg = self.config
-        nominal_lag, nominal_gain = self._nominal_lag, self._nominal_gain
-        self.kind[env], self.size[env], self.start[env], self.end[env] = 0, np.nan, 0, 0
-        self.lag[env], self.gain[env], self.k_s[env], self.k_v[env] = nominal_lag, nominal_gain, cfg.k_s, cfg.k_v
-        self.accel_max[env], self.extra_delay[env], self.packet_loss[env] = cfg.accel_max, 0, 0.0
-        self.radar_bias[env], self.radar_noise[env], self.v2v_down[env] = 0.0, np.nan, False
-        for degradation in degradations:
-            for follower in degradation.followers:
-                self._set_follower(env, follower - 1, degradation)
-        self.descriptions[env] = tuple(degradations)
-        self._stale[env] = True  # its smallest stable settings are found when the ground truth is first asked for
-        hit = self.kind[env] > 0
-        self._reported["size"][env] = np.nan_to_num(self.size[env])
-        self._reported["onset"][env] = np.where(hit, self.start[env] * cfg.dt, np.inf)
-        self._reported["end"][env] = np.where(hit & (self.end[env] < NEVER), self.end[env] * cfg.dt, np.inf)
-        noise = np.where(np.isnan(self.radar_noise[env]), self.spacing_noise_std, self.radar_noise[env])
-        while_active = (self.lag[env], self.gain[env], self.k_s[env], self.k_v[env],
-                        cfg.v2v_delay + self.extra_delay[env] * cfg.dt, self.packet_loss[env], self.radar_bias[env], noise)
-        otherwise = (nominal_lag, nominal_gain, cfg.k_s, cfg.k_v, cfg.v2v_delay, 0.0, 0.0, self.spacing_noise_std)
+        envs = np.asarray(envs, dtype=np.intp)
+        if np.unique(envs).size != envs.size:
+            raise ValueError(f"envs = {envs.tolist()}: each env may be set once")
+        self.kind[envs], self.size[envs], self.start[envs], self.end[envs] = 0, np.nan, 0, 0
+        self.lag[envs], self.gain[envs], self.k_s[envs], self.k_v[envs] = self._nominal_lag, self._nominal_gain, cfg.k_s, cfg.k_v
+        self.accel_max[envs], self.extra_delay[envs], self.packet_loss[envs] = cfg.accel_max, 0, 0.0
+        self.radar_bias[envs], self.radar_noise[envs], self.v2v_down[envs] = 0.0, np.nan, False
+        hits = _Hits()
+        for env, items in zip(envs.tolist(), degradations, strict=True):
+            for degradation in items:
+                hits.add(env, degradation, self)
+            self.descriptions[env] = tuple(items)
+        hits.write(self)
+        self._stale[envs] = True  # their smallest stable settings are found when the ground truth is first asked for
+        self._prepare_truth(envs)
+
+    def _prepare_truth(self, envs: np.ndarray) -> None:
+        """The parts of :meth:`truth` fixed for the episode of each env of ``envs``."""
+        cfg = self.config
+        hit = self.kind[envs] > 0
+        start, end, radar_noise = self.start[envs], self.end[envs], self.radar_noise[envs]
+        self._reported["size"][envs] = np.nan_to_num(self.size[envs])
+        self._reported["onset"][envs] = np.where(hit, start * cfg.dt, np.inf)
+        self._reported["end"][envs] = np.where(hit & (end < NEVER), end * cfg.dt, np.inf)
+        noise = np.where(np.isnan(radar_noise), self.spacing_noise_std, radar_noise)
+        while_active = (self.lag[envs], self.gain[envs], self.k_s[envs], self.k_v[envs],
+                        cfg.v2v_delay + self.extra_delay[envs] * cfg.dt, self.packet_loss[envs], self.radar_bias[envs],
+                        noise)
+        otherwise = (self._nominal_lag, self._nominal_gain, cfg.k_s, cfg.k_v, cfg.v2v_delay, 0.0, 0.0,
+                     self.spacing_noise_std)
         for i, (active_value, other_value) in enumerate(zip(while_active, otherwise)):  # in TRUE_PARAMETERS order
-            self._while_active[i, env], self._otherwise[i, env] = active_value, other_value
+            self._while_active[i, envs], self._otherwise[i, envs] = active_value, other_value
 
     def _find_stable_settings(self, env: int) -> None:
         """Env ``env``'s smallest string-stable settings (``stable``) for its nominal and degraded parameters, with
@@ -273,49 +316,20 @@ class DegradationTable:
                                                         cfg.k_f if up else 0.0, round(float(delay), 9), loss, cfg.dt)
         self._stale[env] = False
 
-    def _set_follower(self, env: int, f: int, degradation: Degradation) -> None:
-        cfg, kind, size = self.config, degradation.kind, degradation.size
-        if kind == "v2v_latency" and (size > cfg.max_v2v_latency + 1e-9 or abs(size / cfg.dt - round(size / cfg.dt)) > 1e-9):
-            raise ValueError(f"degradation size = {size!r}: a v2v_latency must be a multiple of dt = {cfg.dt} s "
-                             f"up to max_v2v_latency = {cfg.max_v2v_latency} s")
-        self.kind[env, f] = KINDS.index(kind)
-        self.size[env, f] = np.nan if size is None else size
-        self.start[env, f] = round(degradation.onset / cfg.dt)
-        self.end[env, f] = NEVER if degradation.end is None else round(degradation.end / cfg.dt)
-        if kind == "lag":
-            self.lag[env, f] *= size
-        elif kind == "gain":
-            self.gain[env, f] = size
-        elif kind == "v2v_latency":
-            self.extra_delay[env, f] = round(size / cfg.dt)
-        elif kind == "packet_loss":
-            self.packet_loss[env, f] = size
-        elif kind == "radar_bias":
-            self.radar_bias[env, f] = size
-        elif kind == "radar_noise":
-            self.radar_noise[env, f] = size
-        elif kind == "v2v_outage":
-            self.v2v_down[env, f] = True
-        else:  # commercial_acc
-            from timegap_env.sim.presets import COMMERCIAL_ACC, acc_presets
-
-            presets, car = acc_presets(), degradation.car or COMMERCIAL_ACC
-            if car not in presets:
-                raise ValueError(f"degradation car = {car!r}: no calibrated preset; known: {sorted(presets)}")
-            model = presets[car].model
-            self.lag[env, f], self.gain[env, f], self.k_s[env, f], self.k_v[env, f] = model.lag, 1.0, model.k_s, model.k_v
-            self.accel_max[env, f], self.v2v_down[env, f] = model.accel_max, True
-
     def write_faults(self, platoon: Platoon, env: int, key: int) -> None:
         """Write env ``env``'s degradations into ``platoon.faults``; ``key`` (uint64) seeds its packet losses."""
+        self.write_faults_many(platoon, np.array([env]), np.array([key], dtype=np.uint64))
+
+    def write_faults_many(self, platoon: Platoon, envs: np.ndarray, keys: np.ndarray) -> None:
+        """:meth:`write_faults` for each env of ``envs`` with its key of ``keys`` (uint64), at once."""
         faults = platoon.faults
-        faults.start[env], faults.end[env] = self.start[env], self.end[env]
-        degraded = ZOHCoefficients.for_glvd(self.lag[env], self.gain[env], self.config.dt)
+        faults.start[envs], faults.end[envs] = self.start[envs], self.end[envs]
+        degraded = ZOHCoefficients.for_glvd(self.lag[envs], self.gain[envs], self.config.dt)
         for target, values in zip(faults.dynamics[:-1], degraded[:-1]):
-            target[env] = values
-        faults.k_s[env], faults.k_v[env], faults.accel_max[env] = self.k_s[env], self.k_v[env], self.accel_max[env]
-        faults.extra_delay[env], faults.packet_loss[env] = self.extra_delay[env], self.packet_loss[env]
-        faults.spacing_bias[env], faults.keys[env] = self.radar_bias[env], np.uint64(key)
+            target[envs] = values
+        faults.k_s[envs], faults.k_v[envs], faults.accel_max[envs] = self.k_s[envs], self.k_v[envs], self.accel_max[envs]
+        faults.extra_delay[envs], faults.packet_loss[envs] = self.extra_delay[envs], self.packet_loss[envs]
+        faults.spacing_bias[envs], faults.keys[envs] = self.radar_bias[envs], np.asarray(keys, dtype=np.uint64)
 
     def active(self, ticks: np.ndarray) -> np.ndarray:
         """Which degradations act during tick ``ticks`` since reset, (..., n_envs) -> (..., n_envs, n_followers)."""
@@ -348,3 +362,75 @@ class DegradationTable:
         return {"kind": self.kind.copy(), **{name: value.copy() for name, value in self._reported.items()},
                 "active": active, **dict(zip(TRUE_PARAMETERS, parameters)), "v2v": v2v.copy(),
                 "smallest_stable_setting": stable}
+
+
+class _Hits:
+    """Every hit follower of a :meth:`DegradationTable.set_many`, gathered degradation by degradation and written
+    into the table's arrays in one go: its kind code, size, start and end ticks, and what the kind changes."""
+
+    def __init__(self) -> None:
+        self.rows: list[int] = []  # env of each hit follower
+        self.columns: list[int] = []  # follower index, 0 = right behind the leader
+        self.kinds: list[int] = []  # KINDS index
+        self.sizes: list[float] = []  # NaN without one
+        self.starts: list[int] = []  # [ticks]
+        self.ends: list[int] = []  # [ticks], NEVER: no end
+        self.cars: list[tuple[int, int, str]] = []  # commercial ACC followers: env, follower index, car
+
+    def add(self, env: int, degradation: Degradation, table: DegradationTable) -> None:
+        """Env ``env``'s followers that ``degradation`` hits; ``ValueError`` for a V2V latency the table cannot hold or
+        an unknown car."""
+        cfg, kind, size = table.config, degradation.kind, degradation.size
+        if kind == "v2v_latency" and (size > cfg.max_v2v_latency + 1e-9 or abs(size / cfg.dt - round(size / cfg.dt)) > 1e-9):
+            raise ValueError(f"degradation size = {size!r}: a v2v_latency must be a multiple of dt = {cfg.dt} s "
+                             f"up to max_v2v_latency = {cfg.max_v2v_latency} s")
+        if kind == "commercial_acc":
+            from timegap_env.sim.presets import COMMERCIAL_ACC, acc_presets  # scipy-backed: imported when used
+
+            car = degradation.car or COMMERCIAL_ACC
+            if car not in acc_presets():
+                raise ValueError(f"degradation car = {car!r}: no calibrated preset; known: {sorted(acc_presets())}")
+            self.cars.extend((env, follower - 1, car) for follower in degradation.followers)
+        count = len(degradation.followers)
+        self.rows.extend([env] * count)
+        self.columns.extend(follower - 1 for follower in degradation.followers)
+        self.kinds.extend([KINDS.index(kind)] * count)
+        self.sizes.extend([math.nan if size is None else size] * count)
+        self.starts.extend([round(degradation.onset / cfg.dt)] * count)
+        self.ends.extend([NEVER if degradation.end is None else round(degradation.end / cfg.dt)] * count)
+
+    def write(self, table: DegradationTable) -> None:
+        """Write the hits into ``table``; ``ValueError`` if a follower is hit twice in one env."""
+        if not self.rows:
+            return
+        rows, columns = np.array(self.rows), np.array(self.columns)
+        followers = rows * table.kind.shape[1] + columns
+        if np.unique(followers).size != followers.size:
+            raise ValueError("degradations hit a follower more than once: each follower takes at most one")
+        kinds, sizes = np.array(self.kinds, dtype=np.int8), np.array(self.sizes)
+        table.kind[rows, columns], table.size[rows, columns] = kinds, sizes
+        table.start[rows, columns], table.end[rows, columns] = self.starts, self.ends
+
+        def where(kind: str) -> tuple[tuple[np.ndarray, np.ndarray], np.ndarray]:
+            chosen = kinds == KINDS.index(kind)
+            return (rows[chosen], columns[chosen]), sizes[chosen]
+
+        at, size = where("lag")
+        table.lag[at] *= size
+        at, size = where("gain")
+        table.gain[at] = size
+        at, size = where("v2v_latency")
+        table.extra_delay[at] = np.rint(size / table.config.dt)
+        for kind, target in (("packet_loss", table.packet_loss), ("radar_bias", table.radar_bias),
+                             ("radar_noise", table.radar_noise)):
+            at, size = where(kind)
+            target[at] = size
+        table.v2v_down[where("v2v_outage")[0]] = True
+        if self.cars:
+            from timegap_env.sim.presets import acc_presets
+
+            presets = acc_presets()
+            for env, f, car in self.cars:
+                model = presets[car].model
+                table.lag[env, f], table.gain[env, f], table.k_s[env, f], table.k_v[env, f] = model.lag, 1.0, model.k_s, model.k_v
+                table.accel_max[env, f], table.v2v_down[env, f] = model.accel_max, True
