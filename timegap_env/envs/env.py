@@ -110,8 +110,9 @@ class TimeGapMonitorEnv(gym.Env):
     ``config`` overrides :class:`timegap_env.config.EnvConfig` (units in its comments), nested
     configs as dicts, e.g. ``{"action_mode": "per_vehicle", "platoon": {"n_followers": 3}}``.
     Unknown keys and bad values raise ``ValueError``. ``step_diagnostics=False`` leaves the per-step keys
-    (monitor, reward terms, ground truth) out of ``step``'s info, for learners that never read them (the
-    step then costs about a third as much); the episode summary stays, and reset's info is whole.
+    (monitor, reward terms, ground truth) out of ``reset``'s and ``step``'s info, for learners that never
+    read them (a step then costs a fraction as much, and the ground truth is never worked out); the
+    episode summary stays.
 
     ## Version History
 
@@ -143,7 +144,8 @@ class TimeGapMonitorEnv(gym.Env):
         self._needs_reset = False
         if self.task.trace is not None:
             self.task.trace.clear()
-        return self.task.observation()[0].ravel(), {**self._info(), **of_env(no_rewards(1), 0)}
+        info = {**self._info(), **of_env(no_rewards(1), 0)} if self.step_diagnostics else {}
+        return self.task.observation()[0].ravel(), info
 
     def __getstate__(self) -> dict[str, Any]:
         """For copy and pickle: everything but the renderer (pygame surfaces and fonts do not pickle), which the next
