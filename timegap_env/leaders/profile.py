@@ -220,18 +220,16 @@ class LeaderProfiles:
             values = np.asarray(getattr(self, field), dtype=float)
             if values.ndim != 2 or values.shape[1] < 2:
                 raise ValueError(f"LeaderProfiles.{field} has shape {values.shape}: must be (n_profiles, n >= 2)")
-            bad = np.argwhere(~np.isfinite(values))
-            if bad.size:
-                row, k = bad[0]
+            if not np.isfinite(values).all():
+                row, k = np.argwhere(~np.isfinite(values))[0]
                 raise ValueError(f"LeaderProfiles.{field}[{row}, {k}] = {values[row, k]}: every sample must be finite")
             object.__setattr__(self, field, values)
         if self.speed.shape != self.accel.shape:
             raise ValueError(
                 f"LeaderProfiles.accel has shape {self.accel.shape}, speed has {self.speed.shape}: must match"
             )
-        negative = np.argwhere(self.speed < 0)
-        if negative.size:
-            row, k = negative[0]
+        if self.speed.min() < 0:
+            row, k = np.argwhere(self.speed < 0)[0]
             raise ValueError(f"LeaderProfiles.speed[{row}, {k}] = {self.speed[row, k]}: must be >= 0")
 
     def __len__(self) -> int:
@@ -253,19 +251,21 @@ class LeaderProfiles:
         accel = np.ascontiguousarray(accel, dtype=float)
         if accel.ndim != 2 or accel.shape[1] < 2:
             raise ValueError(f"accel has shape {accel.shape}: must be (n_profiles, n >= 2)")
-        speed = _integrate_in_band(accel, leader.initial_speed, leader.dt, *leader.speed_band)  # one sample longer
-        realised = np.diff(speed, axis=1) / leader.dt
-        return cls(speed=speed[:, :-1], accel=realised, dt=leader.dt, name=name)
+        speed, realised = _integrate_in_band(accel, leader.initial_speed, leader.dt, *leader.speed_band)
+        return cls(speed=speed, accel=realised, dt=leader.dt, name=name)
 
 
 # Runs in order: every step depends on the speed reached so far.
 @numba.njit(cache=True)
 def _integrate_in_band(accel, initial_speed, dt, low, high):  # noqa: ANN001, ANN202
-    """Speeds [m/s] (n_profiles, n + 1) integrated from ``initial_speed`` along each row of ``accel`` (n_profiles,
-    n) [m/s^2], each step clipped to [low, high]."""
-    speed = np.empty((accel.shape[0], accel.shape[1] + 1))
+    """Speeds [m/s] integrated from ``initial_speed`` along each row of ``accel`` (n_profiles, n) [m/s^2], each step
+    clipped to [low, high], and the accelerations realised [m/s^2] (the speed's forward difference over ``dt``),
+    both (n_profiles, n)."""
+    speed, realised = np.empty(accel.shape), np.empty(accel.shape)
     for row in range(accel.shape[0]):
-        speed[row, 0] = initial_speed
+        now = initial_speed
         for k in range(accel.shape[1]):
-            speed[row, k + 1] = min(max(speed[row, k] + accel[row, k] * dt, low), high)
-    return speed
+            after = min(max(now + accel[row, k] * dt, low), high)
+            speed[row, k], realised[row, k] = now, (after - now) / dt
+            now = after
+    return speed, realised

@@ -80,7 +80,7 @@ def aggressive_cycles_batch(
     n_draws = DRAWS_PER_PHASE * (math.ceil(leader.n_samples * leader.dt / params.phase_duration_range[0]) + 16)
     for row, seed in enumerate(seeds):
         rng = np.random.default_rng(seed)
-        sign = float(rng.choice([-1.0, 1.0]))
+        sign = (-1.0, 1.0)[int(rng.integers(2))]  # what rng.choice([-1.0, 1.0]) draws, without building an array
         draws = rng.random(n_draws)
         while _cycle_phases(accel[row], sign, draws, tuple(constants)) < 0:  # ran out: draw as many again
             draws = np.concatenate((draws, rng.random(draws.size)))

@@ -167,7 +167,7 @@ def draw_degradation(rng: np.random.Generator, config: DegradationConfig, n_foll
     kind = kinds[kind_draw.draw(rng)]
     hit = rng.random(n_followers) < config.follower_probability
     hit[rng.integers(n_followers)] = True  # at least one follower
-    followers = tuple(int(f) + 1 for f in np.flatnonzero(hit))
+    followers = tuple(f + 1 for f, is_hit in enumerate(hit.tolist()) if is_hit)
     midway, recovers = rng.random() < config.midway_onset_probability, rng.random() < config.recovery_probability
     onset = round_to_tick(rng.uniform(0.25, 0.75) * duration, dt) if midway else 0.0
     end = round_to_tick(onset + rng.uniform(0.2, 0.5) * duration, dt) if recovers else None
