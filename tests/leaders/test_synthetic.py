@@ -45,3 +45,21 @@ def test_aggressive_cycles_match_the_paper_description():
 def test_hard_braking_brakes_hard():
     profile = make_leader("hard_braking", 0)
     assert profile.accel.min() <= -4.0
+
+
+@pytest.mark.parametrize("family", [*FAMILIES, "stop_and_go", "emergency_braking"])
+def test_a_batch_holds_each_seeds_own_profile(family):
+    seeds = [5, 0, 123, 5, 2**31 - 1]
+    batch = getattr(synthetic, f"{family}_batch")(seeds)
+    for row, seed in enumerate(seeds):
+        single = getattr(synthetic, family)(seed)
+        np.testing.assert_array_equal(batch.speed[row], single.speed)
+        np.testing.assert_array_equal(batch.accel[row], single.accel)
+        assert batch.profile(row).name == single.name
+
+
+def test_the_first_cycle_sign_is_what_choice_of_two_draws():
+    for seed in range(5000):
+        ours, numpy = np.random.default_rng(seed), np.random.default_rng(seed)
+        assert (-1.0, 1.0)[int(ours.integers(2))] == numpy.choice([-1.0, 1.0])
+        assert ours.bit_generator.state == numpy.bit_generator.state
