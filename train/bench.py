@@ -26,6 +26,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import platform
+import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -88,6 +89,11 @@ class Row:
     reference: str = ""  # what it is set against, measured alongside
     ratio: str = ""  # value over reference
     target: str = ""  # the target and whether it is met
+
+
+def say(stage: str) -> None:
+    """Progress on stderr (the full run takes minutes)."""
+    print(f"bench: {stage}", file=sys.stderr, flush=True)
 
 
 def verdict(target: str, met: bool) -> str:
@@ -205,10 +211,24 @@ def single_env_rows(sizes: Sizes) -> tuple[list[Row], float]:
     return rows, cartpole
 
 
+def memory_row(run: bench_vector.VectorRun) -> Row:
+    """Peak memory per env: tracemalloc's, with the resident memory's growth beside it; the latter alone for a
+    size that was not traced."""
+    def per_env(mib: float) -> str:
+        return f"{bench_vector.per_env_kib(mib, run.n_envs):,.1f} KiB ({mib:,.1f} MiB in all)"
+
+    measure = f"native vector env, {run.n_envs} envs: peak memory"
+    rss = "n/a (no /proc/self/status)" if run.rss_mib is None else per_env(run.rss_mib)
+    if run.traced_mib is not None:
+        return Row(f"{measure}, tracemalloc [KiB per env]", per_env(run.traced_mib), f"peak RSS growth: {rss}")
+    return Row(f"{measure}, peak RSS growth (not traced: the set-up took {run.set_up_seconds:,.0f} s untraced, "
+               f"tracing would exceed {bench_vector.TRACE_BUDGET:.0f} s) [KiB per env]", rss)
+
+
 def vector_rows(sizes: Sizes, cartpole: float) -> list[Row]:
     """Rows of measurements 2 and 3."""
-    runs = [bench_vector.measure(n, False, n in sizes.reset_sizes, sizes.vector_seconds, sizes.vector_min_steps)
-            for n in sizes.vector_sizes]
+    runs = bench_vector.measure_sizes(sizes.vector_sizes, sizes.reset_sizes, sizes.vector_seconds,
+                                      sizes.vector_min_steps)
     base = runs[0]
     rows = []
     for run in runs:
@@ -223,15 +243,14 @@ def vector_rows(sizes: Sizes, cartpole: float) -> list[Row]:
                         f"{run.env_steps_per_second:,.0f}",
                         f"{base.n_envs} envs: {base.env_steps_per_second:,.0f} / CartPole-v1, one env: {cartpole:,.0f}",
                         f"{ratio:.2f}x / {run.env_steps_per_second / cartpole:.2f}x", target))
-    for run in runs:
-        rows.append(Row(f"native vector env, {run.n_envs} envs: peak memory [KiB per env]",
-                        f"{run.kib_per_env:,.1f} KiB ({run.peak_mib:,.1f} MiB in all)"))
-    with_info = bench_vector.measure(base.n_envs, True, False, sizes.vector_seconds, sizes.vector_min_steps)
+    rows += [memory_row(run) for run in runs]
+    with_info = bench_vector.measure(base.n_envs, True, False, False, sizes.vector_seconds, sizes.vector_min_steps)
     rows.append(Row(f"native vector env, {base.n_envs} envs, step_diagnostics=True [env-steps/s]",
                     f"{with_info.env_steps_per_second:,.0f}",
                     f"step_diagnostics=False: {base.env_steps_per_second:,.0f}",
                     f"{with_info.env_steps_per_second / base.env_steps_per_second:.2f}x"))
     n = sizes.sync_envs
+    say(f"native vector env against SyncVectorEnv, {n} envs")
     native = vector_env_steps_per_second(
         gym.make_vec(timegap_env.ENV_ID, num_envs=n, vectorization_mode="vector_entry_point"), sizes.sync_steps)
     synced = vector_env_steps_per_second(gym.make_vec(timegap_env.ENV_ID, num_envs=n, vectorization_mode="sync"),
@@ -301,21 +320,24 @@ def table(rows: list[Row], quick: bool) -> str:
     lines = [
         f"# Benchmarks (`python -m train.bench{' --quick' if quick else ''}`)",
         "",
-        f"Python {platform.python_version()}, NumPy {np.__version__}, {platform.machine()}. Each figure is set against "
+        (f"Python {platform.python_version()}, NumPy {np.__version__}, {platform.machine()}. Each figure is set against "
         "a reference measured alongside it in the same process (cold start: in child processes launched alike); "
         "the ratios are the figures to compare, absolute rates move with the machine's load. Numba kernels are "
-        "loaded (or compiled) before timing, except in the cold start.",
+        "loaded (or compiled) before timing, except in the cold start."),
         "",
         "- Single envs take turns over several rounds, random actions, resets included.",
-        "- The native vector env runs in this one process on one core (numba's kernels are single-threaded), "
+        ("- The native vector env runs in this one process on one core (numba's kernels are single-threaded), "
         "random actions; its stepping is timed within episodes (all sub-envs start together, so their episodes "
         "end in the same step: the envs are reset, untimed, before that step; resets are timed on their own). "
-        "Peak memory: tracemalloc's peak (NumPy's allocations included) while building, resetting and stepping.",
-        "- Cold start: CPU seconds (the child's `time.process_time()`) and wall seconds from `python -c` to the "
+        "Peak memory: tracemalloc's peak (NumPy's allocations included) while building, resetting and stepping; "
+        "beside it, the growth of the process's peak resident memory (RSS), which stands in for it at a size whose "
+        f"traced set-up would take over {bench_vector.TRACE_BUDGET:.0f} s (tracing slows a per-env Python reset "
+        "loop several times over)."),
+        ("- Cold start: CPU seconds (the child's `time.process_time()`) and wall seconds from `python -c` to the "
         "first `env.step` returning (imports, `gym.make`, reset, one step), `NUMBA_CACHE_DIR` a fresh directory, "
-        "then the same directory again (warm, median of the runs); the reference child steps CartPole-v1 once.",
-        "- PPO: `hyperparams/ppo.yml` as `make train` runs it (TimeGapVecEnv, VecNormalize, MlpPolicy, CPU, one "
-        "torch thread), after one untimed rollout; the env's share is the time in its `step_wait` and `reset`.",
+        "then the same directory again (warm, median of the runs); the reference child steps CartPole-v1 once."),
+        ("- PPO: `hyperparams/ppo.yml` as `make train` runs it (TimeGapVecEnv, VecNormalize, MlpPolicy, CPU, one "
+        "torch thread), after one untimed rollout; the env's share is the time in its `step_wait` and `reset`."),
         "",
         "| measure | value | reference (same process) | ratio | target |",
         "|---|---|---|---|---|",
@@ -332,10 +354,14 @@ def main() -> None:
     sizes = QUICK if args.quick else FULL
     started = time.perf_counter()
 
+    say("single envs")
     rows, cartpole = single_env_rows(sizes)
     rows += vector_rows(sizes, cartpole)
+    say("cold start (child processes)")
     rows += cold_start_rows(sizes)
+    say("PPO")
     rows += ppo_rows(sizes)
+    say("simulator and monitor")
     rows += kernel_rows(sizes)
 
     text = table(rows, args.quick) + f"\nThe whole benchmark took {time.perf_counter() - started:,.0f} s.\n"
