@@ -23,6 +23,7 @@ from timegap_env.leaders.scenarios import SCENARIOS, make_leaders
 from timegap_env.sim.degradation import Categorical, Degradation, draw_degradation, parse_degradations
 
 RESET_OPTIONS = ("leader_speed", "scenario", "degradation")  # the keys reset(options=...) takes
+LEADER_BATCH = 256  # leaders built at once: a few MB of temporaries, reused rather than mapped afresh
 PACKET_LOSS_STREAM = np.uint64(0x5DEECE66D)  # the packet-loss key is the noise key xor this (another stream)
 
 
@@ -99,12 +100,13 @@ class Episodes:
                 members.append(env)
                 seeds.append(int(rng.integers(2**31)))
             for family, (members, seeds) in families.items():
-                loaded = 0
-                for batch in make_leaders(family, seeds, cfg.leader):
-                    if not math.isclose(batch.dt, dt, rel_tol=1e-9):
-                        raise ValueError(f"scenario {family!r} has dt = {batch.dt} s; the env runs at {dt} s")
-                    self._load_leaders(np.array(members[loaded : loaded + len(batch)]), batch)
-                    loaded += len(batch)
+                for first in range(0, len(seeds), LEADER_BATCH):  # a batch's arrays stay small enough to reuse
+                    loaded = first
+                    for batch in make_leaders(family, seeds[first : first + LEADER_BATCH], cfg.leader):
+                        if not math.isclose(batch.dt, dt, rel_tol=1e-9):
+                            raise ValueError(f"scenario {family!r} has dt = {batch.dt} s; the env runs at {dt} s")
+                        self._load_leaders(np.array(members[loaded : loaded + len(batch)]), batch)
+                        loaded += len(batch)
         durations = self.episode_ticks * dt  # [s]
         for env in envs.tolist():
             rng = rngs[env]
