@@ -48,7 +48,7 @@ EPISODES: list[dict[str, Any]] = [  # gym.make config, reset seed and options, a
     {"config": None, "seed": 7, "options": {"leader_speed": 20.0 + 3.0 * np.sin(np.arange(1500) * 0.02)},
      "actions": 107},
     {"config": {"platoon": {"actuation_lag": 1.0, "actuation_gain": 0.6, "initial_setting": 0.6},
-                "degradation": {"kind_weights": {"v2v_outage": 1.0}}, "setting_levels": (0.6, 0.7)},
+                "degradation": {"kind_weights": {"v2v_outage": 1.0}}, "setting_levels": (0.6, 0.7), "preferred_setting": 0.6},
      "seed": 0, "options": {"scenario": "hard_braking"}, "actions": 108},
 ]
 VECTOR_ENVS, VECTOR_STEPS = 4, 300

@@ -29,7 +29,7 @@ from agents.oracles import NOMINAL
 from agents.policies import ChartStepPolicy, FixedPolicy, NamedPolicy, PaperRulePolicy, seconds
 from agents.protocol import EVAL_SEED_START
 from timegap_env.config import EnvConfig
-from timegap_env.envs.info import summary_of, truth_of
+from timegap_env.envs.info import summary_of
 from train.value_of_information import SELECTION_SEED_START, kind_groups
 
 DEFAULT_EPISODES = 256
@@ -48,8 +48,8 @@ def run(seeds: Sequence[int], policies: Sequence[NamedPolicy]) -> dict[str, np.n
     n, m = len(seeds), len(policies)
     venv = gym.make_vec(timegap_env.ENV_ID, num_envs=n * m, vectorization_mode="vector_entry_point",
                         step_diagnostics=False)
-    obs, infos = venv.reset(seed=list(seeds) * m)
-    kinds = np.array([next((k for k in row if k != NOMINAL), NOMINAL) for row in truth_of(infos)["kind"][:n]],
+    obs, _ = venv.reset(seed=list(seeds) * m)
+    kinds = np.array([next((k for k in row if k != NOMINAL), NOMINAL) for row in venv.ground_truth()["kind"][:n]],
                      dtype=object)
     returns, active = np.zeros(n * m), np.ones(n * m, dtype=bool)
     summary = {name: np.zeros(n * m) for name in SUMMARY}

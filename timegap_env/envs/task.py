@@ -117,13 +117,13 @@ class PlatoonTask:
 
     # ------------------------------------------------------------------ reset
     def reset(self, mask: np.ndarray, rngs: Sequence[np.random.Generator], options: Mapping[str, Any] | None) -> None:
-        """Draw a new episode for every env in ``mask``, env i from ``rngs[i]``; ``options`` as in
+        """Draw a new episode for every env in ``mask``, env i from ``rngs[i]``, all in one batch; ``options`` as in
         :meth:`~timegap_env.envs.episodes.Episodes.draw`."""
         options = check_reset_options(options)
         episodes, loop = self.episodes, self.loop
-        for env in np.flatnonzero(mask):
-            episodes.draw(env, rngs[env], options)
-            loop.degrade(env, episodes.degradations[env], episodes.packet_loss_keys[env])
+        envs = np.flatnonzero(mask)
+        episodes.draw_many(envs, rngs, options)
+        loop.degrade_many(envs, [episodes.degradations[env] for env in envs], episodes.packet_loss_keys[envs])
         loop.reset(episodes.leader_speed[:, 0], episodes.leader_accel[:, 0], mask=mask,
                    setting=episodes.initial_setting[:, None], noise_key=episodes.noise_keys,
                    dropout_probability=episodes.dropout_probability)

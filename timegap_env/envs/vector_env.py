@@ -19,7 +19,9 @@ from gymnasium.vector.utils import batch_space
 
 from timegap_env.config import EnvConfig
 from timegap_env.envs.action import action_space
-from timegap_env.envs.info import EPISODE_PREFIX, REWARD_PREFIX, no_rewards, prefixed, with_masks
+from timegap_env.envs.info import (
+    EPISODE_PREFIX, REWARD_PREFIX, TRUTH_PREFIX, no_rewards, prefixed, truth_of, with_masks,
+)
 from timegap_env.envs.observation import observation_space
 from timegap_env.envs.task import PlatoonTask
 
@@ -115,6 +117,12 @@ class TimeGapMonitorVectorEnv(VectorEnv):
             return self._observations(), {}
         infos = {**self.task.step_info(), **no_rewards(self.num_envs)}
         return self._observations(), with_masks(infos, mask)
+
+    def ground_truth(self) -> dict[str, np.ndarray]:
+        """The ground truth now, as :func:`~timegap_env.envs.info.truth_of` reads it from an info (``kind`` as
+        names), arrays (num_envs, n_followers), whatever ``step_diagnostics`` puts in the infos: for oracles and
+        evaluation, never in the observation."""
+        return truth_of(prefixed(TRUTH_PREFIX, self.task.ground_truth()))
 
     def _reset_mask(self, mask: Any) -> np.ndarray:
         if mask is None:
