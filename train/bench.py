@@ -63,6 +63,7 @@ class Sizes:
     vector_sizes: tuple[int, ...]  # native vector env sizes; the first is the reference size
     vector_seconds: float  # at least this much stepping timed per size [s]
     vector_min_steps: int  # and at least this many steps
+    vector_rounds: int  # the sizes take turns stepping over this many rounds
     reset_sizes: tuple[int, ...]  # sizes whose batched reset is timed (each one of vector_sizes)
     sync_envs: int  # sub-envs of the native against SyncVectorEnv comparison
     sync_steps: int
@@ -72,9 +73,9 @@ class Sizes:
     ppo_shrink: dict[str, int] | None  # overrides of hyperparams/ppo.yml's n_envs, n_steps, ... (None: as trained)
 
 
-FULL = Sizes(10, 1000, 25, {1: 20000, 64: 5000, 1024: 1000}, (256, 1024, 4096, 16384, 65536), 1.5, 3,
+FULL = Sizes(10, 1000, 25, {1: 20000, 64: 5000, 1024: 1000}, (256, 1024, 4096, 16384, 65536), 2.0, 4, 4,
              (4096, 65536), 64, 100, 300, 3, 8, None)
-QUICK = Sizes(1, 20, 3, {1: 20, 64: 10, 1024: 10}, (4, 8, 16), 0.0, 2, (8, 16), 4, 5, 5, 1, 1,
+QUICK = Sizes(1, 20, 3, {1: 20, 64: 10, 1024: 10}, (4, 8, 16), 0.0, 2, 2, (8, 16), 4, 5, 5, 1, 1,
               {"n_envs": 4, "n_steps": 8, "batch_size": 16, "n_epochs": 1})
 TICKS_PER_BLOCK = 10  # the simulator advances a decision's ticks in one call, as the env does
 WARM_UP_STEPS = 20  # untimed steps first: numba kernels load (or compile) on their first call
@@ -227,8 +228,8 @@ def memory_row(run: bench_vector.VectorRun) -> Row:
 
 def vector_rows(sizes: Sizes, cartpole: float) -> list[Row]:
     """Rows of measurements 2 and 3."""
-    runs = bench_vector.measure_sizes(sizes.vector_sizes, sizes.reset_sizes, sizes.vector_seconds,
-                                      sizes.vector_min_steps)
+    runs = bench_vector.measure_sizes(sizes.vector_sizes, sizes.reset_sizes, False, sizes.vector_seconds,
+                                      sizes.vector_min_steps, sizes.vector_rounds)
     base = runs[0]
     rows = []
     for run in runs:
@@ -244,7 +245,7 @@ def vector_rows(sizes: Sizes, cartpole: float) -> list[Row]:
                         f"{base.n_envs} envs: {base.env_steps_per_second:,.0f} / CartPole-v1, one env: {cartpole:,.0f}",
                         f"{ratio:.2f}x / {run.env_steps_per_second / cartpole:.2f}x", target))
     rows += [memory_row(run) for run in runs]
-    with_info = bench_vector.measure(base.n_envs, True, False, False, sizes.vector_seconds, sizes.vector_min_steps)
+    [with_info] = bench_vector.measure_sizes((base.n_envs,), (), True, sizes.vector_seconds, sizes.vector_min_steps, 1)
     rows.append(Row(f"native vector env, {base.n_envs} envs, step_diagnostics=True [env-steps/s]",
                     f"{with_info.env_steps_per_second:,.0f}",
                     f"step_diagnostics=False: {base.env_steps_per_second:,.0f}",
@@ -327,7 +328,8 @@ def table(rows: list[Row], quick: bool) -> str:
         "",
         "- Single envs take turns over several rounds, random actions, resets included.",
         ("- The native vector env runs in this one process on one core (numba's kernels are single-threaded), "
-        "random actions; its stepping is timed within episodes (all sub-envs start together, so their episodes "
+        "random actions, the sizes taking turns over several rounds (all of them held at once); its stepping is "
+        "timed within episodes (all sub-envs start together, so their episodes "
         "end in the same step: the envs are reset, untimed, before that step; resets are timed on their own). "
         "Peak memory: tracemalloc's peak (NumPy's allocations included) while building, resetting and stepping; "
         "beside it, the growth of the process's peak resident memory (RSS), which stands in for it at a size whose "

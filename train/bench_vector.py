@@ -72,33 +72,45 @@ def make_native(n_envs: int, step_diagnostics: bool) -> gym.vector.VectorEnv:
                         step_diagnostics=step_diagnostics)
 
 
-def stepping_rate(envs: gym.vector.VectorEnv, since_reset: int, min_seconds: float, min_steps: int) -> float:
-    """Env-steps/s of ``envs`` under random actions, over at least min_steps steps and min_seconds of stepping.
+class Stepper:
+    """Times steps of one vector env under random actions, turn by turn, within episodes: before a step would
+    reach the episode limit, the env is reset (untimed) with the next seed."""
 
-    ``since_reset``: steps the envs took since their last reset. Before a step would reach the episode limit,
-    the envs are reset (untimed) with the next seed.
-    """
-    envs.action_space.seed(0)
-    actions = [envs.action_space.sample() for _ in range(ACTION_POOL)]
-    limit = int(envs.max_episode_steps)
-    seconds, steps, resets = 0.0, 0, 0
-    while steps < min_steps or seconds < min_seconds:
-        if since_reset >= limit - 1:
-            resets += 1
-            envs.reset(seed=resets)
-            since_reset = 0
-        start = time.perf_counter()
-        envs.step(actions[steps % ACTION_POOL])
-        seconds += time.perf_counter() - start
-        steps += 1
-        since_reset += 1
-    return steps * envs.num_envs / seconds
+    def __init__(self, envs: gym.vector.VectorEnv, since_reset: int) -> None:
+        self.envs = envs
+        envs.action_space.seed(0)
+        self.actions = [envs.action_space.sample() for _ in range(ACTION_POOL)]
+        self.limit = int(envs.max_episode_steps)
+        self.since_reset = since_reset  # steps since the last reset
+        self.resets = 0
+        self.steps = 0  # timed, over all turns
+        self.seconds = 0.0  # [s]
+
+    def turn(self, min_seconds: float, min_steps: int) -> None:
+        """Step at least min_steps times and for at least min_seconds more [s]."""
+        seconds, steps = 0.0, 0
+        while steps < min_steps or seconds < min_seconds:
+            if self.since_reset >= self.limit - 1:
+                self.resets += 1
+                self.envs.reset(seed=self.resets)
+                self.since_reset = 0
+            start = time.perf_counter()
+            self.envs.step(self.actions[self.steps % ACTION_POOL])
+            seconds += time.perf_counter() - start
+            steps += 1
+            self.steps += 1
+            self.since_reset += 1
+        self.seconds += seconds
+
+    @property
+    def env_steps_per_second(self) -> float:
+        """Sub-envs x timed steps per second of them [1/s]."""
+        return self.steps * self.envs.num_envs / self.seconds
 
 
-def measure(n_envs: int, step_diagnostics: bool, trace: bool, time_reset: bool, min_seconds: float,
-            min_steps: int) -> VectorRun:
-    """Peak memory of building, resetting and stepping the env (traced if ``trace``), then, untraced, the time of
-    one reset (if ``time_reset``) and the stepping rate."""
+def set_up(n_envs: int, step_diagnostics: bool, trace: bool, time_reset: bool) -> tuple[Stepper, VectorRun]:
+    """Build, reset and step the env TRACED_STEPS times (traced if ``trace``), then time one reset if
+    ``time_reset``; its stepper and its figures, the stepping rate still 0."""
     gc.collect()
     rss_before = restart_peak_rss()
     if trace:
@@ -121,22 +133,31 @@ def measure(n_envs: int, step_diagnostics: bool, trace: bool, time_reset: bool, 
         envs.reset(seed=0)
         reset_seconds = time.perf_counter() - start
         since_reset = 0
-    rate = stepping_rate(envs, since_reset, min_seconds, min_steps)
-    envs.close()
-    return VectorRun(n_envs, rate, set_up_seconds, traced, rss, reset_seconds)
+    return Stepper(envs, since_reset), VectorRun(n_envs, 0.0, set_up_seconds, traced, rss, reset_seconds)
 
 
-def measure_sizes(sizes: tuple[int, ...], reset_sizes: tuple[int, ...], min_seconds: float,
-                  min_steps: int) -> list[VectorRun]:
-    """``measure`` each size in turn (step_diagnostics=False), tracing while the traced set-up, extrapolated
-    linearly from the size before, stays within TRACE_BUDGET."""
-    runs: list[VectorRun] = []
+def measure_sizes(sizes: tuple[int, ...], reset_sizes: tuple[int, ...], step_diagnostics: bool, min_seconds: float,
+                  min_steps: int, rounds: int) -> list[VectorRun]:
+    """Set up every size in turn, tracing while the traced set-up, extrapolated linearly from the size before,
+    stays within TRACE_BUDGET; then time their stepping over ``rounds`` rounds, the sizes taking turns (so that a
+    slow spell of a shared machine hits all of them), min_seconds [s] and min_steps in all per size."""
+    if rounds < 1:
+        raise ValueError(f"rounds = {rounds}: must be >= 1")
+    steppers, runs = [], []
     for n in sizes:
         trace = not runs or (runs[-1].traced_mib is not None
                              and runs[-1].set_up_seconds * n / runs[-1].n_envs <= TRACE_BUDGET)
         print(f"bench: native vector env, {n} envs{'' if trace else ', not traced'}", file=sys.stderr, flush=True)
-        runs.append(measure(n, False, trace, n in reset_sizes, min_seconds, min_steps))
-    return runs
+        stepper, run = set_up(n, step_diagnostics, trace, n in reset_sizes)
+        steppers.append(stepper)
+        runs.append(run)
+    for _ in range(rounds):
+        for stepper in steppers:
+            stepper.turn(min_seconds / rounds, -(-min_steps // rounds))
+    for stepper in steppers:
+        stepper.envs.close()
+    return [dataclasses.replace(run, env_steps_per_second=stepper.env_steps_per_second)
+            for run, stepper in zip(runs, steppers)]
 
 
 def generators_seconds(n: int, seed: int = 0) -> float:

@@ -66,16 +66,27 @@ def test_bench_runs_quick(tmp_path, monkeypatch, capsys):
 def test_sizes_whose_traced_set_up_would_exceed_the_budget_are_not_traced(monkeypatch):
     calls = []
 
-    def fake_measure(n, step_diagnostics, trace, time_reset, min_seconds, min_steps):
+    class FakeStepper:
+        def __init__(self, n):
+            self.envs, self.env_steps_per_second = self, 1e5
+
+        def turn(self, min_seconds, min_steps):
+            pass
+
+        def close(self):
+            pass
+
+    def fake_set_up(n, step_diagnostics, trace, time_reset):
         calls.append((n, trace, time_reset))
         seconds = 1e-3 * n  # traced set-up: 1 ms per env
-        return bench_vector.VectorRun(n, 1e5, seconds, 0.1 * n if trace else None, 0.1 * n, None)
+        return FakeStepper(n), bench_vector.VectorRun(n, 0.0, seconds, 0.1 * n if trace else None, 0.1 * n, None)
 
-    monkeypatch.setattr(bench_vector, "measure", fake_measure)
+    monkeypatch.setattr(bench_vector, "set_up", fake_set_up)
     monkeypatch.setattr(bench_vector, "TRACE_BUDGET", 20.0)
-    runs = bench_vector.measure_sizes((1024, 4096, 16384, 65536), (4096,), 0.0, 1)
+    runs = bench_vector.measure_sizes((1024, 4096, 16384, 65536), (4096,), False, 0.0, 1, 2)
     # 4096: 4.1 s extrapolated, traced; 16384: 16.4 s, traced; 65536: 65.5 s > 20 s, not traced
     assert calls == [(1024, True, False), (4096, True, True), (16384, True, False), (65536, False, False)]
+    assert [run.env_steps_per_second for run in runs] == [1e5] * 4
     rows = [bench.memory_row(run) for run in runs]
     assert "tracemalloc" in rows[2].measure and "peak RSS growth" in rows[2].reference
     assert "not traced" in rows[3].measure and first_number(rows[3].value) == 0.1 * 1024
