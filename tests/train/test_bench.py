@@ -52,12 +52,8 @@ def test_bench_runs_quick(tmp_path, monkeypatch, capsys):
     measures = [row[0].removeprefix("| ") for row in rows]
     expected = expected_measures(bench.QUICK)
     assert len(measures) == len(expected), measures
-    lean_env = bench.single_env_without_diagnostics()
     for (measure, value, _, ratio, _), start in zip(rows, expected):
         assert measure.removeprefix("| ").startswith(start), (measure, start)
-        if value == bench.NO_KWARG:  # only while the single env takes no step_diagnostics
-            assert lean_env is None and "step_diagnostics=False" in measure, measure
-            continue
         for cell in (value, ratio) if ratio else (value,):
             number = first_number(cell)
             assert math.isfinite(number) and number > 0, (measure, cell)
