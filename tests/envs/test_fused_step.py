@@ -87,3 +87,54 @@ def test_staged_only_while_tracing() -> None:
     trace = env.task.start_trace()
     env.step(env.action_space.sample())
     assert trace.arrays().t.size == env.task.ticks_per_decision
+
+
+def test_single_env_fused_equals_staged_in_every_action_mode() -> None:
+    """The single env runs the same task: fused and staged agree over two episodes, pinned degradations included."""
+    from timegap_env.envs.env import TimeGapMonitorEnv
+
+    for mode in ("platoon", "per_vehicle", "relative"):
+        envs = {fused: TimeGapMonitorEnv({**SHORT, "action_mode": mode}) for fused in (True, False)}
+        envs[False].task.fused = False
+        envs[True].action_space.seed(1)
+        for episode, kind in enumerate(("packet_loss", "radar_bias")):
+            options = {"degradation": {"kind": kind, "size": 0.5, "followers": [2], "onset": 10.0}}
+            resets = {fused: env.reset(seed=episode, options=options) for fused, env in envs.items()}
+            same_bytes(resets[True][0], resets[False][0], f"{mode} reset")
+            done = False
+            while not done:
+                action = envs[True].action_space.sample()
+                outputs = {fused: env.step(action) for fused, env in envs.items()}
+                for part, (a, b) in enumerate(zip(outputs[True], outputs[False])):
+                    same_bytes(a, b, f"{mode} episode {episode} part {part}")
+                done = outputs[True][2] or outputs[True][3]
+
+
+def test_without_step_diagnostics_infos_hold_only_episode_summaries() -> None:
+    import gymnasium as gym
+
+    env = gym.make("TimeGapMonitor-v0", config={"episode_duration": 3.0}, step_diagnostics=False)
+    full = gym.make("TimeGapMonitor-v0", config={"episode_duration": 3.0})
+    assert env.reset(seed=2)[1] == {}
+    full.reset(seed=2)
+    for _ in range(3):
+        obs, reward, terminated, truncated, info = env.step(4)
+        want = full.step(4)
+        same_bytes(obs, want[0], "observation")
+        assert reward == want[1] and (terminated, truncated) == want[2:4]
+    assert truncated and sorted(info) == sorted(key for key in want[4] if key.startswith("episode_"))
+
+
+def test_the_vector_env_gives_the_ground_truth_without_step_diagnostics() -> None:
+    from timegap_env.envs.info import truth_of
+
+    options = {"degradation": {"kind": "gain", "size": 0.7, "followers": [1, 3]}}
+    lean = TimeGapMonitorVectorEnv(2, step_diagnostics=False)
+    full = TimeGapMonitorVectorEnv(2)
+    assert lean.reset(seed=5, options=options)[1] == {}
+    want = truth_of(full.reset(seed=5, options=options)[1])
+    got = lean.ground_truth()
+    assert got.keys() == want.keys()
+    for name in want:
+        np.testing.assert_array_equal(got[name], want[name], err_msg=name)
+    assert list(got["kind"][0]) == ["gain", "none", "gain", "none", "none"]
