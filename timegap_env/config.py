@@ -452,6 +452,11 @@ class ChartConfig(ConfigMixin):
         return int(round(self.exceedance_window / self.dt))
 
     @property
+    def settle_ticks(self) -> int:
+        """``settle_time`` in ticks [-]."""
+        return int(round(self.settle_time / self.dt))
+
+    @property
     def half_width(self) -> float:
         """L sigma_desired: from the centre line to either Shewhart limit [s]."""
         return self.limit_width * self.baseline_std

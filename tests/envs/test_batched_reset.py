@@ -235,20 +235,20 @@ def test_a_follower_hit_twice_is_refused():
         table.set_many(np.array([1, 1]), [(), ()])
 
 
-def reset_in_a_batch(original):
-    """``PlatoonTask.reset`` with its per-env loop replaced by the batched calls (the loop's draw and degrade do
-    nothing for that call): the change proposed for task.py."""
+def reset_env_by_env(original):
+    """``PlatoonTask.reset`` drawing and degrading one env after another (``Episodes.draw``,
+    ``MonitoredPlatoon.degrade``), as it did before its batched calls; the rest of the reset as it is."""
 
     def reset(task: PlatoonTask, mask: np.ndarray, rngs: list, options: dict | None) -> None:
-        envs = np.flatnonzero(mask)
         episodes, loop = task.episodes, task.loop
-        episodes.draw_many(envs, rngs, check_reset_options(options))
-        loop.degrade_many(envs, [episodes.degradations[env] for env in envs], episodes.packet_loss_keys[envs])
-        episodes.draw, loop.degrade = (lambda *args: None), (lambda *args: None)
+        for env in np.flatnonzero(mask):
+            episodes.draw(env, rngs[env], check_reset_options(options))
+            loop.degrade(env, episodes.degradations[env], episodes.packet_loss_keys[env])
+        episodes.draw_many, loop.degrade_many = (lambda *args: None), (lambda *args: None)
         try:
             original(task, mask, rngs, options)
         finally:
-            del episodes.draw, loop.degrade
+            del episodes.draw_many, loop.degrade_many
 
     return reset
 
@@ -282,9 +282,9 @@ def test_the_env_runs_the_same_after_a_batched_reset(monkeypatch):
         return out
 
     config = {"degradation": {"follower_probability": 0.6}, "random_initial_setting": True}
-    per_env = episode(TimeGapMonitorVectorEnv(num_envs=12, config=config))
-    monkeypatch.setattr(PlatoonTask, "reset", reset_in_a_batch(PlatoonTask.reset))
     batched = episode(TimeGapMonitorVectorEnv(num_envs=12, config=config))
+    monkeypatch.setattr(PlatoonTask, "reset", reset_env_by_env(PlatoonTask.reset))
+    per_env = episode(TimeGapMonitorVectorEnv(num_envs=12, config=config))
     assert_same(batched, per_env)
 
 

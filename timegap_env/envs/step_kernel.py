@@ -26,22 +26,24 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
-from timegap_env.config import EnvConfig
+from timegap_env.config import ACTION_MODES, CHART_KINDS, EnvConfig
 from timegap_env.envs.action import RELATIVE_STEPS
 from timegap_env.envs.observation import FollowerState, encode_env
 from timegap_env.envs.reward import (
     RewardConstants, RewardTerms, StepReadouts, StepTicks, env_readouts, env_reward_terms, env_weighted_sum,
 )
 from timegap_env.envs.totals import add_step_env
-from timegap_env.monitoring.charts import CHARTS, ChartMemory, ChartState, count_excursions_env
+from timegap_env.monitoring.charts import ChartMemory, ChartState, count_excursions_env
 from timegap_env.monitoring.loop import SAME_SETTING
 from timegap_env.monitoring.monitor import MonitorTicks, WindowMemory, update_env
 from timegap_env.monitoring.posterior import Moments
 from timegap_env.monitoring.sensors import Readings, measure_env
 from timegap_env.sim.platoon import Controller, LeaderTicks, PlatoonState, PlatoonTicks, advance_env
 
-ACTION_MODES = ("platoon", "per_vehicle", "relative")  # StepRules.action_mode indexes this
-CHART_KINDS = tuple(CHARTS)  # StepRules.chart_kind indexes this: shewhart, ewma, cusum
+# StepRules.action_mode and chart_kind as the kernel compares them (indices of the config's tuples)
+PLATOON, PER_VEHICLE, RELATIVE = (ACTION_MODES.index(mode) for mode in ("platoon", "per_vehicle", "relative"))
+EWMA, CUSUM = (CHART_KINDS.index(kind) for kind in ("ewma", "cusum"))  # the Shewhart chart charts the estimate
+
 
 
 class StepState(NamedTuple):
@@ -75,13 +77,13 @@ class StepState(NamedTuple):
 class StepRules(NamedTuple):
     """The config's constants of a step."""
 
-    action_mode: int  # index of ACTION_MODES
+    action_mode: int  # index of timegap_env.config.ACTION_MODES
     levels: np.ndarray  # the setting ladder [s]
     relative_steps: np.ndarray  # int64 levels moved by each relative action [-]
     v2v_enabled: bool  # PlatoonConfig.v2v: False keeps every follower in ACC
     ticks_per_step: int
     settle_ticks: int  # alarms wait this long after a change has ramped in [ticks]
-    chart_kind: int  # index of CHART_KINDS
+    chart_kind: int  # index of timegap_env.config.CHART_KINDS
     half_width: float  # the charted statistic's limits are centre -/+ this [s]
     ewma_lambda: float  # [-]
     baseline_std: float  # sigma_desired [s]
@@ -95,11 +97,11 @@ class StepRules(NamedTuple):
     def from_config(cls, config: EnvConfig, chart_half_width: float, reward: tuple, weights: np.ndarray,
                     scales: tuple) -> StepRules:
         """The rules of ``config``; ``chart_half_width`` [s] is the chart's (an EWMA's differs from the config's)."""
-        chart, dt = config.chart, config.platoon.dt
+        chart = config.chart
         return cls(
             action_mode=ACTION_MODES.index(config.action_mode), levels=np.asarray(config.setting_levels, dtype=float),
             relative_steps=np.asarray(RELATIVE_STEPS, dtype=np.int64), v2v_enabled=bool(config.platoon.v2v),
-            ticks_per_step=int(config.ticks_per_decision), settle_ticks=int(round(chart.settle_time / dt)),
+            ticks_per_step=int(config.ticks_per_decision), settle_ticks=chart.settle_ticks,
             chart_kind=CHART_KINDS.index(chart.kind), half_width=float(chart_half_width),
             ewma_lambda=float(chart.ewma_lambda), baseline_std=float(chart.baseline_std),
             cusum_k=float(chart.cusum_k), cusum_h=float(chart.cusum_h),
@@ -179,7 +181,7 @@ def _change_settings(platoon, controller, memory, chart, rules, action, changed,
     levels = rules.levels
     n_followers = platoon.setting.shape[1]
     level = 0
-    if rules.action_mode == 2:  # relative: from the ladder level nearest the platoon's largest setting
+    if rules.action_mode == RELATIVE:  # from the ladder level nearest the platoon's largest setting
         largest = platoon.setting[e, 0]
         for f in range(1, n_followers):
             largest = max(largest, platoon.setting[e, f])
@@ -188,9 +190,9 @@ def _change_settings(platoon, controller, memory, chart, rules, action, changed,
                 level = i
         level = min(max(level + rules.relative_steps[action[e, 0]], 0), levels.size - 1)
     for f in range(n_followers):
-        if rules.action_mode == 1:
+        if rules.action_mode == PER_VEHICLE:
             level = action[e, f]
-        elif rules.action_mode == 0:
+        elif rules.action_mode == PLATOON:
             level = action[e, 0]
         setting = levels[level]
         changed[e, f] = not abs(setting - platoon.setting[e, f]) <= SAME_SETTING
@@ -208,9 +210,9 @@ def _change_settings(platoon, controller, memory, chart, rules, action, changed,
         chart_memory.side[e, f], chart_memory.exceedance[e, f] = 0, False
         chart_memory.exceedances_in_window[e, f], chart_memory.run_length[e, f] = 0, 0
         chart_memory.restarted[e, f] = chart_tick[0]
-        if rules.chart_kind == 1:  # EWMA restarts at the centre line
+        if rules.chart_kind == EWMA:  # restarts at the centre line
             statistic[e, f, 0] = applied
-        elif rules.chart_kind == 2:  # CUSUM sums restart at 0
+        elif rules.chart_kind == CUSUM:  # its sums restart at 0
             statistic[e, f, 0] = statistic[e, f, 1] = 0.0
         ramp_ticks = math.ceil(abs(setting - applied) / controller.max_setting_change)
         chart_memory.hold_off[e, f] = int(ramp_ticks + rules.settle_ticks)
@@ -224,7 +226,7 @@ def _chart_sides(rules, estimates, centers, statistic, sides, e):  # noqa: ANN00
     for k in range(n_ticks):
         for f in range(n_followers):
             estimate, line = estimates[k, 0, f], centers[k, 0, f]
-            if rules.chart_kind == 2:  # CUSUM of the standardised deviation
+            if rules.chart_kind == CUSUM:  # of the standardised deviation
                 y = (estimate - line) / rules.baseline_std
                 upper = statistic[e, f, 0] = max(0.0, statistic[e, f, 0] + y - rules.cusum_k)
                 lower = statistic[e, f, 1] = max(0.0, statistic[e, f, 1] - y - rules.cusum_k)
@@ -233,10 +235,10 @@ def _chart_sides(rules, estimates, centers, statistic, sides, e):  # noqa: ANN00
                 sides[k, 0, f] = int(above) - int(below)
                 continue
             value = estimate
-            if rules.chart_kind == 1:  # EWMA of the estimate
+            if rules.chart_kind == EWMA:  # of the estimate
                 value = statistic[e, f, 0] = rules.ewma_lambda * estimate + (1.0 - rules.ewma_lambda) * statistic[e, f, 0]
             low, high = line - rules.half_width, line + rules.half_width
             sides[k, 0, f] = 1 if value > high else (-1 if value < low else 0)
 
 
-__all__ = ["ACTION_MODES", "CHART_KINDS", "StepRules", "StepState", "fused_step"]
+__all__ = ["StepRules", "StepState", "fused_step"]

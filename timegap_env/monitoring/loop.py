@@ -125,8 +125,7 @@ class MonitoredPlatoon:
             platoon.request_setting(setting, mask=changed)  # checks the settings
             self.monitor.recenter(setting, changed)
             self.chart.recenter(platoon.applied_setting, changed)
-            settle_ticks = round(self.chart.config.settle_time / platoon.config.dt)
-            self.chart.hold(platoon.ramp_ticks(setting) + settle_ticks, changed)
+            self.chart.hold(platoon.ramp_ticks(setting) + self.chart.config.settle_ticks, changed)
         return changed
 
     def tick(self, leader_speed: np.ndarray | float, leader_accel: np.ndarray | float) -> tuple[np.ndarray, ChartState]:
