@@ -138,3 +138,13 @@ def test_the_vector_env_gives_the_ground_truth_without_step_diagnostics() -> Non
     for name in want:
         np.testing.assert_array_equal(got[name], want[name], err_msg=name)
     assert list(got["kind"][0]) == ["gain", "none", "gain", "none", "none"]
+
+
+@pytest.mark.parametrize("value", ["no", 0, None])
+def test_step_diagnostics_must_be_a_bool(value: object) -> None:
+    import gymnasium as gym
+
+    with pytest.raises(ValueError, match="step_diagnostics"):
+        gym.make("TimeGapMonitor-v0", step_diagnostics=value)
+    with pytest.raises(ValueError, match="step_diagnostics"):
+        TimeGapMonitorVectorEnv(2, step_diagnostics=value)

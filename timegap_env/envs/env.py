@@ -11,7 +11,7 @@ import numpy as np
 
 from timegap_env.config import EnvConfig
 from timegap_env.envs.action import action_space
-from timegap_env.envs.info import EPISODE_PREFIX, REWARD_PREFIX, no_rewards, of_env, prefixed
+from timegap_env.envs.info import EPISODE_PREFIX, REWARD_PREFIX, no_rewards, of_env, prefixed, step_diagnostics_flag
 from timegap_env.envs.observation import observation_space
 from timegap_env.envs.rendering import DEFAULT_TIME_WINDOW
 from timegap_env.envs.task import PlatoonTask
@@ -134,7 +134,7 @@ class TimeGapMonitorEnv(gym.Env):
         self.action_space = action_space(self.config)
         self._renderer = None
         self._needs_reset = True  # step() before reset() or after the episode ended raises gymnasium's ResetNeeded
-        self.step_diagnostics = bool(step_diagnostics)
+        self.step_diagnostics = step_diagnostics_flag(step_diagnostics)
         self._action = np.zeros((1, 1), dtype=np.int64)  # a Discrete action, as the task takes it
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict]:

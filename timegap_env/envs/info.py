@@ -32,6 +32,14 @@ KIND_NAMES = np.array(KINDS, dtype=object)  # truth_kind -> the degradation's na
 REWARD_PREFIX, TRUTH_PREFIX, EPISODE_PREFIX = "reward_", "truth_", "episode_"
 
 
+def step_diagnostics_flag(value: object) -> bool:
+    """The envs' ``step_diagnostics`` argument (whether infos hold the per-step keys) checked: True or False,
+    else ``ValueError`` naming the value."""
+    if not isinstance(value, (bool, np.bool_)):
+        raise ValueError(f"step_diagnostics = {value!r}: must be True or False")
+    return bool(value)
+
+
 def prefixed(prefix: str, values: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
     """``values`` under ``prefix + name``."""
     return {prefix + name: value for name, value in values.items()}
@@ -83,4 +91,4 @@ def rewards_of(info: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
 
 
 __all__ = ["EPISODE_PREFIX", "KIND_NAMES", "REWARD_PREFIX", "TRUTH_PREFIX", "no_rewards", "of_env", "prefixed", "rewards_of",
-           "summary_of", "truth_of", "with_masks"]
+           "step_diagnostics_flag", "summary_of", "truth_of", "with_masks"]

@@ -20,7 +20,7 @@ from gymnasium.vector.utils import batch_space
 from timegap_env.config import EnvConfig
 from timegap_env.envs.action import action_space
 from timegap_env.envs.info import (
-    EPISODE_PREFIX, REWARD_PREFIX, TRUTH_PREFIX, no_rewards, prefixed, truth_of, with_masks,
+    EPISODE_PREFIX, REWARD_PREFIX, TRUTH_PREFIX, no_rewards, prefixed, step_diagnostics_flag, truth_of, with_masks,
 )
 from timegap_env.envs.observation import observation_space
 from timegap_env.envs.task import PlatoonTask
@@ -82,7 +82,7 @@ class TimeGapMonitorVectorEnv(VectorEnv):
         self.action_space = batch_space(self.single_action_space, self.num_envs)
         self._rngs = [seeding.np_random()[0] for _ in range(self.num_envs)]
         self._steps = np.zeros(self.num_envs, dtype=np.int64)
-        self.step_diagnostics = bool(step_diagnostics)
+        self.step_diagnostics = step_diagnostics_flag(step_diagnostics)
         self._was_reset = False  # step() before the first reset() raises gymnasium's ResetNeeded
         self._ended = np.zeros(self.num_envs, dtype=bool)  # episodes that ended and are not reset yet
 
