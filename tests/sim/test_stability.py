@@ -70,3 +70,19 @@ def test_simulator_agrees_with_the_analytic_check(setting, v2v):
     else:
         assert np.all(np.diff(peaks) > 0), peaks
         assert peaks[-1] > 1.1 * peaks[0]
+
+
+def test_a_setting_sweep_gives_the_transfer_function_bit_for_bit():
+    """SettingSweep computes the setting-free parts of G once; the gains equal G written out whole, in the same
+    order of operations, at every setting (smallest_stable_setting's bisection relies on it)."""
+    from timegap_env.sim.stability import FREQUENCY_GRID, SettingSweep
+
+    parameters = dict(k_s=0.2, k_v=0.7, k_a=0.0, k_f=1.0, lag=0.9, gain=0.7, delay=0.4, packet_loss=0.5, dt=0.1)
+    sweep = SettingSweep(**parameters)
+    s = 1j * FREQUENCY_GRID
+    held = (1.0 - 0.5) / (1.0 - 0.5 * np.exp(-0.1 * s))
+    numerator = 0.7 * (1.0 * s**2 * np.exp(-0.4 * s) * held + 0.7 * s + 0.2)
+    for setting in (0.6, 1.0, 1.37, 2.2):
+        denominator = 0.9 * s**3 + (1 - 0.7 * 0.0) * s**2 + 0.7 * (0.7 + 0.2 * setting) * s + 0.7 * 0.2
+        assert sweep.gains(setting).tobytes() == np.abs(numerator / denominator).tobytes()
+        assert sweep.report(setting) == string_stability(setting=setting, **parameters)

@@ -35,7 +35,7 @@ import numpy as np
 
 from timegap_env.config import DEGRADATION_KINDS, DegradationConfig, PlatoonConfig, SensorConfig
 from timegap_env.sim.platoon import Platoon, ZOHCoefficients
-from timegap_env.sim.stability import string_stability
+from timegap_env.sim.stability import SettingSweep
 
 KINDS = ("none", *DEGRADATION_KINDS)  # kind codes: the index in this tuple
 SIZED = {"lag": "factor on the lag T [-]", "gain": "gain K [-]", "v2v_latency": "added V2V delay [s]",
@@ -204,9 +204,11 @@ def smallest_stable_setting(lag: float, gain: float, k_s: float, k_v: float, k_a
     there). ``k_f = 0`` is ACC; ``delay`` is the V2V delay [s], ``packet_loss`` the chance [-] that a V2V message
     (one every ``dt`` [s]) is lost."""
 
+    sweep = SettingSweep(k_s=k_s, k_v=k_v, k_a=k_a, k_f=k_f, lag=lag, gain=gain, delay=delay, packet_loss=packet_loss,
+                         dt=dt)
+
     def stable(setting: float) -> bool:
-        report = string_stability(k_s=k_s, k_v=k_v, k_a=k_a, k_f=k_f, setting=setting, lag=lag, gain=gain, delay=delay,
-                                  packet_loss=packet_loss, dt=dt)
+        report = sweep.report(setting)
         return report.string_stable and report.locally_stable
 
     low, high = SETTING_SEARCH
