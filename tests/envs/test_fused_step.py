@@ -8,6 +8,8 @@ modes, the three charts, a monitor without a window and a platoon without V2V.
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
 import pytest
 
@@ -148,3 +150,70 @@ def test_step_diagnostics_must_be_a_bool(value: object) -> None:
         gym.make("TimeGapMonitor-v0", step_diagnostics=value)
     with pytest.raises(ValueError, match="step_diagnostics"):
         TimeGapMonitorVectorEnv(2, step_diagnostics=value)
+
+
+@pytest.mark.slow
+def test_an_edit_to_a_stage_function_recompiles_the_fused_step(tmp_path):
+    """The fused step inlines functions of other files; numba's cache checks only the kernel's own file, so the
+    step's cache also follows those files (a copy of the package is edited, never the repository's)."""
+    import shutil
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    import timegap_env
+
+    package = tmp_path / "src" / "timegap_env"
+    shutil.copytree(Path(timegap_env.__file__).parent, package, ignore=shutil.ignore_patterns("__pycache__"))
+    code = ("import gymnasium as gym, timegap_env\n"
+            "from timegap_env.envs.step_kernel import fused_step\n"
+            "env = gym.make('TimeGapMonitor-v0', step_diagnostics=False); env.reset(seed=0); env.step(0)\n"
+            "print(sum(fused_step.stats.cache_hits.values()), sum(fused_step.stats.cache_misses.values()))")
+    environment = {**os.environ, "PYTHONPATH": str(tmp_path / "src"), "NUMBA_CACHE_DIR": str(tmp_path / "cache")}
+
+    def hits_and_misses() -> list[int]:
+        out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, env=environment,
+                             cwd=tmp_path)  # not the repository's, which python -c would import first
+        return [int(word) for word in out.stdout.split()]
+
+    assert hits_and_misses() == [0, 1]  # compiled and cached
+    assert hits_and_misses() == [1, 0]  # loaded from the cache
+    platoon = package / "sim" / "platoon.py"
+    platoon.write_text(platoon.read_text() + "\n# an edit\n")
+    assert hits_and_misses() == [0, 1]  # compiled again
+
+
+def test_without_v2v_the_followers_stay_in_acc() -> None:
+    """PlatoonConfig.v2v = False keeps every follower in ACC: the flag, the observation and the physics (the
+    degradations' V2V schedule once overrode it)."""
+    import gymnasium as gym
+
+    from timegap_env.envs.observation import FEATURES
+
+    acc = gym.make("TimeGapMonitor-v0", config={"platoon": {"v2v": False}})
+    no_feed_forward = gym.make("TimeGapMonitor-v0", config={"platoon": {"v2v": False, "k_f": 0.0}})
+    for env in (acc, no_feed_forward):
+        env.reset(seed=4, options={"degradation": None})
+    for _ in range(20):
+        obs, _, _, _, info = acc.step(4)
+        assert not info["v2v"].any() and not obs.reshape(-1, len(FEATURES))[:, FEATURES.index("v2v")].any()
+        same_bytes(info["actual_time_gap"], no_feed_forward.step(4)[4]["actual_time_gap"], "ACC is k_f = 0")
+
+
+def test_an_unchecked_ladder_index_raises_instead_of_reading_past_the_ladder() -> None:
+    env = TimeGapMonitorVectorEnv(2)
+    env.reset(seed=0)
+    with pytest.raises(IndexError, match="ladder index"):
+        env.task.run_step(np.array([[40], [0]]))
+
+
+def test_actions_of_any_memory_layout_share_one_compiled_step() -> None:
+    from timegap_env.envs.step_kernel import fused_step
+
+    env = TimeGapMonitorVectorEnv(4, config={"action_mode": "per_vehicle"})
+    env.reset(seed=0)
+    env.step(np.zeros((4, 5), dtype=np.int64))
+    compiled = len(fused_step.signatures)
+    env.step(np.asfortranarray(np.ones((4, 5), dtype=np.int32)))
+    env.step(np.ones((8, 5), dtype=np.int64)[::2])
+    assert len(fused_step.signatures) == compiled

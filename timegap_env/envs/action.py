@@ -41,7 +41,7 @@ class SettingLadder:
             raise ValueError(f"action = {action!r}: expected integer actions of shape {self.shape}")
         if ((action < 0) | (action >= self.n_actions)).any():
             raise ValueError(f"action = {action!r}: every entry must be in [0, {self.n_actions - 1}]")
-        return action.astype(np.int64, copy=False).reshape(self.shape[0], -1)
+        return np.ascontiguousarray(action, dtype=np.int64).reshape(self.shape[0], -1)  # one layout: one compile
 
     def settings(self, action: np.ndarray, current: np.ndarray) -> np.ndarray:
         """Settings [s] (n_envs, n_followers) for an action: ladder indices, (n_envs,) platoon or (n_envs, N) per

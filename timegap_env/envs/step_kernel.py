@@ -20,7 +20,10 @@ reads or writes, the objects' own) and :class:`StepRules` (the config's constant
 
 from __future__ import annotations
 
+import hashlib
 import math
+import sys
+from pathlib import Path
 from typing import NamedTuple
 
 import numba
@@ -40,14 +43,16 @@ from timegap_env.monitoring.posterior import Moments
 from timegap_env.monitoring.sensors import Readings, measure_env
 from timegap_env.sim.platoon import Controller, LeaderTicks, PlatoonState, PlatoonTicks, advance_env
 
-# StepRules.action_mode and chart_kind as the kernel compares them (indices of the config's tuples)
-PLATOON, PER_VEHICLE, RELATIVE = (ACTION_MODES.index(mode) for mode in ("platoon", "per_vehicle", "relative"))
-EWMA, CUSUM = (CHART_KINDS.index(kind) for kind in ("ewma", "cusum"))  # the Shewhart chart charts the estimate
+# The action modes and charts the kernel handles, and StepRules.action_mode and chart_kind as it compares them
+# (indices of the config's tuples)
+FUSED_ACTION_MODES, FUSED_CHARTS = ("platoon", "per_vehicle", "relative"), ("shewhart", "ewma", "cusum")
+PLATOON, PER_VEHICLE, RELATIVE = (ACTION_MODES.index(mode) for mode in FUSED_ACTION_MODES)
+SHEWHART, EWMA, CUSUM = (CHART_KINDS.index(kind) for kind in FUSED_CHARTS)
 
 
 
 class StepState(NamedTuple):
-    """Every array the step reads or writes, the objects' own (in place); env arrays lead with n_envs."""
+    """Every array the step reads or writes, the objects' own (in place); shapes as noted."""
 
     platoon: tuple  # PlatoonState
     zoh: tuple  # ZOHCoefficients, nominal
@@ -96,8 +101,12 @@ class StepRules(NamedTuple):
     @classmethod
     def from_config(cls, config: EnvConfig, chart_half_width: float, reward: tuple, weights: np.ndarray,
                     scales: tuple) -> StepRules:
-        """The rules of ``config``; ``chart_half_width`` [s] is the chart's (an EWMA's differs from the config's)."""
+        """The rules of ``config``; ``chart_half_width`` [s] is the chart's (an EWMA's differs from the config's).
+        ``ValueError`` for an action mode or chart the fused step does not know (a new one must be added there)."""
         chart = config.chart
+        if config.action_mode not in FUSED_ACTION_MODES or chart.kind not in FUSED_CHARTS:
+            raise ValueError(f"action_mode = {config.action_mode!r}, chart.kind = {chart.kind!r}: the fused step "
+                             f"(timegap_env.envs.step_kernel) handles {FUSED_ACTION_MODES} and {FUSED_CHARTS} only")
         return cls(
             action_mode=ACTION_MODES.index(config.action_mode), levels=np.asarray(config.setting_levels, dtype=float),
             relative_steps=np.asarray(RELATIVE_STEPS, dtype=np.int64), v2v_enabled=bool(config.platoon.v2v),
@@ -194,6 +203,8 @@ def _change_settings(platoon, controller, memory, chart, rules, action, changed,
             level = action[e, f]
         elif rules.action_mode == PLATOON:
             level = action[e, 0]
+        if not 0 <= level < levels.size:  # numba does not check bounds: an unchecked action must not read past
+            raise IndexError("fused_step: a ladder index out of range (check actions with SettingLadder.check)")
         setting = levels[level]
         changed[e, f] = not abs(setting - platoon.setting[e, f]) <= SAME_SETTING
         if not changed[e, f]:
@@ -234,11 +245,35 @@ def _chart_sides(rules, estimates, centers, statistic, sides, e):  # noqa: ANN00
                 below = lower > rules.cusum_h and not above
                 sides[k, 0, f] = int(above) - int(below)
                 continue
-            value = estimate
-            if rules.chart_kind == EWMA:  # of the estimate
+            if rules.chart_kind == SHEWHART:  # of the estimate itself
+                value = estimate
+            else:  # EWMA of the estimate
                 value = statistic[e, f, 0] = rules.ewma_lambda * estimate + (1.0 - rules.ewma_lambda) * statistic[e, f, 0]
             low, high = line - rules.half_width, line + rules.half_width
             sides[k, 0, f] = 1 if value > high else (-1 if value < low else 0)
 
+
+def _cache_follows(dispatcher: numba.core.registry.CPUDispatcher, modules: tuple[str, ...]) -> None:
+    """Make ``dispatcher``'s numba cache go stale when one of ``modules`` (imported, by name) changes, as when its
+    own file does.
+
+    numba reloads a cached kernel while the kernel's own file is unchanged; the fused step carries compiled
+    code of other files (the stage functions it inlines and calls), so an edit there alone would leave it
+    running the old code. The cache's source stamp becomes its own file's and a hash of those files' contents.
+    numba 0.68 keeps it in the dispatcher's ``_cache._cache_file._source_stamp``;
+    should that move, the kernel's own file alone decides, as numba does.
+    """
+    cache_file = getattr(getattr(dispatcher, "_cache", None), "_cache_file", None)
+    if cache_file is None or not hasattr(cache_file, "_source_stamp"):
+        return
+    digest = hashlib.sha256()
+    for module in modules:
+        digest.update(Path(sys.modules[module].__file__).read_bytes())
+    cache_file._source_stamp = (cache_file._source_stamp, digest.hexdigest())
+
+
+_cache_follows(fused_step, tuple(f"timegap_env.{module}" for module in (
+    "sim.counter_noise", "sim.platoon", "monitoring.sensors", "monitoring.monitor", "monitoring.posterior",
+    "monitoring.charts", "envs.reward", "envs.totals", "envs.observation")))
 
 __all__ = ["StepRules", "StepState", "fused_step"]

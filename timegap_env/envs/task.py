@@ -109,10 +109,8 @@ class PlatoonTask:
                                   terminated=np.zeros(n_envs, dtype=bool), truncated=np.zeros(n_envs, dtype=bool))
         self._changed = np.zeros((n_envs, self.n_followers), dtype=bool)
         self._observation = np.zeros((n_envs, self.n_followers, len(FEATURES)), dtype=np.float32)
-        chart = self.loop.chart
-        self._rules = tuple(StepRules.from_config(config, getattr(chart, "half_width", config.chart.half_width),
-                                                  tuple(self._reward_constants), np.array(self._weights),
-                                                  tuple(self._scales)))
+        self._rules = tuple(StepRules.from_config(config, self.loop.chart.half_width, tuple(self._reward_constants),
+                                                  np.array(self._weights), tuple(self._scales)))
         self._state: tuple | None = None  # the fused step's StepState, built at each reset
 
     # ------------------------------------------------------------------ reset
@@ -152,8 +150,8 @@ class PlatoonTask:
             episode_ticks=episodes.episode_ticks, noise=noise, sensor_faults=sensor_faults,
             monitor=loop.monitor.kernel_args, chart=loop.chart.kernel_args, readouts=tuple(self._readouts),
             previous_accel=self._previous_accel, envelope=self._accel_envelope, totals=tuple(self.totals),
-            changed=self._changed, term_rows=result.term_rows, terms=tuple(result.term_rows), reward=result.reward, terminated=result.terminated,
-            truncated=result.truncated, observation=self._observation,
+            changed=self._changed, term_rows=result.term_rows, terms=tuple(result.term_rows), reward=result.reward,
+            terminated=result.terminated, truncated=result.truncated, observation=self._observation,
         ))
 
     def start_trace(self) -> Trace:
@@ -167,7 +165,8 @@ class PlatoonTask:
         return self.run_step(self.ladder.check(action))
 
     def run_step(self, action: np.ndarray) -> StepResult:
-        """:meth:`step` for an action already checked, as :meth:`SettingLadder.check` returns it."""
+        """:meth:`step` for an action already checked, as :meth:`SettingLadder.check` returns it (the fused step
+        raises ``IndexError`` for a ladder index out of range, without naming it)."""
         if self._state is None:
             raise RuntimeError("PlatoonTask.step() before reset(): reset every env first")
         if self.fused and self.trace is None:

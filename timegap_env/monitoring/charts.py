@@ -115,6 +115,12 @@ class ControlChart:
     )
     run_length = property(lambda self: self._memory.run_length, doc="Ticks since the last alarm or (re)start.")
     hold_off = property(lambda self: self._memory.hold_off, doc="Ticks left in which alarms are held off.")
+    @property
+    def half_width(self) -> float:
+        """Distance from the centre line to either limit of the charted statistic [s]: L sigma_desired (the
+        EWMA chart's own; the CUSUM chart holds its sums against ``cusum_h`` instead)."""
+        return self.config.half_width
+
     kernel_args = property(lambda self: (self._memory_args, self.center, self.statistic, self._tick),
                            doc="(memory, center, statistic, tick): the chart's own arrays, as a fused step takes them.")
 
@@ -215,15 +221,15 @@ class ShewhartChart(ControlChart):
     @property
     def lcl(self) -> np.ndarray:
         """Lower control limit (n_envs, n_vehicles) [s]."""
-        return self.center - self.config.half_width
+        return self.center - self.half_width
 
     @property
     def ucl(self) -> np.ndarray:
         """Upper control limit (n_envs, n_vehicles) [s]."""
-        return self.center + self.config.half_width
+        return self.center + self.half_width
 
     def _sides(self, estimates: np.ndarray, centers: np.ndarray) -> np.ndarray:
-        half_width = self.config.half_width
+        half_width = self.half_width
         return _outside(estimates, centers - half_width, centers + half_width)
 
     def _restart(self, mask: np.ndarray) -> None:
