@@ -200,11 +200,11 @@ def test_without_v2v_the_followers_stay_in_acc() -> None:
         same_bytes(info["actual_time_gap"], no_feed_forward.step(4)[4]["actual_time_gap"], "ACC is k_f = 0")
 
 
-def test_an_unchecked_ladder_index_raises_instead_of_reading_past_the_ladder() -> None:
+def test_the_task_checks_actions_before_the_kernel_sees_them() -> None:
     env = TimeGapMonitorVectorEnv(2)
     env.reset(seed=0)
-    with pytest.raises(IndexError, match="ladder index"):
-        env.task.run_step(np.array([[40], [0]]))
+    with pytest.raises(ValueError, match="every entry must be in"):
+        env.task.step(np.array([40, 0]))
 
 
 def test_actions_of_any_memory_layout_share_one_compiled_step() -> None:

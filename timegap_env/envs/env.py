@@ -156,7 +156,7 @@ class TimeGapMonitorEnv(gym.Env):
         if self._needs_reset:
             raise ResetNeeded("TimeGapMonitorEnv.step() called before reset() or after the episode ended "
                               "(terminated or truncated): call reset() first")
-        result = self.task.run_step(self._checked(action))
+        result = self.task._run_step(self._checked(action))
         info = {**self._info(), **of_env(prefixed(REWARD_PREFIX, result.terms), 0)} if self.step_diagnostics else {}
         terminated, truncated = bool(result.terminated[0]), bool(result.truncated[0])
         if terminated or truncated:

@@ -121,8 +121,9 @@ class StepRules(NamedTuple):
 @numba.njit(cache=True, error_model="numpy")
 def fused_step(state, rules, action):  # noqa: ANN001, ANN201
     """One decision step of every env: ``action`` (n_envs, 1) ladder indices or relative steps, or (n_envs,
-    n_followers) indices per follower, int64; ``state`` (:class:`StepState`) is updated in place under
-    ``rules`` (:class:`StepRules`)."""
+    n_followers) indices per follower, int64, checked by :meth:`~timegap_env.envs.action.SettingLadder.check`
+    (numba checks no bounds; a raise here would cost seconds of compilation); ``state`` (:class:`StepState`) is
+    updated in place under ``rules`` (:class:`StepRules`)."""
     state, rules = StepState(*state), StepRules(*rules)
     platoon = PlatoonState(*state.platoon)
     n_envs, n_followers = platoon.setting.shape
@@ -203,8 +204,6 @@ def _change_settings(platoon, controller, memory, chart, rules, action, changed,
             level = action[e, f]
         elif rules.action_mode == PLATOON:
             level = action[e, 0]
-        if not 0 <= level < levels.size:  # numba does not check bounds: an unchecked action must not read past
-            raise IndexError("fused_step: a ladder index out of range (check actions with SettingLadder.check)")
         setting = levels[level]
         changed[e, f] = not abs(setting - platoon.setting[e, f]) <= SAME_SETTING
         if not changed[e, f]:

@@ -162,11 +162,11 @@ class PlatoonTask:
     # ------------------------------------------------------------------ step
     def step(self, action: np.ndarray) -> StepResult:
         """Apply the action (checked against the action space), run one decision interval of ticks, and score it."""
-        return self.run_step(self.ladder.check(action))
+        return self._run_step(self.ladder.check(action))
 
-    def run_step(self, action: np.ndarray) -> StepResult:
-        """:meth:`step` for an action already checked, as :meth:`SettingLadder.check` returns it (the fused step
-        raises ``IndexError`` for a ladder index out of range, without naming it)."""
+    def _run_step(self, action: np.ndarray) -> StepResult:
+        """:meth:`step` for an action that :meth:`SettingLadder.check` returned (the single env checks its own; the
+        fused step checks nothing)."""
         if self._state is None:
             raise RuntimeError("PlatoonTask.step() before reset(): reset every env first")
         if self.fused and self.trace is None:
@@ -177,7 +177,7 @@ class PlatoonTask:
         return self._result
 
     def _staged_step(self, action: np.ndarray) -> None:
-        """:meth:`run_step`, stage by stage through the objects' methods."""
+        """:meth:`_run_step`, stage by stage through the objects' methods."""
         cfg, loop, platoon = self.config, self.loop, self.loop.platoon
         changed = loop.change_setting(self.ladder.settings(action.reshape(self.ladder.shape), platoon.setting))
         ticks = loop.ticks + np.arange(self.ticks_per_decision)[:, None]  # (n_ticks, n_envs), before each tick
