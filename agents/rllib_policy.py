@@ -100,7 +100,7 @@ class RLlibPolicy:
         deterministic: bool = True,
     ) -> tuple[np.ndarray, Any]:
         """The module's actions for ``observation``; ``state`` is passed back unchanged (the module is
-        feed-forward) and ``episode_start`` is not needed. Not deterministic: drawn from torch's generator."""
+        feed-forward) and ``episode_start`` is not needed. ``deterministic=False`` samples from torch's generator."""
         import torch
         from ray.rllib.core.columns import Columns
 
