@@ -6,7 +6,8 @@ rates. The targets are issue 16's.
 
 1. single env steps/s of ``TimeGapMonitor-v0``, with its full per-step info and with
    ``step_diagnostics=False``, against gymnasium's ``CartPole-v1`` and highway-env's ``highway-fast-v0``,
-   the envs taking turns over several rounds;
+   the envs taking turns over several rounds; then where its step goes (:mod:`train.bench_single`): a fused
+   step's call, numba's unpacking of its arguments, and its arithmetic per env-step;
 2. the native vector env (``step_diagnostics=False``) from 256 to 65,536 envs on one core: env-steps/s
    against the 256-env figure and CartPole-v1's steps/s, peak memory per env (tracemalloc), 256 envs with
    the per-step diagnostics on, and 64 envs against a ``SyncVectorEnv`` of single envs;
@@ -37,7 +38,7 @@ import numpy as np
 import timegap_env
 from timegap_env.config import MonitorConfig, PlatoonConfig
 from timegap_env.sim import Platoon
-from train import bench_cold, bench_ppo, bench_vector
+from train import bench_cold, bench_ppo, bench_single, bench_vector
 from train.bench_monitor import bench as bench_monitor
 
 TARGET_VS_HIGHWAY = 100.0  # single env steps/s over highway-fast-v0's [-]
@@ -56,6 +57,7 @@ class Sizes:
     """How long each measurement runs."""
 
     rounds: int  # single-env measurements alternate between the envs this many times
+    split_calls: int  # fused-step calls timed for the single env's split (per timing)
     env_steps: int  # steps of TimeGapMonitor-v0 and CartPole-v1 per round
     highway_steps: int  # steps of highway-fast-v0 per round (it is about 100x slower)
     ticks: dict[int, int]  # simulator ticks timed per batch size, in blocks of TICKS_PER_BLOCK
@@ -72,9 +74,9 @@ class Sizes:
     ppo_shrink: dict[str, int] | None  # overrides of hyperparams/ppo.yml's n_envs, n_steps, ... (None: as trained)
 
 
-FULL = Sizes(10, 1000, 25, {1: 20000, 64: 5000, 1024: 1000}, (256, 1024, 4096, 16384, 65536), 2.0, 4, 4,
+FULL = Sizes(10, 20000, 1000, 25, {1: 20000, 64: 5000, 1024: 1000}, (256, 1024, 4096, 16384, 65536), 2.0, 4, 4,
              (4096, 65536), 64, 100, 300, 3, 8, None)
-QUICK = Sizes(1, 20, 3, {1: 20, 64: 10, 1024: 10}, (4, 8, 16), 0.0, 2, 2, (8, 16), 4, 5, 5, 1, 1,
+QUICK = Sizes(1, 20, 20, 3, {1: 20, 64: 10, 1024: 10}, (4, 8, 16), 0.0, 2, 2, (8, 16), 4, 5, 5, 1, 1,
               {"n_envs": 4, "n_steps": 8, "batch_size": 16, "n_epochs": 1})
 TICKS_PER_BLOCK = 10  # the simulator advances a decision's ticks in one call, as the env does
 WARM_UP_STEPS = 20  # untimed steps first: numba kernels load (or compile) on their first call
@@ -195,6 +197,19 @@ def single_env_rows(sizes: Sizes) -> tuple[list[Row], float]:
     for env, _ in envs.values():
         env.close()
     return rows, cartpole
+
+
+def single_env_split_rows(sizes: Sizes, cartpole: float) -> list[Row]:
+    """Where a single env's step goes (:mod:`train.bench_single`), against CartPole-v1's whole step."""
+    split = bench_single.measure(sizes.split_calls)
+    step = f"CartPole-v1 step: {1e6 / cartpole:.2f}"
+    return [
+        Row("one env: a fused_step call [µs]", f"{split.call:.2f}", step, f"{split.call * cartpole / 1e6:.2f}x"),
+        Row("one env: of that call, numba unpacking the state arrays (a kernel that only unpacks them) [µs]",
+            f"{split.unpacking:.2f}", f"the call: {split.call:.2f}", f"{split.unpacking / split.call:.2f}x"),
+        Row(f"fused_step's arithmetic per env-step, {bench_single.ARITHMETIC_ENVS} envs in one call [µs]",
+            f"{split.arithmetic:.2f}", step, f"{split.arithmetic * cartpole / 1e6:.2f}x"),
+    ]
 
 
 def memory_row(run: bench_vector.VectorRun) -> Row:
@@ -343,6 +358,7 @@ def main() -> None:
 
     say("single envs")
     rows, cartpole = single_env_rows(sizes)
+    rows += single_env_split_rows(sizes, cartpole)
     rows += vector_rows(sizes, cartpole)
     say("cold start (child processes)")
     rows += cold_start_rows(sizes)

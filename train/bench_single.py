@@ -1,0 +1,62 @@
+"""Where a single env's step goes: the fused kernel's call, the part of it numba spends unpacking its arguments,
+and its arithmetic per env-step at 256 envs, in microseconds, all measured in this process (``make bench``).
+
+The unpacking is timed with a kernel that takes the same arguments and only reads one value: what numba does to
+turn the ~100 state arrays into native arrays at every call, whatever the kernel then computes.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from collections.abc import Callable
+
+import numba
+import numpy as np
+
+from timegap_env.envs.step_kernel import StepState, fused_step
+from timegap_env.envs.vector_env import TimeGapMonitorVectorEnv
+
+
+@dataclasses.dataclass(frozen=True)
+class SingleEnvSplit:
+    """Microseconds of a fused step's parts."""
+
+    call: float  # one call of fused_step for one env [µs]
+    unpacking: float  # one call of a kernel that only unpacks the same arguments [µs]
+    arithmetic: float  # fused_step per env-step at ARITHMETIC_ENVS envs, where the call's cost is spread thin [µs]
+
+
+ARITHMETIC_ENVS = 256
+
+
+@numba.njit(cache=True)
+def _unpack_only(state, rules, action):  # noqa: ANN001, ANN202
+    """Reads one value of what fused_step takes; its cost is numba's unpacking of the arguments."""
+    return StepState(*state).reward[0]
+
+
+def microseconds(call: Callable[[], object], calls: int) -> float:
+    """The fastest of five timings of ``calls`` calls, per call [µs]."""
+    call()  # loads (or compiles) the kernel
+    best = np.inf
+    for _ in range(5):
+        start = time.perf_counter()
+        for _ in range(calls):
+            call()
+        best = min(best, (time.perf_counter() - start) / calls)
+    return best * 1e6
+
+
+def measure(calls: int) -> SingleEnvSplit:
+    """The split, each timing ``calls`` calls (a few for 256 envs)."""
+    times = {}
+    for n_envs in (1, ARITHMETIC_ENVS):
+        env = TimeGapMonitorVectorEnv(n_envs, step_diagnostics=False)
+        env.reset(seed=0)
+        task = env.task
+        action = task.ladder.check(np.full(task.ladder.shape, 5))
+        times[n_envs] = microseconds(lambda: fused_step(task._state, task._rules, action), max(calls // n_envs, 2))
+        if n_envs == 1:
+            unpacking = microseconds(lambda: _unpack_only(task._state, task._rules, action), calls)
+    return SingleEnvSplit(call=times[1], unpacking=unpacking, arithmetic=times[ARITHMETIC_ENVS] / ARITHMETIC_ENVS)
