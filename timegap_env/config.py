@@ -65,8 +65,11 @@ def _is_integer(value: Any) -> bool:
 
 
 def _is_finite(value: Any) -> bool:
-    """A real number that is not NaN or infinite (an integer of any size is finite)."""
-    return _is_integer(value) or math.isfinite(value)
+    """A real number that is not NaN or infinite and fits a float (an integer beyond 1.8e308 does not)."""
+    try:
+        return math.isfinite(float(value))
+    except OverflowError:
+        return False
 
 
 def _items(value: Any) -> tuple[Any, ...] | None:
@@ -74,6 +77,14 @@ def _items(value: Any) -> tuple[Any, ...] | None:
     if isinstance(value, np.ndarray):
         value = value.tolist()
     return tuple(value) if isinstance(value, (tuple, list)) else None
+
+
+def shown(value: Any, limit: int = 200) -> str:
+    """``repr(value)`` for an error message, at most ``limit`` characters (an integer too long to print by its bits)."""
+    if _is_integer(value) and abs(int(value)) >= 10**limit:
+        return f"<an integer of {int(value).bit_length()} bits>"
+    text = repr(value)
+    return text if len(text) <= limit else f"{text[: limit - 3]}..."
 
 
 def _interval(low: float, high: float, open_low: bool = False, open_high: bool = False) -> str:
@@ -93,7 +104,7 @@ class ConfigMixin:
         """Copy of this config with ``overrides`` applied; unknown keys raise ``ValueError``."""
         name = type(self).__name__
         if overrides is not None and not isinstance(overrides, Mapping):
-            raise ValueError(f"{name} overrides = {overrides!r}: must be a dict of {name} fields")
+            raise ValueError(f"{name} overrides = {shown(overrides)}: must be a dict of {name} fields")
         overrides = dict(overrides or {})
         known = {f.name for f in dataclasses.fields(self)}  # type: ignore[arg-type]
         unknown = sorted(set(overrides) - known, key=repr)
@@ -102,7 +113,7 @@ class ConfigMixin:
         return dataclasses.replace(self, **overrides)  # type: ignore[type-var]
 
     def _fail(self, field: str, value: Any, rule: str) -> None:
-        raise ValueError(f"{type(self).__name__}.{field} = {value!r}: {rule}")
+        raise ValueError(f"{type(self).__name__}.{field} = {shown(value)}: {rule}")
 
     def _number(self, field: str, low: float, high: float, *, open_low: bool = False, open_high: bool = False,
                 integer: bool = False) -> float:
@@ -114,11 +125,13 @@ class ConfigMixin:
             self._fail(field, value, "must be finite")
         if not _within(value, low, high, open_low, open_high):
             self._fail(field, value, f"must be in {_interval(low, high, open_low, open_high)}")
+        object.__setattr__(self, field, int(value) if integer else float(value))  # Python's, whatever was passed
         return float(value)
 
     def _flag(self, field: str) -> None:
         if not isinstance(getattr(self, field), (bool, np.bool_)):
             self._fail(field, getattr(self, field), "must be True or False")
+        object.__setattr__(self, field, bool(getattr(self, field)))
 
     def _choice(self, field: str, options: tuple[str, ...]) -> None:
         value = getattr(self, field)
@@ -141,6 +154,7 @@ class ConfigMixin:
         if pair[0] > pair[1] or (strict and pair[0] == pair[1]):
             self._fail(field, value, "must satisfy low < high (the band is reversed or empty)" if strict
                        else "must satisfy low <= high")
+        object.__setattr__(self, field, tuple(int(end) if integer else float(end) for end in pair))
         return float(pair[0]), float(pair[1])
 
     def _weights(self, field: str, what: str, known: tuple[str, ...] | None = None) -> None:
@@ -156,6 +170,7 @@ class ConfigMixin:
         weights = list(value.values())
         if not all(_is_real(w) and _is_finite(w) and 0 <= w <= MAX_WEIGHT for w in weights) or sum(weights) <= 0:
             self._fail(field, value, f"weights must be finite numbers in [0, {MAX_WEIGHT:g}], not all 0")
+        object.__setattr__(self, field, {key: float(weight) for key, weight in value.items()})
 
     def _ticks(self, field: str, dt: float, max_ticks: int, dt_name: str = "dt") -> int:
         """The field's value [s] in ticks of ``dt`` [s], checked: a whole number of ticks, 1 to ``max_ticks``."""
@@ -213,6 +228,8 @@ class PlatoonConfig(ConfigMixin):
                 self._fail(field, getattr(self, field), f"must be a multiple of dt = {self.dt}")
         for field in ("actuation_lag", "actuation_gain"):
             self.per_follower(field)
+            raw = getattr(self, field)
+            object.__setattr__(self, field, float(raw) if _is_real(raw) else tuple(float(v) for v in _items(raw)))
 
     @property
     def v2v_delay_ticks(self) -> int:
@@ -230,9 +247,9 @@ class PlatoonConfig(ConfigMixin):
         values = (raw,) if _is_real(raw) else _items(raw)
         if values is None or len(values) not in (1, self.n_followers) or not all(_is_real(v) for v in values):
             self._fail(field, raw, f"must be one number or {self.n_followers} numbers (one per follower)")
-        array = np.asarray(values, dtype=float)
-        if not np.all(np.isfinite(array)) or np.any(array <= 0) or np.any(array > 10.0):
+        if not all(_is_finite(v) and 0 < v <= 10.0 for v in values):
             self._fail(field, raw, "every value must be finite and in (0, 10]")
+        array = np.asarray(values, dtype=float)
         return np.broadcast_to(array, (self.n_followers,)).copy()
 
 
@@ -396,11 +413,12 @@ class MonitorConfig(ConfigMixin):
         if (matrix is None or any(row is None or len(row) != 2 for row in matrix)
                 or not all(_is_real(x) for row in matrix for x in row)):
             self._fail("prior_cov", self.prior_cov, "must be a 2x2 matrix of numbers")
-        cov = np.asarray(matrix, dtype=float)
-        if not np.all(np.isfinite(cov)) or np.any(np.abs(cov) > 1e6):
+        if not all(_is_finite(x) and abs(x) <= 1e6 for row in matrix for x in row):
             self._fail("prior_cov", self.prior_cov, "entries must be finite and within [-1e6, 1e6]")
+        cov = np.asarray(matrix, dtype=float)
         if not np.allclose(cov, cov.T) or np.any(np.linalg.eigvalsh(cov) <= 0):
             self._fail("prior_cov", self.prior_cov, "must be symmetric positive definite")
+        object.__setattr__(self, "prior_cov", tuple(tuple(float(x) for x in row) for row in matrix))
         if self.window is not None:
             self._number("window", 0.0, math.inf, open_low=True)
             self._ticks("window", self.dt, MAX_WINDOW_TICKS)
@@ -633,6 +651,7 @@ class EnvConfig(ConfigMixin):
                        f"must be 2 to {MAX_SETTING_LEVELS} finite settings in (0, {MAX_TIME_GAP:g}]")
         if np.any(np.diff(np.asarray(levels, dtype=float)) <= 0):
             self._fail("setting_levels", self.setting_levels, "must increase strictly")
+        object.__setattr__(self, "setting_levels", tuple(float(level) for level in levels))
         if not np.any(np.isclose(levels, self.platoon.initial_setting)):
             self._fail("platoon.initial_setting", self.platoon.initial_setting, f"must be one of {self.setting_levels}")
         self._number("preferred_setting", levels[0], levels[-1])
@@ -652,7 +671,7 @@ class EnvConfig(ConfigMixin):
     def from_dict(cls, overrides: Mapping[str, Any] | None = None) -> EnvConfig:
         """The default config with ``overrides``; nested configs take dicts of their own fields."""
         if overrides is not None and not isinstance(overrides, Mapping):
-            raise ValueError(f"EnvConfig config = {overrides!r}: must be a dict of EnvConfig fields "
+            raise ValueError(f"EnvConfig config = {shown(overrides)}: must be a dict of EnvConfig fields "
                              f"(nested configs as dicts) or None")
         overrides = dict(overrides or {})
         default = cls()
