@@ -251,8 +251,8 @@ def emergency_braking(
 
     Every speed change is a jerk-limited trapezoid (:func:`_speed_change`). Each stop follows at least
     ``min_cruise_duration`` of cruising; the rest of the cruising time is split at random between the gaps
-    before the stops and after the last. Stops that do not fit in the profile are dropped, last first.
-    Speeds lie in [0, speed_band[1]].
+    before the stops and after the last. Stops that do not fit in the profile are dropped, last first; a profile too
+    short for even the way to the cruise speed is that way cut short. Speeds lie in [0, speed_band[1]].
     """
     return emergency_braking_batch([seed], params, leader).profile(0)
 
@@ -291,7 +291,7 @@ def _emergency_braking_accel(rng: np.random.Generator, params: EmergencyBrakingC
     for event, ticks in zip(events, cruises[:-1], strict=True):  # the last cruise is the zeros after
         segments.extend((np.zeros(ticks), event))
     accel = np.zeros(leader.n_samples)
-    body = np.concatenate(segments)
+    body = np.concatenate(segments)[: leader.n_samples]  # in a short profile even the way to the cruise may not fit
     accel[: body.size] = body
     return accel
 
