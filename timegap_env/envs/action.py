@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 from gymnasium import spaces
 
-from timegap_env.config import EnvConfig
+from timegap_env.config import EnvConfig, shown
 
 
 RELATIVE_STEPS = (-1, 0, 1)  # action_mode="relative": action i moves the platoon's setting this many levels [-]
@@ -34,13 +34,14 @@ class SettingLadder:
         self.n_actions = len(RELATIVE_STEPS) if self.relative else self.levels.size  # per entry of an action
 
     def check(self, action: np.ndarray) -> np.ndarray:
-        """``action`` (integers of shape ``shape``, each in [0, n_actions)) as int64 (n_envs, 1), or (n_envs, N)
-        per vehicle, the layout of the fused step; ``ValueError`` naming the action otherwise."""
+        """``action`` (integers of shape ``shape``, each in [0, n_actions); bools count as 0 and 1, as gymnasium's
+        spaces take them) as int64 (n_envs, 1), or (n_envs, N) per vehicle, the layout of the fused step;
+        ``ValueError`` naming the action otherwise."""
         action = np.asarray(action)
-        if action.shape != self.shape or action.dtype.kind not in "iu":
-            raise ValueError(f"action = {action!r}: expected integer actions of shape {self.shape}")
+        if action.shape != self.shape or action.dtype.kind not in "iub":
+            raise ValueError(f"action = {shown(action)}: expected integer actions of shape {self.shape}")
         if ((action < 0) | (action >= self.n_actions)).any():
-            raise ValueError(f"action = {action!r}: every entry must be in [0, {self.n_actions - 1}]")
+            raise ValueError(f"action = {shown(action)}: every entry must be in [0, {self.n_actions - 1}]")
         return np.ascontiguousarray(action, dtype=np.int64).reshape(self.shape[0], -1)  # one layout: one compile
 
     def settings(self, action: np.ndarray, current: np.ndarray) -> np.ndarray:

@@ -9,7 +9,7 @@ import gymnasium as gym
 from gymnasium.error import ResetNeeded
 import numpy as np
 
-from timegap_env.config import EnvConfig
+from timegap_env.config import EnvConfig, shown
 from timegap_env.envs.action import action_space
 from timegap_env.envs.info import EPISODE_PREFIX, REWARD_PREFIX, no_rewards, of_env, prefixed, step_diagnostics_flag
 from timegap_env.envs.observation import observation_space
@@ -172,9 +172,9 @@ class TimeGapMonitorEnv(gym.Env):
                 and not isinstance(action, (bool, np.bool_)) and 0 <= action < self.action_space.n:
             self._action[0, 0] = action  # the common case, without NumPy's checks
             return self._action
-        indices = np.asarray(action)
-        if not np.issubdtype(indices.dtype, np.integer) or not self.action_space.contains(indices.astype(np.int64)):
-            raise ValueError(f"action = {action!r} is outside the action space {self.action_space}")
+        indices = np.asarray(action)  # bools count as 0 and 1, as gymnasium's spaces take them
+        if indices.dtype.kind not in "iub" or not self.action_space.contains(indices.astype(np.int64)):
+            raise ValueError(f"action = {shown(action)} is outside the action space {self.action_space}")
         return self.task.ladder.check(indices.astype(np.int64)[None])
 
     @property

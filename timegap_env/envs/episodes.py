@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from timegap_env.config import EnvConfig
+from timegap_env.config import EnvConfig, shown
 from timegap_env.leaders.profile import LeaderProfile, LeaderProfiles
 from timegap_env.leaders.scenarios import SCENARIOS, make_leaders
 from timegap_env.sim.degradation import Categorical, Degradation, draw_degradation, parse_degradations
@@ -28,11 +28,28 @@ PACKET_LOSS_STREAM = np.uint64(0x5DEECE66D)  # the packet-loss key is the noise 
 
 
 def check_reset_options(options: Mapping[str, Any] | None) -> dict[str, Any]:
-    """``options`` as a dict; ``ValueError`` naming any unknown key."""
+    """``options`` as a dict, ``leader_speed`` as a float array and a ``scenario`` of None left out; ``ValueError``
+    naming any unknown key, a scenario that is not one of ``SCENARIOS``' names, a ``leader_speed`` that is not a
+    series of numbers, or both of these at once."""
+    if options is not None and not isinstance(options, Mapping):
+        raise ValueError(f"reset options = {shown(options)}: must be a dict with keys among {list(RESET_OPTIONS)}")
     options = dict(options or {})
-    unknown = sorted(set(options) - set(RESET_OPTIONS))
+    unknown = sorted(set(options) - set(RESET_OPTIONS), key=repr)
     if unknown:
         raise ValueError(f"reset options {unknown} unknown; known: {list(RESET_OPTIONS)}")
+    if options.get("scenario", "") is None:
+        del options["scenario"]  # None: drawn from scenario_weights, as without the option
+    if "scenario" in options and (not isinstance(options["scenario"], str) or options["scenario"] not in SCENARIOS):
+        raise ValueError(f"reset option scenario = {shown(options['scenario'])}: must be None (drawn) or one of "
+                         f"{sorted(SCENARIOS)}")
+    if "leader_speed" in options:
+        if "scenario" in options:
+            raise ValueError("reset options scenario and leader_speed: give one (leader_speed is the user's own leader)")
+        try:
+            options["leader_speed"] = np.asarray(options["leader_speed"], dtype=float)
+        except (TypeError, ValueError, OverflowError) as error:
+            raise ValueError(f"reset option leader_speed = {shown(options['leader_speed'])}: must be a series of "
+                             f"speeds [m/s] ({error})") from None
     return options
 
 
@@ -89,13 +106,13 @@ class Episodes:
         n_followers, dt = cfg.platoon.n_followers, cfg.platoon.dt
         pinned = parse_degradations(options["degradation"], n_followers) if "degradation" in options else None
         if "leader_speed" in options:
-            profile = LeaderProfile.from_speed(np.asarray(options["leader_speed"], dtype=float), dt, "user")
+            profile = LeaderProfile.from_speed(options["leader_speed"], dt, "user")
             self._load_leaders(envs, LeaderProfiles.of(profile))
         else:
             families: dict[str, tuple[list[int], list[int]]] = {}  # family -> its envs and their leaders' seeds
             for env in envs.tolist():
                 rng = rngs[env]
-                family = options.get("scenario") or self._families[self._family_draw.draw(rng)]
+                family = options["scenario"] if "scenario" in options else self._families[self._family_draw.draw(rng)]
                 members, seeds = families.setdefault(family, ([], []))
                 members.append(env)
                 seeds.append(int(rng.integers(2**31)))

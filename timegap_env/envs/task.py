@@ -17,6 +17,7 @@ the objects' own methods, the readable specification the tests hold the fused st
 from __future__ import annotations
 
 import dataclasses
+from collections import deque
 from collections.abc import Mapping, Sequence
 from typing import Any, NamedTuple
 
@@ -27,7 +28,7 @@ from timegap_env.envs.action import SettingLadder
 from timegap_env.envs.episodes import Episodes, check_reset_options
 from timegap_env.envs.info import TRUTH_PREFIX, prefixed
 from timegap_env.envs.observation import FEATURES, FollowerState, ObservationScales, observe_into
-from timegap_env.envs.rendering import RenderFrame
+from timegap_env.envs.rendering import DEFAULT_TIME_WINDOW, RenderFrame
 from timegap_env.envs.reward import REWARD_TERMS, RewardConstants, StepReadouts, StepTicks, score_step, weights_of
 from timegap_env.envs.step_kernel import StepRules, StepState, fused_step
 from timegap_env.envs.totals import EpisodeTotals
@@ -59,21 +60,42 @@ class TraceArrays(NamedTuple):
 
 
 class Trace:
-    """A record of env 0's estimates and chart centre lines, tick by tick, for rendering and profiles."""
+    """A record of env 0's estimates and chart centre lines, tick by tick, for rendering and profiles.
 
-    def __init__(self, n_followers: int) -> None:
+    ``keep``: how far back from its latest tick the trace reaches [s]; older ticks are dropped as new ones come, so
+    its memory stays bounded however long the episode (the default: what a rendered chart shows). None keeps every
+    tick (a whole-episode profile).
+    """
+
+    def __init__(self, n_followers: int, keep: float | None = DEFAULT_TIME_WINDOW) -> None:
+        if keep is not None and not 0.0 <= keep < np.inf:
+            raise ValueError(f"Trace keep = {keep!r}: must be a finite number of seconds >= 0, or None (every tick)")
         self.n_followers = n_followers
-        self._blocks: list[TraceArrays] = []
+        self.keep = None if keep is None else float(keep)
+        self._blocks: deque[TraceArrays] = deque()
 
     def add(self, block: TraceArrays) -> None:
-        """Append a block of ticks."""
-        self._blocks.append(block)
+        """Append a block of ticks (copied), then drop the ticks more than ``keep`` seconds before its last."""
+        self._blocks.append(TraceArrays(*(np.array(part, dtype=float) for part in block)))
+        if self.keep is None:
+            return
+        cutoff = self._blocks[-1].t[-1] - self.keep  # [s]
+        while self._blocks[0].t[-1] < cutoff:  # wholly older than the window
+            self._blocks.popleft()
+        first = self._blocks[0]
+        if first.t[0] < cutoff:
+            self._blocks[0] = TraceArrays(*(part[first.t >= cutoff] for part in first))
 
     def clear(self) -> None:
         self._blocks.clear()
 
+    @property
+    def n_ticks(self) -> int:
+        """Ticks held now [-]: at most ``keep / dt + 1`` with a ``keep``."""
+        return sum(block.t.size for block in self._blocks)
+
     def arrays(self) -> TraceArrays:
-        """Every tick recorded so far."""
+        """Every tick held: all recorded so far, or with a ``keep`` those of the last ``keep`` seconds."""
         if not self._blocks:
             return TraceArrays(np.empty(0), np.empty((0, self.n_followers)), np.empty((0, self.n_followers)))
         return TraceArrays(*(np.concatenate(parts) for parts in zip(*self._blocks)))
@@ -113,6 +135,11 @@ class PlatoonTask:
                                                   np.array(self._weights), tuple(self._scales)))
         self._state: tuple | None = None  # the fused step's StepState, built at each reset
 
+    @staticmethod
+    def bytes_per_env(config: EnvConfig) -> int:
+        """Bytes of NumPy state each env of a task with ``config`` holds (what one more env costs) [B]."""
+        return _owned_bytes(PlatoonTask(config, 2)) - _owned_bytes(PlatoonTask(config, 1))
+
     # ------------------------------------------------------------------ reset
     def reset(self, mask: np.ndarray, rngs: Sequence[np.random.Generator], options: Mapping[str, Any] | None) -> None:
         """Draw a new episode for every env in ``mask``, env i from ``rngs[i]``, all in one batch; ``options`` as in
@@ -120,8 +147,12 @@ class PlatoonTask:
         options = check_reset_options(options)
         episodes, loop = self.episodes, self.loop
         envs = np.flatnonzero(mask)
-        episodes.draw_many(envs, rngs, options)
-        loop.degrade_many(envs, [episodes.degradations[env] for env in envs], episodes.packet_loss_keys[envs])
+        try:
+            episodes.draw_many(envs, rngs, options)
+            loop.degrade_many(envs, [episodes.degradations[env] for env in envs], episodes.packet_loss_keys[envs])
+        except BaseException:  # the envs are half reset: they name no episode (the env shells refuse to step them)
+            episodes.scenario[envs] = ""
+            raise
         loop.reset(episodes.leader_speed[:, 0], episodes.leader_accel[:, 0], mask=mask,
                    setting=episodes.initial_setting[:, None], noise_key=episodes.noise_keys,
                    dropout_probability=episodes.dropout_probability)
@@ -154,9 +185,10 @@ class PlatoonTask:
             terminated=result.terminated, truncated=result.truncated, observation=self._observation,
         ))
 
-    def start_trace(self) -> Trace:
-        """Record env 0 at every tick from now on (cleared at each reset by the env); returns the trace."""
-        self.trace = Trace(self.n_followers)
+    def start_trace(self, keep: float | None = DEFAULT_TIME_WINDOW) -> Trace:
+        """Record env 0 at every tick from now on, holding the last ``keep`` seconds [s] (None: every tick; see
+        :class:`Trace`); cleared at each reset by the env. Returns the trace."""
+        self.trace = Trace(self.n_followers, keep)
         return self.trace
 
     # ------------------------------------------------------------------ step
@@ -205,7 +237,7 @@ class PlatoonTask:
     # ------------------------------------------------------------------ read-outs
     @property
     def scenario(self) -> np.ndarray:
-        """The leader's name in each env's episode (n_envs,)."""
+        """The leader's name in each env's episode (n_envs,); "" where the last reset raised."""
         return self.episodes.scenario
 
     def observation(self) -> np.ndarray:
@@ -262,20 +294,25 @@ class PlatoonTask:
         return self.episodes.fingerprint(env)
 
     def render_frame(self, history: float) -> RenderFrame:
-        """What env 0 looks like now, with the last ``history`` seconds [s] of its trace (empty without one)."""
+        """What env 0 looks like now, with the last ``history`` seconds [s] of its trace (empty without one), at most
+        what the trace keeps."""
         platoon, chart = self.loop.platoon, self.loop.chart
         now = self.loop.ticks[0] * self.config.platoon.dt
-        trace = (self.trace or Trace(self.n_followers)).arrays()
-        recent = trace.t >= now - history
-        centers = trace.center[recent]
+        trace = self.trace or Trace(self.n_followers)
+        if trace.keep is not None and history > trace.keep:
+            raise ValueError(f"render_frame history = {history} s: the trace keeps only the last {trace.keep} s "
+                             f"(start_trace(keep=...))")
+        arrays = trace.arrays()
+        recent = arrays.t >= now - history
+        centers = arrays.center[recent]
         half_width = self._scales.half_width
         return RenderFrame(
             t=now,
             x=platoon.x[0].copy(),
             v=platoon.v[0].copy(),
             vehicle_length=self.config.platoon.vehicle_length,
-            history_t=trace.t[recent],
-            estimate_history=trace.estimate[recent],
+            history_t=arrays.t[recent],
+            estimate_history=arrays.estimate[recent],
             lcl=chart.center[0] - half_width,
             ucl=chart.center[0] + half_width,
             center=chart.center[0].copy(),
@@ -285,4 +322,5 @@ class PlatoonTask:
             lcl_history=centers - half_width,
             ucl_history=centers + half_width,
             center_history=centers,
+            settling=chart.hold_off[0] > 0,
         )

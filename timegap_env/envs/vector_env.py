@@ -8,6 +8,7 @@ step by step, and the whole equals ``SyncVectorEnv`` over single envs with the s
 
 from __future__ import annotations
 
+import os
 from collections.abc import Mapping
 from typing import Any
 
@@ -17,13 +18,39 @@ from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from timegap_env.config import EnvConfig
+from timegap_env.config import EnvConfig, shown
 from timegap_env.envs.action import action_space
 from timegap_env.envs.info import (
     EPISODE_PREFIX, REWARD_PREFIX, TRUTH_PREFIX, no_rewards, prefixed, step_diagnostics_flag, truth_of, with_masks,
 )
 from timegap_env.envs.observation import observation_space
 from timegap_env.envs.task import PlatoonTask
+
+
+def available_memory() -> int | None:
+    """Bytes of memory the system can give now without swapping (Linux's MemAvailable, else the free pages), None if
+    neither can be read [B]."""
+    try:
+        with open("/proc/meminfo") as meminfo:
+            for line in meminfo:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    try:
+        return os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    except (OSError, ValueError, AttributeError):
+        return None
+
+
+def check_fits(num_envs: int, bytes_per_env: int, available: int | None) -> None:
+    """``ValueError`` naming ``num_envs`` and what it costs when ``num_envs`` sub-envs of ``bytes_per_env`` [B] each
+    need more than ``available`` [B] (None: unknown, nothing refused)."""
+    needed = num_envs * bytes_per_env
+    if available is not None and needed > available:
+        raise ValueError(f"num_envs = {num_envs}: the sub-envs' state needs about {needed / 1e9:.3g} GB "
+                         f"({bytes_per_env / 1e3:.3g} kB each with this config), more than the {available / 1e9:.3g} GB "
+                         "of memory available now; use fewer envs (or a shorter episode_duration, fewer followers)")
 
 
 def parse_autoreset_mode(mode: str | AutoresetMode) -> AutoresetMode:
@@ -69,11 +96,12 @@ class TimeGapMonitorVectorEnv(VectorEnv):
         autoreset_mode: str | AutoresetMode = AutoresetMode.SAME_STEP,
     ) -> None:
         if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) or num_envs < 1:
-            raise ValueError(f"num_envs = {num_envs!r}: must be an integer >= 1")
+            raise ValueError(f"num_envs = {shown(num_envs)}: must be an integer >= 1")
         self.autoreset_mode = parse_autoreset_mode(autoreset_mode)
         self.metadata = {**type(self).metadata, "autoreset_mode": self.autoreset_mode}
         self.num_envs = int(num_envs)
         self.config = EnvConfig.from_dict(config)
+        check_fits(self.num_envs, PlatoonTask.bytes_per_env(self.config), available_memory())
         self.max_episode_steps = max_episode_steps or self.config.max_episode_steps
         self.task = PlatoonTask(self.config, self.num_envs)
         self.single_observation_space = observation_space(self.config)
@@ -85,6 +113,7 @@ class TimeGapMonitorVectorEnv(VectorEnv):
         self.step_diagnostics = step_diagnostics_flag(step_diagnostics)
         self._was_reset = False  # step() before the first reset() raises gymnasium's ResetNeeded
         self._ended = np.zeros(self.num_envs, dtype=bool)  # episodes that ended and are not reset yet
+        self._half_reset = np.zeros(self.num_envs, dtype=bool)  # sub-envs whose last reset raised: step() refuses
 
     @property
     def scenario(self) -> np.ndarray:
@@ -109,7 +138,7 @@ class TimeGapMonitorVectorEnv(VectorEnv):
         for env in np.flatnonzero(mask):  # unseeded, a sub-env's generator carries on, as a single env's would
             if seeds[env] is not None:
                 self._rngs[env] = seeding.np_random(seeds[env])[0]
-        self.task.reset(mask, self._rngs, options or None)
+        self._reset_task(mask, options or None)
         self._was_reset = True
         self._steps[mask] = 0
         self._ended[mask] = False
@@ -138,6 +167,9 @@ class TimeGapMonitorVectorEnv(VectorEnv):
     def step(self, actions: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
         if not self._was_reset:
             raise ResetNeeded("TimeGapMonitorVectorEnv.step() called before reset(): call reset() first")
+        if self._half_reset.any():
+            raise ResetNeeded(f"sub-envs {np.flatnonzero(self._half_reset).tolist()} are half reset (their last reset "
+                              "raised): reset them first, e.g. reset(options={'reset_mask': mask})")
         restarting = self._ended.copy()
         if restarting.any() and self.autoreset_mode == AutoresetMode.DISABLED:
             raise ResetNeeded(f"sub-envs {np.flatnonzero(restarting).tolist()} ended and autoreset_mode is "
@@ -148,7 +180,7 @@ class TimeGapMonitorVectorEnv(VectorEnv):
         terminated, truncated = result.terminated & done, ~result.terminated & done
         reward, terms = result.reward.copy(), result.terms
         if restarting.any():  # next_step: their step above ran past the episode's end and is dropped
-            self.task.reset(restarting, self._rngs, None)
+            self._reset_task(restarting, None)
             self._steps[restarting] = 0
             reward = np.where(restarting, 0.0, reward)
             terms = {name: np.where(restarting, 0.0, term) for name, term in terms.items()}
@@ -163,7 +195,7 @@ class TimeGapMonitorVectorEnv(VectorEnv):
                 final_obs[env] = row
             infos = {"final_obs": final_obs, "_final_obs": done.copy(),
                      "final_info": with_masks(final_info, done), "_final_info": done.copy()}
-            self.task.reset(done, self._rngs, None)
+            self._reset_task(done, None)
             self._steps[done] = 0
             terms = {name: np.where(done, 0.0, term) for name, term in terms.items()}  # the reset's, as reset() gives
         if self.step_diagnostics:
@@ -173,6 +205,13 @@ class TimeGapMonitorVectorEnv(VectorEnv):
                 infos.update(with_masks(prefixed(EPISODE_PREFIX, self.task.episode_summary()), done))
             self._ended = done
         return self._observations(), reward, terminated, truncated, infos
+
+    def _reset_task(self, mask: np.ndarray, options: dict[str, Any] | None) -> None:
+        """Reset the task's envs of ``mask``; if that raises, they are half reset and :meth:`step` refuses until a
+        reset of theirs succeeds."""
+        self._half_reset |= mask
+        self.task.reset(mask, self._rngs, options)
+        self._half_reset &= ~mask
 
     def _observations(self) -> np.ndarray:
         return self.task.observation().reshape(self.num_envs, -1)

@@ -33,13 +33,22 @@ from typing import Any
 
 import numpy as np
 
-from timegap_env.config import DEGRADATION_KINDS, DegradationConfig, PlatoonConfig, SensorConfig
+from timegap_env.config import (
+    DEGRADATION_KINDS, MAX_DT, MAX_EPISODE_TICKS, MAX_TIME_GAP, DegradationConfig, PlatoonConfig, SensorConfig, shown,
+)
 from timegap_env.sim.platoon import Platoon, ZOHCoefficients
 from timegap_env.sim.stability import SettingSweep
 
 KINDS = ("none", *DEGRADATION_KINDS)  # kind codes: the index in this tuple
-SIZED = {"lag": "factor on the lag T [-]", "gain": "gain K [-]", "v2v_latency": "added V2V delay [s]",
-         "packet_loss": "chance per tick [-]", "radar_bias": "spacing bias [m]", "radar_noise": "spacing noise std [m]"}
+SIZED = {  # each sized kind: what its size is, and the interval a size must lie in (low, high, low open, high open)
+    "lag": ("factor on the lag T [-]", (0.0, 10.0, True, False)),
+    "gain": ("gain K [-]", (0.0, 10.0, True, False)),
+    "v2v_latency": ("added V2V delay [s]", (0.0, MAX_TIME_GAP, False, False)),
+    "packet_loss": ("chance per tick [-]", (0.0, 1.0, False, True)),
+    "radar_bias": ("spacing bias [m]", (-100.0, 100.0, False, False)),
+    "radar_noise": ("spacing noise std [m]", (0.0, 100.0, False, False)),
+}
+MAX_TIME = MAX_EPISODE_TICKS * MAX_DT  # latest onset or end of a degradation, the longest episode there can be [s]
 DESCRIPTION_KEYS = ("kind", "size", "followers", "onset", "end", "car")  # what a degradation dict may hold
 NEVER = np.iinfo(np.int64).max // 4  # the end tick of a degradation that does not end
 SETTING_SEARCH = (0.05, 6.0)  # smallest_stable_setting searches tau* in this range [s]
@@ -67,39 +76,54 @@ class Degradation:
     car: str | None = None  # commercial_acc only: the car model (default the median car, COMMERCIAL_ACC)
 
     def __post_init__(self) -> None:
-        if self.kind not in DEGRADATION_KINDS:
+        if not isinstance(self.kind, str) or self.kind not in DEGRADATION_KINDS:
             self._fail("kind", self.kind, f"must be one of {DEGRADATION_KINDS}")
         followers = self.followers
         if (not isinstance(followers, tuple) or not followers
-                or any(isinstance(f, bool) or not isinstance(f, (int, np.integer)) or f < 1 for f in followers)
+                or any(isinstance(f, (bool, np.bool_)) or not isinstance(f, (int, np.integer)) or f < 1 for f in followers)
                 or len(set(followers)) != len(followers)):
             self._fail("followers", followers, "must be distinct follower numbers >= 1 (1 = right behind the leader)")
+        object.__setattr__(self, "followers", tuple(int(f) for f in followers))
         if self.kind in SIZED:
-            if isinstance(self.size, bool) or not isinstance(self.size, (int, float)) or not math.isfinite(self.size):
-                self._fail("size", self.size, f"a {self.kind} degradation needs a finite size: {SIZED[self.kind]}")
-            low_ok = {"lag": self.size > 0, "gain": self.size > 0, "v2v_latency": self.size >= 0,
-                      "packet_loss": 0 <= self.size < 1, "radar_bias": True, "radar_noise": self.size >= 0}[self.kind]
-            if not low_ok:
-                self._fail("size", self.size, f"out of range for {self.kind}: {SIZED[self.kind]}")
+            meaning, (low, high, open_low, open_high) = SIZED[self.kind]
+            interval = f"{'(' if open_low else '['}{low:g}, {high:g}{')' if open_high else ']'}"
+            self._time_or_size("size", f"a {self.kind} degradation needs a finite size: {meaning}")
+            if not ((low < self.size if open_low else low <= self.size)
+                    and (self.size < high if open_high else self.size <= high)):
+                self._fail("size", self.size, f"out of range for {self.kind}: {meaning} in {interval}")
         elif self.size is not None:
             self._fail("size", self.size, f"a {self.kind} degradation has no size")
-        if self.car is not None and self.kind != "commercial_acc":
-            self._fail("car", self.car, "only a commercial_acc degradation names a car")
-        if isinstance(self.onset, bool) or not isinstance(self.onset, (int, float)) or not 0 <= self.onset < math.inf:
-            self._fail("onset", self.onset, "must be a finite time >= 0 [s]")
-        if self.end is not None and (isinstance(self.end, bool) or not isinstance(self.end, (int, float))
-                                     or not self.onset < self.end < math.inf):
-            self._fail("end", self.end, f"must be None (never) or a finite time after onset = {self.onset} [s]")
+        if self.car is not None and (self.kind != "commercial_acc" or not isinstance(self.car, str)):
+            self._fail("car", self.car, "only a commercial_acc degradation names a car (by its name)")
+        self._time_or_size("onset", f"must be a time in [0, {MAX_TIME:g}] [s]")
+        if not 0 <= self.onset <= MAX_TIME:
+            self._fail("onset", self.onset, f"must be a time in [0, {MAX_TIME:g}] [s]")
+        if self.end is not None:
+            self._time_or_size("end", f"must be None (never) or a time after onset = {self.onset}, at most {MAX_TIME:g} [s]")
+            if not self.onset < self.end <= MAX_TIME:
+                self._fail("end", self.end, f"must be None (never) or a time after onset = {self.onset}, "
+                           f"at most {MAX_TIME:g} [s]")
+
+    def _time_or_size(self, field: str, rule: str) -> None:
+        """Check that ``field`` is a real number (not a bool) that is finite as a float, and store it as a float."""
+        value = getattr(self, field)
+        try:
+            number = float(value) if not isinstance(value, (bool, np.bool_)) else math.nan
+        except (TypeError, ValueError, OverflowError):
+            number = math.nan
+        if not isinstance(value, (int, float, np.integer, np.floating)) or not math.isfinite(number):
+            self._fail(field, value, rule)
+        object.__setattr__(self, field, number)
 
     def _fail(self, field: str, value: Any, rule: str) -> None:
-        raise ValueError(f"degradation {field} = {value!r}: {rule}")
+        raise ValueError(f"degradation {field} = {shown(value)}: {rule}")
 
     @classmethod
     def from_dict(cls, description: Mapping[str, Any], n_followers: int) -> Degradation:
         """A degradation from a dict of DESCRIPTION_KEYS; ``followers`` defaults to all ``n_followers``."""
         if not isinstance(description, Mapping):
             raise ValueError(f"degradation = {description!r}: must be a dict with keys {list(DESCRIPTION_KEYS)}")
-        unknown = sorted(set(description) - set(DESCRIPTION_KEYS))
+        unknown = sorted(set(description) - set(DESCRIPTION_KEYS), key=repr)
         if unknown:
             raise ValueError(f"degradation keys {unknown} unknown; known: {list(DESCRIPTION_KEYS)}")
         if "kind" not in description:
@@ -107,9 +131,6 @@ class Degradation:
         fields = dict(description)
         followers = fields.get("followers", range(1, n_followers + 1))
         fields["followers"] = tuple(followers) if isinstance(followers, (list, tuple, range)) else followers
-        size = fields.get("size")
-        if isinstance(size, (np.floating, np.integer)):
-            fields["size"] = float(size)
         return cls(**fields)
 
 
