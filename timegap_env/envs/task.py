@@ -324,3 +324,29 @@ class PlatoonTask:
             center_history=centers,
             settling=chart.hold_off[0] > 0,
         )
+
+
+def _owned_bytes(root: Any) -> int:
+    """Bytes of every NumPy array reachable from ``root`` through attributes, containers and named tuples, each
+    array's memory counted once (a view counts as its base) [B]."""
+    seen: set[int] = set()
+    total, stack = 0, [root]
+    while stack:
+        item = stack.pop()
+        if isinstance(item, np.ndarray):
+            while isinstance(item.base, np.ndarray):
+                item = item.base
+            if id(item) not in seen:
+                seen.add(id(item))
+                total += item.nbytes
+            continue
+        if id(item) in seen or isinstance(item, (str, bytes, int, float, type)):
+            continue
+        seen.add(id(item))
+        if isinstance(item, (list, tuple, set, frozenset)):
+            stack.extend(item)
+        elif isinstance(item, dict):
+            stack.extend(item.values())
+        elif hasattr(item, "__dict__"):
+            stack.extend(vars(item).values())
+    return total
