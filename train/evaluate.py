@@ -250,7 +250,7 @@ def run_batch(
     prints = [task.fingerprint(env) for env in range(n)]
     scenarios = list(venv.unwrapped.scenario)
     truth0 = {name: value[0] for name, value in truth_of(infos).items()}  # env 0's schedule, for the profile
-    trace = task.start_trace() if record_profile else None  # env 0 at every tick
+    trace = task.start_trace(keep=None) if record_profile else None  # env 0 at every tick of the whole run
     returns, steps, below = np.zeros(n), np.zeros(n, dtype=np.int64), np.zeros(n)
     active = np.ones(n, dtype=bool)
     summaries: list[dict[str, float]] = [{} for _ in range(n)]

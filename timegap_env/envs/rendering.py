@@ -12,7 +12,10 @@ A frame (``PlatoonRenderer.render`` -> (height, width, 3) uint8 RGB) has three b
 - **control chart**: one row per follower sharing the time axis (the last ``time_window`` seconds):
   the posterior mean of its time gap (blue; orange where it lay outside the limits of its time),
   its LCL and UCL (red) and CL = tau* (dashed dark red) as step lines, the current value on the
-  right, and on the left a box coloured by state. The limits of the past come from the frame's
+  right, and on the left a box coloured like the car and labelled with the follower's state
+  (:func:`state_label`: ``COLLIDED``, ``ALARM``, ``settling`` while the chart holds its alarms off
+  after a setting change, ``out of limits`` when the latest estimate lies outside its limits
+  without an alarm, else ``in control``). The limits of the past come from the frame's
   optional ``lcl_history`` / ``ucl_history`` / ``center_history``; without them the current
   limits are drawn over the whole history, and after a setting change the older part of the line
   then shows as outside the (new) limits.
@@ -33,7 +36,7 @@ import numpy as np
 if TYPE_CHECKING:
     import pygame
 
-__all__ = ["RenderFrame", "PlatoonRenderer"]
+__all__ = ["RenderFrame", "PlatoonRenderer", "state_label"]
 
 # ---- colours (RGB) -------------------------------------------------------------------------------
 LEADER_COLOR = (50, 200, 0)  # highway-env's ego green: the human-driven leader
@@ -101,7 +104,8 @@ class RenderFrame:
     """Everything one picture shows; vehicle arrays are leader first, follower arrays follower 1 first.
 
     The three ``*_history`` arrays are optional: give them so that the chart draws the limits each
-    past estimate was judged against (they change when a time gap setting changes).
+    past estimate was judged against (they change when a time gap setting changes). ``settling`` is
+    optional too: give it so that the state box says when a follower's alarms are held off.
     """
 
     t: float  # simulation time [s]
@@ -113,12 +117,13 @@ class RenderFrame:
     lcl: np.ndarray  # (n_followers,) current lower control limit [s]
     ucl: np.ndarray  # (n_followers,) current upper control limit [s]
     center: np.ndarray  # (n_followers,) current centre line, the applied setting tau* [s]
-    alarm: np.ndarray  # (n_followers,) bool, estimate outside the limits now
+    alarm: np.ndarray  # (n_followers,) bool, the chart's alarm now: its statistic outside the limits, not settling
     v2v: np.ndarray  # (n_followers,) bool, CACC (V2V) on
     collided: np.ndarray  # (n_followers,) bool
     lcl_history: np.ndarray | None = None  # (n_history, n_followers) LCL at history_t [s]; None: lcl throughout
     ucl_history: np.ndarray | None = None  # (n_history, n_followers) UCL at history_t [s]; None: ucl throughout
     center_history: np.ndarray | None = None  # (n_history, n_followers) centre line at history_t [s]; None: center
+    settling: np.ndarray | None = None  # (n_followers,) bool, the chart holds alarms off (settling); None: nowhere
 
 
 _LIMIT_HISTORIES = ("lcl_history", "center_history", "ucl_history")  # optional RenderFrame fields: LCL, CL, UCL
@@ -235,6 +240,8 @@ class PlatoonRenderer:
         }
         limit_histories = [name for name in _LIMIT_HISTORIES if getattr(frame, name) is not None]
         expected.update({name: (n_history, n) for name in limit_histories})
+        if frame.settling is not None:
+            expected["settling"] = (n,)
         for name, shape in expected.items():
             if np.shape(getattr(frame, name)) != shape:
                 raise ValueError(f"RenderFrame.{name} has shape {np.shape(getattr(frame, name))}, expected {shape}")
@@ -389,7 +396,7 @@ class PlatoonRenderer:
             """Time gap [s] -> pixel row."""
             return plot.bottom - (value - low) / (high - low) * plot.height
 
-        self._draw_state_box(frame, i, plot)
+        self._draw_state_box(frame, i, plot, estimate, limits)
         pygame.draw.rect(canvas, PLOT_BORDER_COLOR, plot, 1)
         canvas.set_clip(plot)
         x_starts = to_x(starts)
@@ -446,14 +453,16 @@ class PlatoonRenderer:
             points = np.column_stack([np.column_stack([starts, ends]).ravel(), np.repeat(rows, 2)])
             pygame.draw.lines(self._canvas, color, False, points.tolist(), LIMIT_LINE_WIDTH)
 
-    def _draw_state_box(self, frame: RenderFrame, i: int, plot: pygame.Rect) -> None:
-        """Box left of the row, coloured like the car: name, mode and state, as many lines as fit."""
+    def _draw_state_box(
+        self, frame: RenderFrame, i: int, plot: pygame.Rect, estimate: np.ndarray, limits: np.ndarray
+    ) -> None:
+        """Box left of the row, coloured like the car: name, mode and state (:func:`state_label` of the row's visible
+        history, ``estimate`` (n,) [s] and ``limits`` (n, 3) [s]), as many lines as fit."""
         import pygame
 
         box = pygame.Rect(CHART_PADDING, plot.top, STATE_BOX_WIDTH - CHART_PADDING, plot.height)
         pygame.draw.rect(self._canvas, self._vehicle_color(frame, i + 1), box, border_radius=4)
-        state = "COLLIDED" if frame.collided[i] else "ALARM" if frame.alarm[i] else "in control"
-        lines = [f"F{i + 1}", "V2V" if frame.v2v[i] else "ACC", state]
+        lines = [f"F{i + 1}", "V2V" if frame.v2v[i] else "ACC", state_label(frame, i, estimate, limits)]
         line_height = self._label_font.get_linesize()
         lines = lines[: max(1, box.height // line_height)]
         top = box.centery - len(lines) * line_height // 2
@@ -500,6 +509,26 @@ class PlatoonRenderer:
             self._canvas.blit(label, label.get_rect(midtop=(x, last.bottom + 3)))
         title = self._tick_font.render("time [s]", True, CHART_TEXT_COLOR)
         self._canvas.blit(title, title.get_rect(bottomright=(last.right, self._chart_rect.bottom - 2)))
+
+
+def state_label(frame: RenderFrame, i: int, estimate: np.ndarray, limits: np.ndarray) -> str:
+    """Follower ``i``'s state as its chart row's box names it: ``COLLIDED``, ``ALARM``, ``settling`` (alarms held
+    off after a setting change), ``out of limits`` (the latest estimate outside its limits, no alarm yet), else
+    ``in control``.
+
+    ``estimate`` (n,) [s] and ``limits`` (n, 3: LCL, CL, UCL) [s] are the row's visible history; the latest finite
+    estimate is the one the row marks and prints (none at the start of an episode: ``in control``).
+    """
+    if frame.collided[i]:
+        return "COLLIDED"
+    if frame.alarm[i]:
+        return "ALARM"
+    if frame.settling is not None and frame.settling[i]:
+        return "settling"
+    finite = np.flatnonzero(np.isfinite(estimate))
+    if finite.size and not limits[finite[-1], 0] <= estimate[finite[-1]] <= limits[finite[-1], 2]:
+        return "out of limits"
+    return "in control"
 
 
 def _limit_history(frame: RenderFrame, name: str) -> np.ndarray:
