@@ -25,8 +25,8 @@ from pathlib import Path
 
 import numpy as np
 
-from timegap_env.config import LeaderConfig
-from timegap_env.leaders.profile import LeaderProfile, open_csv
+from timegap_env.config import MAX_SPEED, LeaderConfig
+from timegap_env.leaders.profile import LeaderProfile, csv_errors, open_csv
 
 FOOT = 0.3048  # [m per ft]
 FRAME_DT = 0.1  # time between two NGSIM frames [s]
@@ -68,23 +68,24 @@ def read_ngsim(path: str | Path) -> NgsimTable:
     first_row = 2  # the line of the file the chunk's first row is on
     with open_csv(path) as lines:
         reader = csv.reader(lines)
-        header = [name.strip() for name in next(reader)]
-        missing = [name for name in REQUIRED_COLUMNS if name not in header]
-        if missing:
-            raise ValueError(f"{path}: missing column(s) {missing} (found columns {header})")
-        pick = operator.itemgetter(*(header.index(name) for name in REQUIRED_COLUMNS))
-        while True:
-            try:
-                chunk = list(map(pick, itertools.islice(reader, CHUNK_ROWS)))
-            except IndexError:
-                raise ValueError(
-                    f"{path}: row {reader.line_num} has fewer fields than the header ({len(header)})"
-                ) from None
-            if not chunk:
-                break
-            for j, (name, dtype) in enumerate(zip(REQUIRED_COLUMNS, COLUMN_TYPES)):
-                parts[j].append(_parse(path, name, [row[j] for row in chunk], dtype, first_row))
-            first_row += len(chunk)
+        with csv_errors(path, reader):
+            header = [name.strip() for name in next(reader)]
+            missing = [name for name in REQUIRED_COLUMNS if name not in header]
+            if missing:
+                raise ValueError(f"{path}: missing column(s) {missing} (found columns {header})")
+            pick = operator.itemgetter(*(header.index(name) for name in REQUIRED_COLUMNS))
+            while True:
+                try:
+                    chunk = list(map(pick, itertools.islice(reader, CHUNK_ROWS)))
+                except IndexError:
+                    raise ValueError(
+                        f"{path}: row {reader.line_num} has fewer fields than the header ({len(header)})"
+                    ) from None
+                if not chunk:
+                    break
+                for j, (name, dtype) in enumerate(zip(REQUIRED_COLUMNS, COLUMN_TYPES)):
+                    parts[j].append(_parse(path, name, [row[j] for row in chunk], dtype, first_row))
+                first_row += len(chunk)
     if not parts[0]:
         raise ValueError(f"{path}: no data rows after the header")
     vehicle_id, frame, v_vel, v_acc = (np.concatenate(part) for part in parts)
@@ -94,16 +95,37 @@ def read_ngsim(path: str | Path) -> NgsimTable:
 def vehicle_ids(table: NgsimTable, min_duration: float = 0.0) -> list[int]:
     """Sorted ids of the vehicles :func:`vehicle_profile` accepts with at least ``min_duration`` [s] of data.
 
-    A vehicle qualifies when its frames have no gap, no conflicting duplicate
-    and span at least two samples.
+    A vehicle qualifies when its frames have no gap, no conflicting duplicate,
+    its speeds lie in [0, ``MAX_SPEED``] and span at least two samples.
     """
     order = np.lexsort((table.frame, table.vehicle_id))
     vehicle = table.vehicle_id[order]
     repeat, conflict, gap = _adjacent_checks(table, order)
-    faulty = np.unique(vehicle[1:][conflict | gap])
+    faulty = np.union1d(vehicle[1:][conflict | gap], table.vehicle_id[_speed_out_of_range(table.v_vel)])
     ids, samples = np.unique(vehicle[np.append(True, ~repeat)], return_counts=True)
     usable = (samples >= 2) & ((samples - 1) * FRAME_DT >= min_duration) & ~np.isin(ids, faulty)
     return ids[usable].tolist()
+
+
+def no_vehicle_reason(table: NgsimTable, min_duration: float) -> str:
+    """Why :func:`vehicle_ids` finds no vehicle of ``table`` with ``min_duration`` [s] of data, for an error message:
+    the file, how many vehicles it has, the longest usable one, and what is wrong with the first unusable one."""
+    all_ids = np.unique(table.vehicle_id)
+    usable = vehicle_ids(table)
+    order = np.lexsort((table.frame, table.vehicle_id))
+    vehicle, frame = table.vehicle_id[order], table.frame[order]
+    first = np.append(True, (np.diff(vehicle) != 0) | (np.diff(frame) != 0))
+    ids, samples = np.unique(vehicle[first], return_counts=True)
+    longest = ((samples[np.isin(ids, usable)] - 1) * FRAME_DT).max(initial=0.0)
+    reason = f"{table.path}: no vehicle has {min_duration} s of usable frames: of its {all_ids.size} vehicle(s), "
+    reason += f"{len(usable)} usable" + (f" (the longest for {longest:.1f} s)" if usable else "")
+    unusable = np.setdiff1d(all_ids, usable)
+    if unusable.size:
+        try:
+            vehicle_profile(table, int(unusable[0]))
+        except ValueError as error:
+            reason += f", {unusable.size} unusable, e.g. {str(error).removeprefix(f'{table.path}: ')}"
+    return reason
 
 
 def vehicle_profile(
@@ -111,7 +133,8 @@ def vehicle_profile(
 ) -> LeaderProfile:
     """One vehicle's speed [m/s] and acceleration [m/s^2] in frame order, ``dt`` = 0.1 s.
 
-    Rows repeating a frame with identical ``v_Vel`` and ``v_Acc`` count once.
+    Rows repeating a frame with identical ``v_Vel`` and ``v_Acc`` count once. A speed outside [0, ``MAX_SPEED``]
+    is a ``ValueError`` naming the file, the vehicle, the row and the value (whether or not ``within_band``).
     With ``within_band``, the vehicle's acceleration is instead integrated from
     ``within_band.initial_speed`` and kept inside ``within_band.speed_band``
     (``LeaderProfile.from_acceleration``); the profile keeps the vehicle's length.
@@ -144,6 +167,14 @@ def vehicle_profile(
     rows = rows[np.append(True, ~repeat)]
     if rows.size < 2:
         raise ValueError(f"{table.path}: Vehicle_ID {vehicle_id} has 1 frame; a profile needs at least 2")
+    out_of_range = np.flatnonzero(_speed_out_of_range(table.v_vel[rows]))
+    if out_of_range.size:
+        row = rows[out_of_range[0]]
+        raise ValueError(
+            f"{table.path}: Vehicle_ID {vehicle_id}, row {row + 2} (Frame_ID {table.frame[row]}): v_Vel = "
+            f"{table.v_vel[row]} ft/s ({table.v_vel[row] * FOOT:.6g} m/s) is outside [0, MAX_SPEED = "
+            f"{MAX_SPEED:g}] m/s ({out_of_range.size} of its {rows.size} frames are)"
+        )
     speed = table.v_vel[rows] * FOOT
     accel = table.v_acc[rows] * FOOT
     name = f"ngsim-{vehicle_id}"
@@ -154,6 +185,12 @@ def vehicle_profile(
             f"within_band.dt = {within_band.dt}: must equal the NGSIM frame period {FRAME_DT} s"
         )
     return LeaderProfile.from_acceleration(accel, within_band, name=f"{name}-in-band")
+
+
+def _speed_out_of_range(v_vel: np.ndarray) -> np.ndarray:
+    """Which of the speeds ``v_vel`` [ft/s] lie outside [0, MAX_SPEED] once in m/s [bool]."""
+    speed = v_vel * FOOT
+    return (speed < 0) | (speed > MAX_SPEED)
 
 
 def _adjacent_checks(table: NgsimTable, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

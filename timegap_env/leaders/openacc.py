@@ -30,13 +30,14 @@ from pathlib import Path
 
 import numpy as np
 
-from timegap_env.config import LeaderConfig
-from timegap_env.leaders.profile import LeaderProfile, open_csv
+from timegap_env.config import MAX_SPEED, LeaderConfig
+from timegap_env.leaders.profile import LeaderProfile, csv_errors, open_csv
 
 PATH_VARIABLE = "TIMEGAP_OPENACC_PATH"  # a directory of OpenACC files
 SHARED_DIR = Path("shared", "data", "openacc")
 TICK = 0.1  # time between two records [s]
-STANDSTILL_SPEED = 0.1  # a car slower than this stands still [m/s]
+STANDSTILL_SPEED = 0.1  # a car slower than this stands still; a recorded speed may dip this far below 0 (the data
+# holds -0.07 m/s), a lead car's is then read as 0 [m/s]
 MIN_STANDSTILL_TIME = 2.0  # a follower's standstill spacing needs at least this much standing still [s]
 TICK_TOLERANCE = 1e-6  # a time step farther than this from TICK is an error [s]
 METADATA = ("Date", "Vehicle_order", "Number_of_vehicles", "ACC", "Distance_setting")
@@ -83,6 +84,9 @@ def default_openacc_dir() -> Path:
 def openacc_paths(directory: str | Path | None = None) -> list[Path]:
     """The ``.csv`` and ``.csv.gz`` files of ``directory`` (default :func:`default_openacc_dir`), sorted by name."""
     directory = default_openacc_dir() if directory is None else Path(directory)
+    if directory.exists() and not directory.is_dir():
+        raise NotADirectoryError(f"OpenACC data at {directory} is not a directory: set ${PATH_VARIABLE} to a directory "
+                                 "of OpenACC files")
     return sorted(path for path in directory.iterdir() if path.name.endswith((".csv", ".csv.gz")))
 
 
@@ -91,8 +95,9 @@ def read_openacc(path: str | Path) -> OpenAccRun:
 
     Raises ``ValueError`` naming the file and what is wrong: the file itself (see :func:`open_csv`), a
     missing or malformed metadata line, a missing column, a value that is neither a number nor empty
-    (an empty or NaN value is a gap in the record; ``inf`` is an error), a time step that is not 0.1 s,
-    an empty table. Rows are numbered as lines of the file. Trailing blank lines are ignored.
+    (an empty or NaN value is a gap in the record; ``inf`` is an error), a speed outside [-STANDSTILL_SPEED,
+    ``MAX_SPEED``], a time step that is not 0.1 s, an empty table. Rows are numbered as lines of the file.
+    Trailing blank lines are ignored.
     """
     path = Path(path)
     metadata = {}
@@ -108,8 +113,9 @@ def read_openacc(path: str | Path) -> OpenAccRun:
                 raise ValueError(f"{path}: line {line_number} is {fields[0]!r}: expected the metadata line {expected!r}")
             metadata[expected] = [field for field in fields[1:] if field]
         reader = csv.reader(lines)
-        header = [name.strip() for name in next(reader, [])]
-        rows = list(reader)
+        with csv_errors(path, reader, first_line=len(METADATA) + 1):
+            header = [name.strip() for name in next(reader, [])]
+            rows = list(reader)
     date, acc, setting, vehicles = _parse_metadata(path, metadata)
     if "Time" not in header:
         raise ValueError(f"{path}: missing column 'Time' (found columns {header[:8]}...)")
@@ -142,6 +148,15 @@ def read_openacc(path: str | Path) -> OpenAccRun:
     for k in range(1, n + 1):
         if f"Speed{k}" in columns:
             speed[:, k - 1] = column(f"Speed{k}")
+            with np.errstate(invalid="ignore"):
+                wrong = np.flatnonzero((speed[:, k - 1] < -STANDSTILL_SPEED) | (speed[:, k - 1] > MAX_SPEED))
+            if wrong.size:
+                i = int(wrong[0])
+                raise ValueError(
+                    f"{path}: row {first_data_line + i}, column 'Speed{k}' (car {vehicles[k - 1]}) = "
+                    f"{rows[i][columns[f'Speed{k}']]!r} m/s is outside [-{STANDSTILL_SPEED}, MAX_SPEED = "
+                    f"{MAX_SPEED:g}] m/s"
+                )
         else:
             absent_positions.append(k)
         if k < n:

@@ -12,7 +12,11 @@ sampled every ``dt`` [s]. Sources:
   (:mod:`timegap_env.leaders.idm`), named in :mod:`timegap_env.leaders.scenarios`.
 
 Every leader file (the user's CSV, NGSIM, OpenACC) is read through :func:`open_csv`, which
-checks it (gzip, UTF-8 text, not empty) and names the file in its errors.
+checks it (a file, gzip, UTF-8 text, not empty) and names the file in its errors, and parsed inside
+:func:`csv_errors`, which names the file and row of an error of the :mod:`csv` module.
+
+Every profile's speeds lie in [0, ``MAX_SPEED``]: a speed outside (or not finite) is a ``ValueError``
+naming the profile, the sample and the value, whatever the source.
 """
 
 from __future__ import annotations
@@ -30,7 +34,7 @@ from pathlib import Path
 import numba
 import numpy as np
 
-from timegap_env.config import LeaderConfig
+from timegap_env.config import MAX_SPEED, LeaderConfig, shown
 
 
 GZIP_MAGIC = b"\x1f\x8b"  # the first two bytes of every gzip file
@@ -44,7 +48,10 @@ def open_csv(path: Path) -> Iterator[Iterator[str]]:
     is dropped) and blank lines at the end are dropped. Raises ``FileNotFoundError`` for a missing file and
     ``ValueError`` naming the file when it is named ``.gz`` but not gzip (on opening), or, as ``lines`` is
     read, a truncated or corrupt gzip stream, binary (not UTF-8, or NUL bytes), or empty (no line with text).
+    A directory raises ``IsADirectoryError`` saying so.
     """
+    if path.is_dir():
+        raise IsADirectoryError(f"{path}: is a directory, not a .csv or .csv.gz file")
     if path.suffix == ".gz":
         with path.open("rb") as raw:
             start = raw.read(8)
@@ -88,15 +95,44 @@ def _checked_lines(path: Path, text: io.TextIOWrapper) -> Iterator[str]:
         raise ValueError(f"{path}: empty file (no text)")
 
 
+@contextlib.contextmanager
+def csv_errors(path: Path, reader: csv.DictReader | Iterator[list[str]], first_line: int = 1) -> Iterator[None]:
+    """Turn an error of the :mod:`csv` module while ``reader`` (a reader of ``path``) is read into a ``ValueError``
+    naming the file, the row (a line of the file; the reader's first line is line ``first_line``) and the cause,
+    e.g. a field longer than the module's limit of 131,072 characters."""
+    try:
+        yield
+    except csv.Error as err:
+        # A DictReader's own line_num lags behind its csv reader's until a row is read whole.
+        row = first_line - 1 + max(getattr(reader, "reader", reader).line_num, 1)
+        raise ValueError(f"{path}: row {row} is not readable as CSV ({err})") from err
+
+
 def _series(name: str, values: np.ndarray) -> np.ndarray:
     """``values`` as a finite 1-D float array of at least 2 samples; ValueError naming ``name`` otherwise."""
-    array = np.asarray(values, dtype=float)
+    try:
+        array = np.asarray(values, dtype=float)
+    except (TypeError, ValueError, OverflowError):
+        raise ValueError(f"{name} = {shown(values)}: must be a 1-D array of numbers") from None
     if array.ndim != 1 or array.size < 2:
         raise ValueError(f"{name} has shape {array.shape}: must be 1-D with at least 2 samples")
     bad = np.flatnonzero(~np.isfinite(array))
     if bad.size:
         raise ValueError(f"{name}[{bad[0]}] = {array[bad[0]]}: every sample must be finite ({bad.size} are not)")
     return array
+
+
+def check_speeds(speed: np.ndarray, where: str) -> None:
+    """ValueError unless every speed [m/s] of ``speed`` (any shape, finite) lies in [0, MAX_SPEED], naming the first
+    that does not as ``where`` followed by its index, e.g. ``LeaderProfile 'user': speed[3] = 1000.0 m/s ...``."""
+    if speed.min() >= 0 and speed.max() <= MAX_SPEED:  # the usual case, in two passes
+        return
+    bad = (speed < 0) | (speed > MAX_SPEED)
+    if bad.any():
+        index = tuple(int(i) for i in np.argwhere(bad)[0])
+        at = ", ".join(map(str, index))
+        raise ValueError(f"{where}speed[{at}] = {float(speed[index])!r} m/s: every speed must lie in [0, MAX_SPEED = "
+                         f"{MAX_SPEED:g}] m/s ({np.count_nonzero(bad)} do not)")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -112,16 +148,16 @@ class LeaderProfile:
         if not (isinstance(self.dt, (int, float)) and math.isfinite(self.dt) and self.dt > 0):
             raise ValueError(f"LeaderProfile.dt = {self.dt!r}: must be a finite number > 0")
         for field in ("speed", "accel"):
-            values = _series(f"LeaderProfile.{field}", getattr(self, field)).copy()
+            values = _series(f"LeaderProfile {self.name!r}: {field}", getattr(self, field)).copy()
             values.setflags(write=False)
             object.__setattr__(self, field, values)
+            if field == "speed":
+                check_speeds(values, f"LeaderProfile {self.name!r}: ")
         if self.speed.shape != self.accel.shape:
             raise ValueError(
-                f"LeaderProfile.accel has shape {self.accel.shape}, speed has {self.speed.shape}: must match"
+                f"LeaderProfile {self.name!r}: accel has shape {self.accel.shape}, speed has {self.speed.shape}: "
+                "must match"
             )
-        negative = np.flatnonzero(self.speed < 0)
-        if negative.size:
-            raise ValueError(f"LeaderProfile.speed[{negative[0]}] = {self.speed[negative[0]]}: must be >= 0")
 
     @property
     def t(self) -> np.ndarray:
@@ -136,7 +172,8 @@ class LeaderProfile:
     @classmethod
     def from_speed(cls, speed: np.ndarray, dt: float = LeaderConfig.dt, name: str = "custom") -> LeaderProfile:
         """A profile from a speed series [m/s]; the acceleration is its central difference."""
-        speed = _series("speed", speed)
+        speed = _series(f"LeaderProfile {name!r}: speed", speed)
+        check_speeds(speed, f"LeaderProfile {name!r}: ")  # before the difference, which 1e308 m/s would overflow
         return cls(speed=speed, accel=np.gradient(speed, dt), dt=dt, name=name)
 
     @classmethod
@@ -160,17 +197,19 @@ class LeaderProfile:
         Columns: ``speed`` [m/s] (required); ``time`` [s] (optional, evenly
         spaced, sets ``dt``); ``accel`` [m/s^2] (optional, else differentiated).
         Names may be padded with spaces (``time, speed``); blank lines are skipped.
-        Raises ``ValueError`` naming the file and what is wrong (see :func:`open_csv`);
+        Raises ``ValueError`` naming the file and what is wrong (see :func:`open_csv`), e.g. a speed outside
+        [0, ``MAX_SPEED``];
         rows are numbered as lines of the file, the header being row 1.
         """
         path = Path(path)
         with open_csv(path) as lines:
             reader = csv.DictReader(lines)
-            columns = [column.strip() for column in reader.fieldnames]
-            if "speed" not in columns:
-                raise ValueError(f"{path}: missing column 'speed' (found columns {columns})")
-            reader.fieldnames = columns
-            rows = [(reader.line_num, row) for row in reader]
+            with csv_errors(path, reader):
+                columns = [column.strip() for column in reader.fieldnames]
+                if "speed" not in columns:
+                    raise ValueError(f"{path}: missing column 'speed' (found columns {columns})")
+                reader.fieldnames = columns
+                rows = [(reader.line_num, row) for row in reader]
         if len(rows) < 2:
             found = "one data row" if rows else "no data rows"
             raise ValueError(f"{path}: {found} after the header; a profile needs at least 2")
@@ -188,6 +227,9 @@ class LeaderProfile:
                     values[i] = math.nan  # not a number: reported just below, as NaN or inf text is
                 if not math.isfinite(values[i]):
                     raise ValueError(f"{path}: row {line}, column '{column}' = {row[column]!r} is not a finite number")
+                if column == "speed" and not 0 <= values[i] <= MAX_SPEED:
+                    raise ValueError(f"{path}: row {line}, column 'speed' = {row[column]!r} m/s is outside "
+                                     f"[0, MAX_SPEED = {MAX_SPEED:g}] m/s")
             data[column] = values
         if "time" in data:
             steps = np.diff(data["time"])
@@ -204,7 +246,7 @@ class LeaderProfile:
 class LeaderProfiles:
     """Leader profiles of one length, a row each: what a batched reset draws and loads at once.
 
-    Checked as :class:`LeaderProfile` checks one (finite, speed >= 0), for all rows in one pass;
+    Checked as :class:`LeaderProfile` checks one (finite, speeds in [0, MAX_SPEED]), for all rows in one pass;
     ``profile(i)`` is row i as a :class:`LeaderProfile`.
     """
 
@@ -228,9 +270,7 @@ class LeaderProfiles:
             raise ValueError(
                 f"LeaderProfiles.accel has shape {self.accel.shape}, speed has {self.speed.shape}: must match"
             )
-        if self.speed.min() < 0:
-            row, k = np.argwhere(self.speed < 0)[0]
-            raise ValueError(f"LeaderProfiles.speed[{row}, {k}] = {self.speed[row, k]}: must be >= 0")
+        check_speeds(self.speed, f"LeaderProfiles {self.name!r}: ")
 
     def __len__(self) -> int:
         return self.speed.shape[0]

@@ -40,8 +40,15 @@ def ngsim_leader(seed: int | None, leader: LeaderConfig, *, within_band: bool) -
         raise FileNotFoundError(
             f"NGSIM data not found at {path}: set ${ngsim.PATH_VARIABLE} to an NGSIM trajectory CSV"
         )
+    if path.is_dir():
+        raise IsADirectoryError(f"NGSIM data at {path} is a directory: set ${ngsim.PATH_VARIABLE} to an NGSIM "
+                                "trajectory CSV (.csv or .csv.gz)")
     table = _ngsim_table(path)
-    vehicle = np.random.default_rng(seed).choice(ngsim.vehicle_ids(table, min_duration=leader.min_recorded_duration))
+    ids = ngsim.vehicle_ids(table, min_duration=leader.min_recorded_duration)
+    if not ids:
+        raise ValueError(f"{ngsim.no_vehicle_reason(table, leader.min_recorded_duration)} (a leader needs "
+                         f"LeaderConfig.min_recorded_duration = {leader.min_recorded_duration} s)")
+    vehicle = np.random.default_rng(seed).choice(ids)
     return ngsim.vehicle_profile(table, int(vehicle), within_band=leader if within_band else None)
 
 
