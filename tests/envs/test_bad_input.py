@@ -177,3 +177,9 @@ def test_bytes_per_env_is_what_sub_envs_take():
         del envs
     measured = (taken[1] - taken[0]) / 400
     assert 0.8 < per_env / measured < 1.25, (per_env, measured)
+
+
+@pytest.mark.parametrize("speed", [np.full(50, 1000.0), np.full(30, np.nan), np.ones((3, 3)), np.array([20.0])])
+def test_a_leader_speed_the_profile_refuses_is_named_as_the_option(speed):
+    with pytest.raises(ValueError, match="reset option leader_speed: "):
+        gym.make("TimeGapMonitor-v0").reset(seed=0, options={"leader_speed": speed})

@@ -106,7 +106,10 @@ class Episodes:
         n_followers, dt = cfg.platoon.n_followers, cfg.platoon.dt
         pinned = parse_degradations(options["degradation"], n_followers) if "degradation" in options else None
         if "leader_speed" in options:
-            profile = LeaderProfile.from_speed(options["leader_speed"], dt, "user")
+            try:
+                profile = LeaderProfile.from_speed(options["leader_speed"], dt, "user")
+            except ValueError as error:
+                raise ValueError(f"reset option leader_speed: {error}") from None
             self._load_leaders(envs, LeaderProfiles.of(profile))
         else:
             families: dict[str, tuple[list[int], list[int]]] = {}  # family -> its envs and their leaders' seeds
