@@ -294,3 +294,78 @@ def test_show_headless(monkeypatch, driver):
     renderer.close()
     assert not pygame.display.get_init()
     renderer.close()
+
+
+# ---- the state box says what is going on (issue 22, item 14) -------------------------------------
+
+
+def state_boxes(renderer: PlatoonRenderer, image: np.ndarray) -> np.ndarray:
+    """The column of state boxes left of the chart rows (nothing else is drawn there)."""
+    return chart_band(renderer, image)[:, : rendering.STATE_BOX_WIDTH]
+
+
+def labels(frame: RenderFrame) -> list[str]:
+    """Each follower's state label for a frame, judged as the renderer judges it (the whole history visible)."""
+    limits = np.stack([rendering._limit_history(frame, name) for name in rendering._LIMIT_HISTORIES], axis=-1)
+    return [rendering.state_label(frame, i, frame.estimate_history[:, i], limits[:, i]) for i in range(N_FOLLOWERS)]
+
+
+def test_the_state_box_names_every_state():
+    quiet = np.zeros(N_FOLLOWERS, dtype=bool)
+    frame = make_frame(alarm=quiet)  # follower 2's estimate is above its UCL, without an alarm (yet)
+    assert labels(frame) == ["in control", "out of limits", "in control", "in control", "in control"]
+    settling = np.array([False, True, True, False, False])
+    assert labels(dataclasses.replace(frame, settling=settling))[:3] == ["in control", "settling", "settling"]
+    assert labels(make_frame())[1] == "ALARM"
+    assert labels(make_frame(collided=~quiet))[1] == "COLLIDED"
+    start = make_frame(t=0.0, history_t=np.empty(0), estimate_history=np.empty((0, N_FOLLOWERS)), alarm=quiet)
+    assert labels(start) == ["in control"] * N_FOLLOWERS  # nothing estimated yet
+    estimate = frame.estimate_history.copy()
+    estimate[-3:, 1] = np.nan  # the latest finite estimate, the one the row marks and prints, is what counts
+    assert labels(dataclasses.replace(frame, estimate_history=estimate))[1] == "out of limits"
+
+
+def test_an_estimate_outside_its_limits_is_not_drawn_as_in_control(renderer):
+    """Only follower 2's history differs, and only inside the plot; its state box must differ too (it read "in
+    control" either way)."""
+    quiet = np.zeros(N_FOLLOWERS, dtype=bool)
+    outside = make_frame(alarm=quiet)
+    inside = dataclasses.replace(outside, estimate_history=np.minimum(outside.estimate_history, 1.8))
+    boxes_outside, boxes_inside = (state_boxes(renderer, renderer.render(frame)) for frame in (outside, inside))
+    differ = np.flatnonzero(np.any(boxes_outside != boxes_inside, axis=(1, 2)))
+    assert differ.size > 0
+    row = renderer._chart_rect.height // N_FOLLOWERS  # the changed pixels lie in follower 2's row
+    assert differ.min() >= rendering.CHART_SUBTITLE_HEIGHT + row // 2 and differ.max() < 2 * row + row // 2
+    assert labels(inside) == ["in control"] * N_FOLLOWERS
+    settling = renderer.render(dataclasses.replace(inside, settling=np.array([False, True, False, False, False])))
+    assert np.any(state_boxes(renderer, settling) != boxes_inside)
+
+
+def test_a_settling_vector_of_the_wrong_shape_is_rejected(renderer):
+    with pytest.raises(ValueError, match="settling"):
+        renderer.render(make_frame(settling=np.zeros(N_FOLLOWERS + 1, dtype=bool)))
+
+
+def test_the_env_frame_says_settling_while_the_chart_holds_its_alarms_off():
+    """After 1.6 s -> 1.0 s the estimate lags above the new UCL while the chart holds its alarms off: the box said
+    "in control"; it says "settling" until the hold ends, then "in control" again."""
+    import gymnasium as gym
+
+    import timegap_env
+
+    levels = list(timegap_env.EnvConfig().setting_levels)
+    env = gym.make(timegap_env.ENV_ID, render_mode="rgb_array", config={"degradation": {"kind_weights": {"none": 1.0}}})
+    env.reset(seed=0, options={"scenario": "aggressive_cycles"})
+    seen = []
+    for step in range(30):
+        env.step(levels.index(1.6) if step < 10 else levels.index(1.0))
+        frame = env.unwrapped.task.render_frame(rendering.DEFAULT_TIME_WINDOW)
+        estimate, ucl = frame.estimate_history[-1], frame.ucl
+        seen.append((bool(np.any(estimate > ucl)), set(labels(frame)), bool(frame.settling.all())))
+    assert seen[9] == (False, {"in control"}, False)
+    assert seen[13] == (True, {"settling"}, True)  # 4 s after the change: the estimates are above 1.25 s
+    assert seen[29] == (False, {"in control"}, False)
+    image = env.render()
+    assert image.shape == (rendering.DEFAULT_HEIGHT, rendering.DEFAULT_WIDTH, 3)
+    env.close()
+
