@@ -1,35 +1,40 @@
 """A trained stable-baselines3 model as a policy, with the observation scaling it was trained under.
 
-    policy = LearnedPolicy.load("results/ppo")          # results/ppo/model.zip (+ vecnormalize.pkl if present)
+    policy = LearnedPolicy.load("results/ppo")          # results/ppo/model.zip, env.json (+ vecnormalize.pkl)
     action, _ = policy.predict(obs, deterministic=True)
 
-A model trained inside ``VecNormalize`` expects normalised observations. ``VecNormalize.load``
+A run is read as it was trained, or not at all: ``env.json`` (``agents.protocol``) says what the
+model's actions mean, how many observations it reads at once and whether they were normalised;
+a missing ``env.json``, one whose env does not fit the model (another action space: a relative-mode
+Discrete(3) read as platoon mode's Discrete(9)), or statistics missing where the run normalised,
+present where it did not, of another shape or not finite, raise :class:`RunFileError` naming the
+file. A model trained inside ``VecNormalize`` expects normalised observations. ``VecNormalize.load``
 needs a venv; instead :class:`ObservationNormalizer` reads the pickle's running mean and
 variance (``obs_rms``), ``clip_obs`` and ``epsilon`` and applies SB3's formula
-clip((obs - mean) / sqrt(var + epsilon), -clip_obs, clip_obs). Without a pickle the
-observations go to the model unchanged. A run's file that cannot be used (not a model zip, not a
-``VecNormalize`` pickle, observations of another shape) raises :class:`RunFileError` naming it.
+clip((obs - mean) / sqrt(var + epsilon), -clip_obs, clip_obs).
+
+``LearnedPolicy.load`` sets torch to one thread (``threads``): the network is tiny, and torch's
+default of a thread per core fights the simulator's numba threads for the cores (on 2 cores a
+16-episode evaluation batch took 2-3 s instead of 0.1-0.2 s, and up to 51 s on a busy machine).
 """
 
 from __future__ import annotations
 
 import dataclasses
-import json
 import pickle
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+import torch
 from gymnasium import spaces
 from stable_baselines3 import PPO
 from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.vec_env import VecNormalize
 
-from agents.protocol import ENV_FILE, MODEL_FILE, VECNORMALIZE_FILE
+from agents.protocol import ENV_FILE, MODEL_FILE, VECNORMALIZE_FILE, RunFileError, check_spaces, read_env_file
 
-
-class RunFileError(ValueError):
-    """A run's file (model zip, ``VecNormalize`` pickle, ``env.json``) that cannot be used; the message names it."""
+__all__ = ["LearnedPolicy", "ObservationNormalizer", "RunFileError", "load_model", "load_vecnormalize"]
 
 
 def load_model(path: str | Path, algorithm: type[BaseAlgorithm] = PPO, **kwargs: Any) -> BaseAlgorithm:
@@ -56,7 +61,42 @@ def load_vecnormalize(path: str | Path) -> VecNormalize:
                            f"({type(error).__name__}: {error})") from error
     if not isinstance(saved, VecNormalize):
         raise RunFileError(f"vecnormalize = {str(path)!r}: holds a {type(saved).__name__}, not a VecNormalize")
+    check_statistics(saved, str(path))
     return saved
+
+
+def check_statistics(saved: VecNormalize, where: str) -> None:
+    """RunFileError naming ``where``, the field and its bad values unless ``saved``'s statistics can scale anything:
+    finite running means, finite variances >= 0, a finite epsilon >= 0, finite clips > 0 (a NaN mean turns every
+    observation into NaN, and the model's actions with it)."""
+    rules = {"mean": ("finite", lambda v: np.isfinite(v)), "var": (">= 0", lambda v: np.isfinite(v) & (v >= 0)),
+             "epsilon": (">= 0", lambda v: np.isfinite(v) & (v >= 0)), "clip": ("> 0", lambda v: np.isfinite(v) & (v > 0))}
+    fields: dict[str, tuple[str, Any]] = {name: ("clip", getattr(saved, name, None)) for name in ("clip_obs", "clip_reward")}
+    fields["epsilon"] = ("epsilon", getattr(saved, "epsilon", None))
+    for name in ("obs_rms", "ret_rms"):
+        statistics = getattr(saved, name, None)
+        parts = statistics.items() if isinstance(statistics, dict) else [("", statistics)]
+        for key, part in parts:
+            if part is not None:
+                prefix = f"{name}[{key!r}]" if key else name
+                fields[f"{prefix}.mean"] = ("mean", getattr(part, "mean", None))
+                fields[f"{prefix}.var"] = ("var", getattr(part, "var", None))
+    for name, (kind, value) in fields.items():
+        try:
+            values = np.asarray(value, dtype=np.float64)
+        except (TypeError, ValueError):
+            values = None
+        if value is None or values is None:
+            raise RunFileError(f"vecnormalize = {where!r}: {name} = {value!r}: not a number (is the file from another "
+                               "SB3 version?)")
+        rule, check = rules[kind]
+        bad = ~check(values)
+        if bad.any():
+            entries = f" at entries {np.flatnonzero(bad).tolist()[:10]}" if values.ndim else ""
+            shown = values.ravel()[bad.ravel()][:5].tolist() if values.ndim else float(values)
+            raise RunFileError(f"vecnormalize = {where!r}: {name} = {shown}{entries}: must be finite"
+                               f"{'' if rule == 'finite' else ' and ' + rule}; these statistics would turn the "
+                               "observations into NaN or inf")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -128,39 +168,49 @@ class LearnedPolicy:
         vecnormalize: str | Path | None = None,
         algorithm: type[BaseAlgorithm] = PPO,
         name: str = "PPO",
+        threads: int | None = 1,
     ) -> LearnedPolicy:
-        """Load ``path`` (a model zip, or a directory holding ``model.zip``) on the CPU.
+        """Load a run, ``path`` (its directory, or the model zip in it), on the CPU, as it was trained.
 
-        ``vecnormalize``: the ``VecNormalize`` pickle; by default ``vecnormalize.pkl`` beside the
-        model if it exists, else no normalisation. An explicit path that does not exist is an error.
-        The action mode comes from ``env.json`` beside the model if it exists. A missing file raises
-        FileNotFoundError; one that cannot be read, or statistics of another observation shape than the
-        model's, RunFileError naming it.
+        ``env.json`` beside the model gives the action mode (checked against the model's action space), the frame
+        stack and whether observations were normalised. ``vecnormalize``: the ``VecNormalize`` pickle; by default
+        ``vecnormalize.pkl`` beside the model, required when the run normalised (``normalize: true``, or not
+        recorded), refused when it did not. ``threads``: torch's threads from now on (None: leave them). A missing
+        model zip raises FileNotFoundError; a missing ``env.json``, missing or extra statistics, or a file that
+        cannot be read or does not fit the others, RunFileError naming it.
         """
         path = Path(path)
         model_path = path / MODEL_FILE if path.is_dir() else path
         if not model_path.is_file():
             raise FileNotFoundError(f"path = {str(path)!r}: no model zip found at {model_path}")
-        stats_path = Path(vecnormalize) if vecnormalize is not None else model_path.parent / VECNORMALIZE_FILE
+        run = read_env_file(model_path.parent / ENV_FILE)
+        beside = model_path.parent / VECNORMALIZE_FILE
+        stats_path = Path(vecnormalize) if vecnormalize is not None else beside
         normalizer = None
-        if vecnormalize is not None or stats_path.is_file():
+        if run.normalize is False:
+            if vecnormalize is not None or beside.is_file():
+                raise RunFileError(f"{stats_path}: {'given' if vecnormalize is not None else 'present'}, but "
+                                   f"{run.path} says the run did not normalise observations (normalize: false); "
+                                   "one of the two is not this run's")
+        else:
+            if vecnormalize is not None and not stats_path.is_file():
+                raise FileNotFoundError(f"vecnormalize = {str(stats_path)!r}: no such file")
+            if not stats_path.is_file():
+                said = ("says the run normalised observations (normalize: true)" if run.normalize else
+                        "does not say whether the run normalised observations (no normalize field)")
+                raise RunFileError(f"{stats_path}: missing; {run.path} {said}, and without the statistics the model "
+                                   "would read unscaled observations. Restore the file"
+                                   + ("" if run.normalize else f", or add \"normalize\": false to {ENV_FILE} if the "
+                                      "run trained without VecNormalize"))
             normalizer = ObservationNormalizer.from_vecnormalize(stats_path)
-        env_path = model_path.parent / ENV_FILE
-        action_mode, frame_stack = None, 1
-        if env_path.is_file():
-            try:
-                run = json.loads(env_path.read_text())
-                action_mode = run["env_kwargs"].get("config", {}).get("action_mode", "platoon")
-                frame_stack = run["frame_stack"]
-            except (UnicodeDecodeError, json.JSONDecodeError, AttributeError, KeyError, TypeError) as error:
-                raise RunFileError(f"{env_path}: not a JSON object with env_kwargs (gym.make's) and frame_stack "
-                                   f"({error!r})") from error
+        if threads is not None:
+            torch.set_num_threads(threads)
         model = load_model(model_path, algorithm, device="cpu")
         try:
-            policy = cls(model, normalizer, name, action_mode, frame_stack)
-        except ValueError as error:  # the action mode or frame stack (env.json's, or the defaults) does not fit the model
-            source = env_path if env_path.is_file() else f"the defaults (no {env_path})"
-            raise RunFileError(f"{source} does not fit the model {model_path}: {error}") from error
+            policy = cls(model, normalizer, name, run.action_mode, run.frame_stack)
+        except ValueError as error:  # the action mode or frame stack of env.json does not fit the model
+            raise RunFileError(f"{run.path} does not fit the model {model_path}: {error}") from error
+        check_spaces(run, model.action_space, model.observation_space.shape, model_path)
         if normalizer is not None and normalizer.mean.shape != policy.observation_shape:
             raise RunFileError(f"vecnormalize = {str(stats_path)!r}: normalises observations of shape "
                                f"{normalizer.mean.shape}, the model {model_path} takes {policy.observation_shape}")

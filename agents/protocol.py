@@ -3,12 +3,109 @@
 Training (``train/train_ppo.py``) seeds its envs below ``EVAL_SEED_START``; the held-out
 evaluation (``train/evaluate.py``) seeds its episodes from ``EVAL_SEED_START`` on, so no
 evaluation episode was seen in training. A trained run is a directory holding ``MODEL_FILE``,
-``ENV_FILE`` (JSON: ``env_kwargs``, the ``gym.make`` keyword arguments of the env it was trained
-in, its action mode among them, and ``frame_stack``, the observations the model reads at once) and, when observations were normalised, ``VECNORMALIZE_FILE`` (all three
-read by ``agents.learned``).
+``ENV_FILE`` and, when observations were normalised, ``VECNORMALIZE_FILE`` (all three read by
+``agents.learned``). ``ENV_FILE`` is a JSON object:
+
+- ``env_kwargs``: the ``gym.make`` keyword arguments of the env the run was trained in (its
+  ``config``, the action mode among it: the meaning of the model's actions);
+- ``frame_stack``: the observations the model reads at once;
+- ``normalize``: true if the model reads observations normalised by ``VECNORMALIZE_FILE``, false if
+  it reads them as the env gives them. Runs written before the field existed leave it out; then
+  ``VECNORMALIZE_FILE`` beside the model says the run normalised, and its absence is an error
+  (the model cannot be told apart from one whose statistics were lost).
+
+:func:`read_env_file` reads and checks it, :func:`check_spaces` checks a model against it; a file
+that is missing, unreadable or does not fit the model is an error naming it, never a default.
 """
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from pathlib import Path
+from typing import Any
 
 EVAL_SEED_START = 10_000  # evaluation seeds are >= this, training seeds < this [-]
 MODEL_FILE = "model.zip"  # the SB3 model of a run
 VECNORMALIZE_FILE = "vecnormalize.pkl"  # SB3 VecNormalize statistics of a run, if it normalised
-ENV_FILE = "env.json"  # the env a run was trained in and its frame stacking (JSON)
+ENV_FILE = "env.json"  # the env a run was trained in, its frame stacking and normalisation (JSON)
+ENV_FILE_KEYS = {"env_kwargs", "frame_stack", "normalize"}  # "normalize" may be absent in older runs
+
+
+class RunFileError(ValueError):
+    """A run's file (model zip, ``VecNormalize`` pickle, ``env.json``) that is missing, cannot be used, or does not
+    fit the others; the message names it."""
+
+
+@dataclasses.dataclass(frozen=True)
+class RunEnv:
+    """A run's ``ENV_FILE``, checked."""
+
+    path: Path  # the file
+    env_kwargs: dict[str, Any]  # gym.make's keyword arguments
+    frame_stack: int  # observations the model reads at once
+    normalize: bool | None  # observations normalised by VECNORMALIZE_FILE; None: not recorded (an older run)
+
+    @property
+    def config(self) -> Any:
+        """The env's ``EnvConfig`` (checked by :func:`read_env_file`)."""
+        from timegap_env.config import EnvConfig
+
+        return EnvConfig.from_dict(self.env_kwargs.get("config"))
+
+    @property
+    def action_mode(self) -> str:
+        """What the model's actions mean: the config's ``action_mode``."""
+        return self.config.action_mode
+
+
+def read_env_file(path: str | Path) -> RunEnv:
+    """The run's ``ENV_FILE`` at ``path``: ``RunFileError`` naming it if it is missing, not such a JSON object, or its
+    env config is not one ``gym.make`` accepts."""
+    from timegap_env.config import EnvConfig
+
+    path = Path(path)
+    if not path.is_file():
+        raise RunFileError(f"{path}: missing; a run's {ENV_FILE} says what the model's actions mean (the env it was "
+                           "trained in), how many observations it reads at once and whether they were normalised; "
+                           "without it the model cannot be evaluated as it was trained")
+    try:
+        run = json.loads(path.read_text())
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as error:
+        raise RunFileError(f"{path}: not readable JSON ({type(error).__name__}: {error})") from error
+    if not isinstance(run, dict) or not {"env_kwargs", "frame_stack"} <= set(run) or set(run) - ENV_FILE_KEYS:
+        raise RunFileError(f"{path}: must be a JSON object with the keys env_kwargs, frame_stack and optionally "
+                           f"normalize; holds {run!r}"[:400])
+    env_kwargs, frame_stack, normalize = run["env_kwargs"], run["frame_stack"], run.get("normalize")
+    if not isinstance(env_kwargs, dict) or not isinstance(env_kwargs.get("config", {}) or {}, dict):
+        raise RunFileError(f"{path}: env_kwargs = {env_kwargs!r}: must be an object (gym.make's keyword arguments, "
+                           "the env's config among them)")
+    if isinstance(frame_stack, bool) or not isinstance(frame_stack, int) or frame_stack < 1:
+        raise RunFileError(f"{path}: frame_stack = {frame_stack!r}: must be an integer >= 1")
+    if normalize is not None and not isinstance(normalize, bool):
+        raise RunFileError(f"{path}: normalize = {normalize!r}: must be true or false")
+    try:
+        EnvConfig.from_dict(env_kwargs.get("config"))
+    except ValueError as error:
+        raise RunFileError(f"{path}: env_kwargs.config is not a config of this env: {error}") from error
+    return RunEnv(path, env_kwargs, frame_stack, normalize)
+
+
+def check_spaces(run: RunEnv, action_space: Any, observation_shape: tuple[int, ...], model: str | Path) -> None:
+    """``RunFileError`` naming ``run``'s file and ``model`` unless the model's action space is the env's (the same
+    meaning of every action: a relative-mode Discrete(3) is not platoon mode's Discrete(9)) and its observations are
+    the env's, ``run.frame_stack`` of them side by side."""
+    from timegap_env.envs.action import action_space as env_action_space
+    from timegap_env.envs.observation import observation_space
+
+    config = run.config
+    expected = env_action_space(config)
+    if action_space != expected:
+        raise RunFileError(f"{run.path} does not fit the model {model}: its env (action_mode = "
+                           f"{config.action_mode!r}) has actions {expected}, the model {action_space}")
+    *batch, width = observation_space(config).shape
+    stacked = (*batch, width * run.frame_stack)
+    if tuple(observation_shape) != stacked:
+        raise RunFileError(f"{run.path} does not fit the model {model}: its env gives observations of shape "
+                           f"{(*batch, width)}, with frame_stack = {run.frame_stack} the model would take {stacked}, "
+                           f"it takes {tuple(observation_shape)}")

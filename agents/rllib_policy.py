@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 
-from agents.protocol import ENV_FILE
+from agents.protocol import ENV_FILE, RunFileError, check_spaces, read_env_file
 
 CHECKPOINT_DIR = "checkpoint"  # train.train_rllib's algo.save directory in a run directory
 CHECKPOINT_MARKER = "rllib_checkpoint.json"  # RLlib writes it at the top of every checkpoint
@@ -54,12 +54,13 @@ class RLlibPolicy:
         self._exploration = module.get_exploration_action_dist_cls()
 
     @classmethod
-    def load(cls, path: str | Path, name: str = "RLlib PPO") -> RLlibPolicy:
+    def load(cls, path: str | Path, name: str = "RLlib PPO", threads: int | None = 1) -> RLlibPolicy:
         """Load ``path``, a checkpoint directory of ``train.train_rllib`` (``algo.save``'s, with its ``env.json``)
         or a run directory holding one as ``checkpoint/``, on the CPU. A missing directory or file raises
-        FileNotFoundError; a module or env.json that cannot be used, RunFileError naming it."""
-        from agents.learned import RunFileError
-
+        FileNotFoundError; a module or env.json that cannot be used or do not fit each other (another action space,
+        as relative mode's Discrete(3) read as platoon mode's Discrete(9), or observations of another shape),
+        RunFileError naming it. ``threads``: torch's threads from now on (None: leave them; one by default, as
+        :meth:`agents.learned.LearnedPolicy.load`: the module is small and the simulator's threads need the cores)."""
         checkpoint = find_checkpoint(path)
         if checkpoint is None:
             raise FileNotFoundError(f"path = {str(path)!r}: no RLlib checkpoint (no {CHECKPOINT_MARKER} in it or in "
@@ -70,12 +71,16 @@ class RLlibPolicy:
         env_path = checkpoint / ENV_FILE
         if not env_path.is_file():
             raise FileNotFoundError(f"path = {str(path)!r}: no {env_path} (train.train_rllib writes it)")
-        try:
-            action_mode = json.loads(env_path.read_text())["env_kwargs"].get("config", {}).get("action_mode", "platoon")
-        except (UnicodeDecodeError, json.JSONDecodeError, AttributeError, KeyError, TypeError) as error:
-            raise RunFileError(f"{env_path}: not a JSON object with env_kwargs (gym.make's) ({error!r})") from error
+        run = read_env_file(env_path)
+        if run.frame_stack != 1 or run.normalize:  # train.train_rllib stacks no frames and uses no observation filter
+            raise RunFileError(f"{env_path}: frame_stack = {run.frame_stack}, normalize = {run.normalize}: an RLlib "
+                               "run is read with neither (train.train_rllib writes frame_stack 1 and no filter)")
         # Ray: slow to import, and only in the clients venv
+        import torch
         from ray.rllib.core.rl_module.rl_module import RLModule
+
+        if threads is not None:
+            torch.set_num_threads(threads)
 
         try:
             module = RLModule.from_checkpoint(module_dir.resolve())
@@ -83,9 +88,11 @@ class RLlibPolicy:
             raise RunFileError(f"{module_dir}: not a readable RLlib RLModule ({type(error).__name__}: {error})") \
                 from error
         try:
-            return cls(module, action_mode, name)
+            policy = cls(module, run.action_mode, name)
         except ValueError as error:
             raise RunFileError(f"{env_path} does not fit the module {module_dir}: {error}") from error
+        check_spaces(run, module.action_space, module.observation_space.shape, module_dir)
+        return policy
 
     @property
     def observation_shape(self) -> tuple[int, ...]:

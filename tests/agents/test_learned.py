@@ -32,10 +32,17 @@ def tiny_ppo(env) -> PPO:
     return model.learn(64)
 
 
+def write_env_file(run, normalize: bool, config: dict | None = None, frame_stack: int = 1) -> None:
+    """The run's env.json, as train_ppo writes it."""
+    (run / "env.json").write_text(json.dumps({"env_kwargs": {"config": config or {}}, "frame_stack": frame_stack,
+                                              "normalize": normalize}))
+
+
 def test_learned_policy_without_vecnormalize(tmp_path):
     env = gym.make(timegap_env.ENV_ID)
     model = tiny_ppo(env)
     model.save(tmp_path / "model.zip")
+    write_env_file(tmp_path, normalize=False)
     policy = LearnedPolicy.load(tmp_path)
     assert policy.normalizer is None and policy.action_mode == "platoon"
     obs = real_observation()
@@ -51,6 +58,7 @@ def test_learned_policy_applies_saved_vecnormalize_statistics(tmp_path):
     model = tiny_ppo(venv)
     model.save(tmp_path / "model.zip")
     venv.save(tmp_path / "vecnormalize.pkl")
+    write_env_file(tmp_path, normalize=True, config={"action_mode": "per_vehicle"})
     policy = LearnedPolicy.load(tmp_path / "model.zip")
     assert policy.normalizer is not None and policy.action_mode == "per_vehicle"
     obs = real_observation()
@@ -60,9 +68,8 @@ def test_learned_policy_applies_saved_vecnormalize_statistics(tmp_path):
     expected, _ = model.predict(venv.normalize_obs(batch), deterministic=True)
     np.testing.assert_array_equal(policy.predict(batch)[0], expected)
     assert policy.predict(obs)[0].shape == (5,)
-    # the same model loaded without the statistics sees other inputs
+    # statistics elsewhere, given explicitly
     (tmp_path / "vecnormalize.pkl").rename(tmp_path / "stats.pkl")
-    assert LearnedPolicy.load(tmp_path).normalizer is None
     assert LearnedPolicy.load(tmp_path, vecnormalize=tmp_path / "stats.pkl").normalizer is not None
 
 
@@ -70,6 +77,7 @@ def test_learned_policy_load_errors(tmp_path):
     with pytest.raises(FileNotFoundError, match="no model zip"):
         LearnedPolicy.load(tmp_path)
     tiny_ppo(gym.make(timegap_env.ENV_ID)).save(tmp_path / "model.zip")
+    write_env_file(tmp_path, normalize=True)
     with pytest.raises(FileNotFoundError, match="vecnormalize = "):
         LearnedPolicy.load(tmp_path, vecnormalize=tmp_path / "missing.pkl")
 
@@ -79,6 +87,7 @@ def test_unusable_run_files_are_errors_that_name_the_file(tmp_path):
     model = tiny_ppo(venv)
     model.save(tmp_path / "model.zip")
     venv.save(tmp_path / "vecnormalize.pkl")
+    write_env_file(tmp_path, normalize=True)
     saved = (tmp_path / "model.zip").read_bytes()
     for corrupted in (saved[:len(saved) // 2], b"", b"not a zip"):
         (tmp_path / "model.zip").write_bytes(corrupted)
@@ -98,10 +107,10 @@ def test_unusable_run_files_are_errors_that_name_the_file(tmp_path):
         LearnedPolicy.load(tmp_path)
     stats.unlink()
     (tmp_path / "env.json").write_bytes(b"\xff\xfe")
-    with pytest.raises(RunFileError, match="env.json: not a JSON object"):
+    with pytest.raises(RunFileError, match="env.json: not readable JSON"):
         LearnedPolicy.load(tmp_path)
     (tmp_path / "env.json").write_text(json.dumps({"env_kwargs": {"config": {"action_mode": "per_vehicle"}},
-                                                   "frame_stack": 1}))
+                                                   "frame_stack": 1, "normalize": False}))
     with pytest.raises(RunFileError, match="env.json does not fit the model .*action_mode = 'per_vehicle'"):
         LearnedPolicy.load(tmp_path)
 
