@@ -12,24 +12,40 @@ a project setting rl-zoo3 does not know, comes from ``--warmup`` (default ``hype
 keyed by env id: ``n_timesteps``, ``env_kwargs``): the first ``n_timesteps`` steps of the run train in
 that env (a decision every 5 s), then the run switches to ``env_kwargs``, keeping the normalisation
 statistics. A run of no more steps than the warm-up (such as ``--timesteps 20000``) trains without
-it, and says so; ``--no-warmup`` leaves it out. The run directory ``--out`` holds exactly:
+it, and says so; ``--no-warmup`` leaves it out.
+
+**Nothing is lost.** A run never writes into ``--out`` while it trains: it works in a new directory beside
+it, ``<out>.partial-<random>`` (a copy of ``--out`` with ``--resume``), where its checkpoints go too, and
+moves it to ``--out`` when it has ended, the run that was there deleted only then. Stopped or failed
+before that (Ctrl-C, a crash, a full disk), ``--out`` is as it was; the work directory is deleted, or, if
+it holds a checkpoint of this run, kept and named (``--resume --out <it>`` continues it). So ``make train``
+regenerates the committed ``results/ppo`` in place, and a run into an existing run directory replaces it
+only by a finished run. ``--out`` must be absent, empty or a run directory (only the files below): a
+directory holding anything else is refused before any work (a finished run replaces the whole
+directory), as is ``--out`` naming a file. The run directory holds exactly:
 
 - ``model.zip``: the PPO model, also the checkpoint (replaced every ``--checkpoint-freq``
   steps and at the end; it stores the timestep count, so ``--resume`` continues from it);
 - ``vecnormalize.pkl``: ``VecNormalize``'s running statistics, when ``normalize`` is on;
-- ``env.json``: the ``gym.make`` keyword arguments of the env as evaluated (its action mode among them);
+- ``env.json``: the ``gym.make`` keyword arguments of the env as evaluated (its action mode among them), the
+  frame stack and ``normalize`` (whether ``vecnormalize.pkl`` belongs to the run; ``agents.protocol``);
 - ``curve.csv`` and ``curve.png``: the learning curve, every ``--curve-freq`` steps (0: only at the
   end) and at the end: the deterministic policy's mean return on the check episodes, and the share
   of the oracle gap it captures there, (policy - best blind constant) / (oracle - best blind
   constant), the constant and the oracle (``train.value_of_information``'s) measured once on the
   same episodes; a resumed run continues the curve;
-- ``training.md``: command, timesteps, wall time, throughput and returns, written at the end.
+- ``training.md``: command, timesteps, wall time, throughput and returns, written at the end; the share
+  of the oracle gap is "n/a" with the reason when the oracle does not beat the best constant there;
+- ``tensorboard/``: TensorBoard's logs (``--tensorboard-log`` puts them elsewhere).
 
 Sub-env i of phase k's env is seeded ``--seed + k * n_envs + i``; all training seeds stay below
 ``agents.protocol.EVAL_SEED_START`` (10 000), where the evaluation's seeds begin. The check episodes of
-the learning curve are ``EVAL_EPISODES`` episodes seeded ``EVAL_SEED + i``, also below 10 000. TensorBoard logs go to ``--tensorboard-log``.
+the learning curve are ``EVAL_EPISODES`` episodes seeded ``EVAL_SEED + i``, also below 10 000.
 A ``--resume`` from a checkpoint or statistics that cannot be read, or that take observations of
-another shape than the env's, stops with a message naming the file.
+another shape or actions of another meaning than the env's, stops with a message naming the file; so do
+bad settings (an unknown ``--env-config`` field, a hyperparameter), each before any work, as one line
+without a traceback on the command line. Torch runs on one thread (the network is tiny; more threads
+fight the simulator for the cores).
 """
 
 from __future__ import annotations
@@ -42,7 +58,9 @@ import json
 import math
 import os
 import shlex
+import shutil
 import sys
+import tempfile
 import time
 from pathlib import Path
 from typing import Any
@@ -61,8 +79,9 @@ from stable_baselines3.common.vec_env import VecEnv, VecFrameStack, VecNormalize
 from agents.learned import LearnedPolicy, ObservationNormalizer, RunFileError, load_model, load_vecnormalize
 from agents.policies import seconds
 from agents.protocol import ENV_FILE, EVAL_SEED_START, MODEL_FILE, VECNORMALIZE_FILE
-from timegap_env import ENV_ID
+from timegap_env import ENV_ID, cli
 from timegap_env.config import EnvConfig
+from timegap_env.envs.action import action_space
 from timegap_env.envs.info import summary_of, truth_of
 from timegap_env.envs.observation import observation_space
 from timegap_env.envs.sb3 import TimeGapVecEnv
@@ -70,6 +89,9 @@ from train.value_of_information import DEFAULT_TRAIN_EPISODES, all_oracles, choo
 
 REPORT_FILE = "training.md"
 CURVE_FILE, CURVE_FIGURE = "curve.csv", "curve.png"
+TENSORBOARD_DIR = "tensorboard"  # TensorBoard's logs in the run directory, unless --tensorboard-log
+RUN_CONTENTS = {MODEL_FILE, VECNORMALIZE_FILE, ENV_FILE, REPORT_FILE, CURVE_FILE, CURVE_FIGURE, TENSORBOARD_DIR}
+PARTIAL_SUFFIX = ".partial-"  # the work directory beside --out: <out>.partial-<random>
 EVAL_SEED = 9_000  # first seed of the end-of-training check, below EVAL_SEED_START [-]
 EVAL_EPISODES = 32  # episodes of the end-of-training check [-]
 RUN_KEYS = {"n_envs", "n_timesteps", "policy", "normalize", "frame_stack", "env_kwargs"}  # rl-zoo3's; the rest: PPO's
@@ -86,7 +108,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                         help="seed of PyTorch and the envs; phase k's sub-env i gets seed + k n_envs + i (default: 0)")
     parser.add_argument("--n-envs", type=int, default=None,
                         help="platoons stepped together (default: n_envs of the yml)")
-    parser.add_argument("--env-config", type=json.loads, default={},
+    parser.add_argument("--env-config", type=cli.json_object, default={},
                         help="EnvConfig overrides as JSON, merged into the config of env_kwargs and of the warm-up's "
                              "(default: none), e.g. '{\"action_mode\": \"platoon\"}'")
     parser.add_argument("--frame-stack", type=int, default=None,
@@ -98,15 +120,16 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--no-warmup", dest="warmup", action="store_const", const=None,
                         help="train in env_kwargs from the start")
     parser.add_argument("--out", type=Path, default=Path("results/ppo"),
-                        help="run directory: model.zip, vecnormalize.pkl, training.md (default: %(default)s)")
+                        help="run directory: model.zip, vecnormalize.pkl, training.md, ...; written when the run ends, "
+                             "replacing a run there (default: %(default)s)")
     parser.add_argument("--resume", action="store_true",
                         help="continue from <out>/model.zip (and its VecNormalize stats) up to --timesteps in all")
     parser.add_argument("--checkpoint-freq", type=int, default=100_000,
                         help="replace <out>/model.zip and vecnormalize.pkl every so many steps (default: %(default)s)")
     parser.add_argument("--curve-freq", type=int, default=100_000,
                         help="a point of the learning curve every so many steps, 0: none (default: %(default)s)")
-    parser.add_argument("--tensorboard-log", type=Path, default=Path("runs"),
-                        help="TensorBoard log directory (default: %(default)s)")
+    parser.add_argument("--tensorboard-log", type=Path, default=None,
+                        help=f"TensorBoard log directory (default: <out>/{TENSORBOARD_DIR})")
     parser.add_argument("--progress-bar", action=argparse.BooleanOptionalAction, default=True,
                         help="show SB3's progress bar (default: on)")
     return parser.parse_args(argv)
@@ -175,7 +198,8 @@ class Checkpoint(BaseCallback):
     def __init__(self, every: int, out: Path) -> None:
         super().__init__()
         self.every, self.out = every, out
-        self.last = 0  # timestep count of the last checkpoint
+        self.last = 0  # timestep count of the last checkpoint (or of the phase's start)
+        self.saved_at: int | None = None  # timestep count of the last checkpoint written; None: none yet
 
     def _on_training_start(self) -> None:
         self.last = self.num_timesteps
@@ -183,7 +207,7 @@ class Checkpoint(BaseCallback):
     def _on_step(self) -> bool:
         if self.every and self.num_timesteps - self.last >= self.every:
             save_run(self.model, self.out)
-            self.last = self.num_timesteps
+            self.last = self.saved_at = self.num_timesteps
         return True
 
 
@@ -293,6 +317,72 @@ def write_curve(points: list[tuple[int, float]], reference: CurveReference, out:
     plt.close(fig)
 
 
+def check_out(out: Path, resume: bool) -> None:
+    """Before any work: ``out`` must be a directory to resume from (``--resume``), or absent, empty or one holding
+    only a run's files (``RUN_CONTENTS``), which this run replaces when it ends; anything else is refused."""
+    cli.output_dir(out)
+    if resume or not out.is_dir():
+        return
+    foreign = sorted(path.name for path in out.iterdir() if path.name not in RUN_CONTENTS)
+    if foreign:
+        raise ValueError(f"--out {out}: holds {foreign[:5]}{' ...' if len(foreign) > 5 else ''}, not only a "
+                         f"training run's files ({', '.join(sorted(RUN_CONTENTS))}); a run replaces the whole "
+                         "directory when it ends, so give a new directory (or one holding a run)")
+
+
+def check_config(env_kwargs: dict[str, Any], source: str, overrides: dict[str, Any]) -> EnvConfig:
+    """``env_kwargs``' config as an EnvConfig; a ValueError naming where it came from (and the field) if it is
+    not one."""
+    try:
+        return EnvConfig.from_dict(env_kwargs.get("config"))
+    except ValueError as error:
+        given = f"--env-config {json.dumps(overrides)} merged into {source}" if overrides else source
+        raise ValueError(f"{given}: {error}") from error
+
+
+def read_curve(path: Path) -> list[tuple[int, float]]:
+    """The (timesteps, mean return) points of a curve.csv; RunFileError naming it if it cannot be read."""
+    try:
+        with open(path, newline="") as file:
+            return [(int(row["timesteps"]), float(row["mean_return"])) for row in csv.DictReader(file)]
+    except (OSError, UnicodeDecodeError, csv.Error, KeyError, TypeError, ValueError) as error:
+        raise RunFileError(f"{path}: not a learning curve of train_ppo ({type(error).__name__}: {error})") from error
+
+
+def work_directory(out: Path, resume: bool) -> Path:
+    """A new directory beside ``out`` for the run to write into (a copy of ``out`` to resume from)."""
+    out = Path(os.path.abspath(out))
+    out.parent.mkdir(parents=True, exist_ok=True)
+    work = Path(tempfile.mkdtemp(prefix=f"{out.name}{PARTIAL_SUFFIX}", dir=out.parent))
+    umask = os.umask(0o022)
+    os.umask(umask)
+    os.chmod(work, 0o777 & ~umask)  # as mkdir would make it (mkdtemp's is private)
+    if resume:
+        shutil.copytree(out, work, dirs_exist_ok=True)
+    return work
+
+
+def publish(work: Path, out: Path) -> None:
+    """Move the finished run ``work`` to ``out``, the previous content of ``out`` deleted only once it is there."""
+    out = Path(os.path.abspath(out))
+    if not out.exists():
+        os.rename(work, out)
+        return
+    previous = Path(tempfile.mkdtemp(prefix=f"{out.name}.replaced-", dir=out.parent))
+    os.rename(out, previous)  # (rename onto an existing non-empty directory fails)
+    os.rename(work, out)
+    shutil.rmtree(previous)
+
+
+def share_text(reference: CurveReference, learned: float) -> str:
+    """The share of the oracle gap captured for training.md, or why there is none."""
+    share = reference.share(learned)
+    if math.isfinite(share):
+        return f"{share:.2f}"
+    return (f"n/a: the oracle ({reference.oracle_return:.1f}) does not beat the best constant "
+            f"({reference.blind_return:.1f}) on these episodes, so there is no gap to capture")
+
+
 def main(argv: list[str] | None = None) -> None:
     started = time.perf_counter()
     args = parse_args(argv)
@@ -328,20 +418,27 @@ def main(argv: list[str] | None = None) -> None:
     if not isinstance(normalize, (bool, dict)):
         raise ValueError(f"hyperparams {ENV_ID}.normalize = {normalize!r}: "
                          "must be true, false or a dict of VecNormalize arguments")
+    evaluated = check_config(env_kwargs, f"{args.hyperparams} env_kwargs", args.env_config)
+    if warmup:
+        check_config(phases[0][1], f"{args.warmup} env_kwargs (the warm-up)", args.env_config)
+    check_out(args.out, args.resume)
     # One thread: the network is tiny, the 2 cores are better left to the env (two threads measured 7x slower).
     torch.set_num_threads(1)
-    evaluated = EnvConfig.from_dict(env_kwargs.get("config"))
 
     # ---------------------------------------------------------------- model
     model_path, stats_path = args.out / MODEL_FILE, args.out / VECNORMALIZE_FILE
     model: PPO | None = None
     saved_statistics: VecNormalize | None = None  # --resume's, given the first phase's env below
+    curve: list[tuple[int, float]] = []  # (timesteps, mean return) of the learning curve, a resumed run's first
     if args.resume:  # every file checked before anything is written
         if not model_path.is_file():
             raise FileNotFoundError(f"--resume: no checkpoint {model_path}")
         if normalize and not stats_path.is_file():
             raise FileNotFoundError(f"--resume with normalize = {normalize!r}: no statistics {stats_path}")
-        model = load_model(model_path, PPO, device="cpu", tensorboard_log=str(args.tensorboard_log))
+        if not normalize and stats_path.is_file():
+            raise ValueError(f"--resume with normalize = {normalize!r}: {stats_path} says the run normalised its "
+                             f"observations; resume with the hyperparameters it was trained with")
+        model = load_model(model_path, PPO, device="cpu")
         model.set_random_seed(args.seed)
         if model.num_timesteps >= total_timesteps:
             raise ValueError(f"--resume: {model_path} has trained {model.num_timesteps} steps, "
@@ -352,79 +449,85 @@ def main(argv: list[str] | None = None) -> None:
         if model.observation_space.shape != (*batch, width * frame_stack):
             raise RunFileError(f"--resume: {model_path} takes observations of shape {model.observation_space.shape}, "
                                f"the env gives {(*batch, width)} with frame_stack = {frame_stack}")
+        if model.action_space != action_space(evaluated):
+            raise RunFileError(f"--resume: {model_path} has actions {model.action_space}, the env (action_mode = "
+                               f"{evaluated.action_mode!r}) {action_space(evaluated)}")
         if normalize:
             saved_statistics = load_vecnormalize(stats_path)
             if saved_statistics.observation_space.shape != (*batch, width):
                 raise RunFileError(f"--resume: {stats_path} normalises observations of shape "
                                    f"{saved_statistics.observation_space.shape}, the env gives {(*batch, width)}")
-    args.out.mkdir(parents=True, exist_ok=True)
-    (args.out / ENV_FILE).write_text(json.dumps({"env_kwargs": env_kwargs, "frame_stack": frame_stack}, indent=1,
-                                                sort_keys=True) + "\n")
-    reference = CurveReference.measure(evaluated)
-    curve: list[tuple[int, float]] = []
-    if args.resume and (args.out / CURVE_FILE).is_file():
-        with open(args.out / CURVE_FILE) as file:
-            curve = [(int(row["timesteps"]), float(row["mean_return"])) for row in csv.DictReader(file)]
-    if not args.resume:
-        (args.out / REPORT_FILE).unlink(missing_ok=True)  # rewritten when this run ends
-        stats_path.unlink(missing_ok=True)  # a stale one would mislead the evaluation
-        (args.out / CURVE_FILE).unlink(missing_ok=True)
-        (args.out / CURVE_FIGURE).unlink(missing_ok=True)
+        if (args.out / CURVE_FILE).is_file():
+            curve = read_curve(args.out / CURVE_FILE)
+    elif args.out.is_dir() and any(args.out.iterdir()):
+        print(f"note: --out {args.out} holds a run; this run replaces it when it ends (until then it stays whole)")
     steps_before = model.num_timesteps if model else 0
 
-    # ---------------------------------------------------------------- train, phase by phase
+    # ---------------------------------------------------------------- train, phase by phase, in a work directory
+    work = work_directory(args.out, args.resume)
+    tensorboard = args.tensorboard_log if args.tensorboard_log is not None else work / TENSORBOARD_DIR
+    shown_tensorboard = args.tensorboard_log if args.tensorboard_log is not None else args.out / TENSORBOARD_DIR
+    checkpoint = Checkpoint(args.checkpoint_freq, work)
     env: VecEnv | None = None  # the phase's env, normalised; the model steps it through VecFrameStack if frame_stack > 1
-    timings: list[tuple[str, int, float]] = []  # (phase, steps, seconds)
-    for phase, (phase_end, phase_env_kwargs) in enumerate(phases):
-        if model is not None and model.num_timesteps >= phase_end:
-            continue
-        phase_env: VecEnv = TimeGapVecEnv(n_envs, **phase_env_kwargs)
-        if saved_statistics is not None and env is None:
-            saved_statistics.set_venv(phase_env)
-            phase_env = saved_statistics
-        elif normalize:
-            phase_env = VecNormalize(phase_env, gamma=model.gamma if model else hyperparams.get("gamma", 0.99),
-                                     **({} if normalize is True else normalize))
-            if isinstance(env, VecNormalize):  # features and per-step rewards (means over ticks) keep their scale
-                phase_env.obs_rms, phase_env.ret_rms = env.obs_rms.copy(), env.ret_rms.copy()
-        if env is not None:
-            env.close()
-        env = phase_env
-        stepped = VecFrameStack(env, frame_stack) if frame_stack > 1 else env
-        if model is None:
-            model = PPO(policy, stepped, seed=args.seed, device="cpu", tensorboard_log=str(args.tensorboard_log),
-                        **hyperparams)
-        else:
-            model.set_env(stepped)
-        stepped.seed(args.seed + phase * n_envs)
-        phase_start, clock = model.num_timesteps, time.perf_counter()
-        callbacks = [Checkpoint(args.checkpoint_freq, args.out), EpisodeSummaries(),
-                     LearningCurve(args.curve_freq, evaluated, reference, args.out, curve, frame_stack)]
-        model.learn(
-            total_timesteps=phase_end - model.num_timesteps,
-            callback=callbacks,
-            tb_log_name="ppo",
-            reset_num_timesteps=not args.resume and not timings,
-            progress_bar=args.progress_bar,
-        )
-        label = f"warm-up, {phase_env_kwargs}" if phase < len(phases) - 1 else "main"
-        timings.append((label, model.num_timesteps - phase_start, time.perf_counter() - clock))
-    assert model is not None and env is not None  # the last phase always trains: total_timesteps > steps_before
-    save_run(model, args.out)
-    final = LearningCurve(args.curve_freq, evaluated, reference, args.out, curve, frame_stack)
-    final.init_callback(model)
-    final.add_point()  # the end of the run
+    try:
+        (work / ENV_FILE).write_text(json.dumps({"env_kwargs": env_kwargs, "frame_stack": frame_stack,
+                                                 "normalize": bool(normalize)}, indent=1, sort_keys=True) + "\n")
+        for stale in (REPORT_FILE, CURVE_FILE, CURVE_FIGURE) if not args.resume else ():
+            (work / stale).unlink(missing_ok=True)
+        if model is not None:
+            model.tensorboard_log = str(tensorboard)
+        reference = CurveReference.measure(evaluated)
+        timings: list[tuple[str, int, float]] = []  # (phase, steps, seconds)
+        for phase, (phase_end, phase_env_kwargs) in enumerate(phases):
+            if model is not None and model.num_timesteps >= phase_end:
+                continue
+            phase_env: VecEnv = TimeGapVecEnv(n_envs, **phase_env_kwargs)
+            if saved_statistics is not None and env is None:
+                saved_statistics.set_venv(phase_env)
+                phase_env = saved_statistics
+            elif normalize:
+                phase_env = VecNormalize(phase_env, gamma=model.gamma if model else hyperparams.get("gamma", 0.99),
+                                         **({} if normalize is True else normalize))
+                if isinstance(env, VecNormalize):  # features and per-step rewards (means over ticks) keep their scale
+                    phase_env.obs_rms, phase_env.ret_rms = env.obs_rms.copy(), env.ret_rms.copy()
+            if env is not None:
+                env.close()
+            env = phase_env
+            stepped = VecFrameStack(env, frame_stack) if frame_stack > 1 else env
+            if model is None:
+                model = PPO(policy, stepped, seed=args.seed, device="cpu", tensorboard_log=str(tensorboard),
+                            **hyperparams)
+            else:
+                model.set_env(stepped)
+            stepped.seed(args.seed + phase * n_envs)
+            phase_start, clock = model.num_timesteps, time.perf_counter()
+            callbacks = [checkpoint, EpisodeSummaries(),
+                         LearningCurve(args.curve_freq, evaluated, reference, work, curve, frame_stack)]
+            model.learn(
+                total_timesteps=phase_end - model.num_timesteps,
+                callback=callbacks,
+                tb_log_name="ppo",
+                reset_num_timesteps=not args.resume and not timings,
+                progress_bar=args.progress_bar,
+            )
+            label = f"warm-up, {phase_env_kwargs}" if phase < len(phases) - 1 else "main"
+            timings.append((label, model.num_timesteps - phase_start, time.perf_counter() - clock))
+        assert model is not None and env is not None  # the last phase always trains: total_timesteps > steps_before
+        save_run(model, work)
+        final = LearningCurve(args.curve_freq, evaluated, reference, work, curve, frame_stack)
+        final.init_callback(model)
+        final.add_point()  # the end of the run
 
-    # ---------------------------------------------------------------- check and report
-    learned = curve[-1][1]
-    episodes = [info["r"] for info in model.ep_info_buffer]
-    final_return = f"{np.mean(episodes):.1f}" if episodes else "n/a (no episode ended)"
-    command = shlex.join(["python", "-m", "train.train_ppo", *(sys.argv[1:] if argv is None else argv)])
-    phase_rows = "\n".join(f"| {label}: steps, time, throughput | {steps:,}, {seconds:.0f} s, "
-                           f"{steps / seconds:,.0f} steps/s |" for label, steps, seconds in timings)
-    files = ", ".join(f"`{name}`" for name in (MODEL_FILE, ENV_FILE, CURVE_FILE, CURVE_FIGURE)) + (
-        f", `{VECNORMALIZE_FILE}`" if isinstance(env, VecNormalize) else "")
-    report = f"""# PPO on {ENV_ID}
+        # ------------------------------------------------------------ check and report
+        learned = curve[-1][1]
+        episodes = [info["r"] for info in model.ep_info_buffer]
+        final_return = f"{np.mean(episodes):.1f}" if episodes else "n/a (no episode ended)"
+        command = shlex.join(["python", "-m", "train.train_ppo", *(sys.argv[1:] if argv is None else argv)])
+        phase_rows = "\n".join(f"| {label}: steps, time, throughput | {steps:,}, {seconds:.0f} s, "
+                               f"{steps / seconds:,.0f} steps/s |" for label, steps, seconds in timings)
+        files = ", ".join(f"`{name}`" for name in (MODEL_FILE, ENV_FILE, CURVE_FILE, CURVE_FIGURE)) + (
+            f", `{VECNORMALIZE_FILE}`" if isinstance(env, VecNormalize) else "")
+        report = f"""# PPO on {ENV_ID}
 
 Command: `{command}` ({f"resumed from a checkpoint at {steps_before:,} steps" if args.resume else "fresh run"})
 
@@ -439,17 +542,25 @@ Command: `{command}` ({f"resumed from a checkpoint at {steps_before:,} steps" if
 | mean return, deterministic policy, {EVAL_EPISODES} episodes seeded {EVAL_SEED}+ | {learned:.1f} |
 | mean return, best constant ({seconds(reference.blind_setting)} s), same episodes | {reference.blind_return:.1f} |
 | mean return, oracle ({reference.oracle}), same episodes | {reference.oracle_return:.1f} |
-| share of the oracle gap captured | {reference.share(learned):.2f} |
+| share of the oracle gap captured | {share_text(reference, learned)} |
 
-Files: {files}, this report; TensorBoard logs in `{args.tensorboard_log}/`.
+Files: {files}, this report; TensorBoard logs in `{shown_tensorboard}/`.
 """
-    (args.out / REPORT_FILE).write_text(report)
-    env.close()
+        (work / REPORT_FILE).write_text(report)
+        env.close()
+        publish(work, args.out)
+    except BaseException:  # interrupted or failed: args.out stays as it was
+        if env is not None:
+            env.close()
+        if checkpoint.saved_at is not None:
+            print(f"train_ppo: stopped; --out {args.out} is unchanged. This run's checkpoint at "
+                  f"{checkpoint.saved_at:,} steps is in {work} (continue it with --resume --out {work}, or delete "
+                  "it)", file=sys.stderr)
+        else:
+            shutil.rmtree(work, ignore_errors=True)
+        raise
     print(report)
 
 
 if __name__ == "__main__":
-    try:
-        main()
-    except (RunFileError, FileNotFoundError) as error:  # a file to fix, not a bug: its message, no traceback
-        sys.exit(f"python -m train.train_ppo: error: {error}")
+    cli.run(main, "python -m train.train_ppo")

@@ -106,7 +106,7 @@ def test_tiny_training_run_saves_loads_and_resumes(tmp_path: Path) -> None:
     assert sorted(p.name for p in out.iterdir()) == ["curve.csv", "curve.png", "env.json", "model.zip", "training.md",
                                                      "vecnormalize.pkl"]
     assert json.loads((out / "env.json").read_text()) == {"env_kwargs": {"config": {"episode_duration": 10.0}},
-                                                          "frame_stack": 1}
+                                                          "frame_stack": 1, "normalize": True}
     assert LearnedPolicy.load(out).action_mode == "platoon"
     model = PPO.load(out / "model.zip", device="cpu")
     assert model.num_timesteps == 128
