@@ -41,6 +41,12 @@ the cluster at ``--address``; the batches are the same, so the files are too, bi
 runtime line, which says how the work was spread, aside). The oracle's lookup and choice are
 spread the same way.
 
+The learned policy is loaded as it was trained (``agents.learned.LearnedPolicy.load``: ``env.json``
+gives the meaning of its actions, and ``vecnormalize.pkl`` must be there if the run normalised), with
+torch on one thread, and checked before any other work, as are ``--out`` (not a file) and the NGSIM and
+OpenACC data of the planned groups (a file that cannot be read is named before the other groups run).
+Bad input stops the command with one line naming it and a non-zero exit, no traceback.
+
     python -m train.evaluate [--episodes 112] [--policies rule_platoon fixed_1.6 ...] [--out results/eval]
                              [--backend serial|ray] [--address A]
 """
@@ -65,6 +71,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 import timegap_env
+from timegap_env import cli
 from agents.oracles import TruthPolicy
 from agents.policies import ChartStepPolicy, NamedPolicy, PaperRulePolicy, V2VAwarePolicy, fixed_policies, seconds
 from agents.protocol import EVAL_SEED_START, MODEL_FILE
@@ -187,14 +194,41 @@ class PolicyChoiceError(ValueError):
     """A policy name or a model that ``--policies`` / ``--model`` cannot use."""
 
 
+def model_exists(model: Path) -> bool:
+    """Whether ``model`` is an SB3 model zip, a run directory holding one, or an RLlib run."""
+    return model.is_file() or (model / MODEL_FILE).is_file() or find_checkpoint(model) is not None
+
+
+def load_ppo(model: Path) -> Any:
+    """The learned policy of ``model`` (an SB3 zip or run directory, or a train.train_rllib run), loaded as it was
+    trained (``env.json``, its statistics: ``LearnedPolicy.load``; torch on one thread), checked to take the
+    evaluation env's observations; ``PolicyChoiceError`` naming what does not fit."""
+    from agents.learned import LearnedPolicy, RunFileError  # torch is slow to import; only when needed
+
+    rllib = find_checkpoint(model)  # a train.train_rllib run rather than an SB3 model
+    try:
+        if rllib is not None:
+            from agents.rllib_policy import RLlibPolicy  # loading needs the ray extra
+
+            policy = RLlibPolicy.load(rllib)
+        else:
+            policy = LearnedPolicy.load(model)
+    except (RunFileError, FileNotFoundError) as error:
+        raise PolicyChoiceError(str(error)) from error
+    expected = observation_space(EnvConfig()).shape
+    if policy.observation_shape != expected:
+        raise PolicyChoiceError(f"--model {model}: takes observations of shape {policy.observation_shape}, the env "
+                                f"gives {expected}")
+    return policy
+
+
 def build_policies(
-    names: Sequence[str] | None, model: Path, backend: Backend | None = None
+    names: Sequence[str] | None, model: Path, backend: Backend | None = None, ppo: Any = None
 ) -> dict[str, NamedPolicy | TruthPolicy]:
     """Policies by CLI name; ``names=None`` is the default set (PPO only if ``model``, a zip or a run directory,
-    exists). The oracle's lookup is measured on training seeds and the oracle chosen on selection seeds
+    exists). The learned policy is ``ppo`` if given, else loaded from ``model`` (before the oracle, which takes a
+    while). The oracle's lookup is measured on training seeds and the oracle chosen on selection seeds
     (``train.value_of_information``), their episodes spread by ``backend`` (default: serial)."""
-    rllib = find_checkpoint(model)  # a train.train_rllib run rather than an SB3 model
-    model = model / MODEL_FILE if model.is_dir() and rllib is None else model
     config = EnvConfig()  # the default, whose action mode is one setting for the platoon
     policies: dict[str, Any] = {
         "rule_platoon": PaperRulePolicy(config),
@@ -207,32 +241,38 @@ def build_policies(
     unknown = sorted(set(wanted) - set(policies) - {ORACLE, "ppo"})
     if unknown:
         raise PolicyChoiceError(f"--policies {unknown}: unknown; known: {sorted(policies) + [ORACLE, 'ppo']}")
-    if ORACLE in wanted:
-        table, _ = measure_lookup(config, DEFAULT_TRAIN_EPISODES, backend)
-        policies[ORACLE] = choose_oracle(config, all_oracles(config, table), backend)
     if "ppo" in wanted:
-        if rllib is not None or model.is_file():
-            from agents.learned import LearnedPolicy, RunFileError  # torch is slow to import; only when needed
-
-            try:
-                if rllib is not None:
-                    from agents.rllib_policy import RLlibPolicy  # loading needs the ray extra
-
-                    policies["ppo"] = RLlibPolicy.load(rllib)
-                else:
-                    policies["ppo"] = LearnedPolicy.load(model)
-            except RunFileError as error:
-                raise PolicyChoiceError(str(error)) from error
-            expected = observation_space(config).shape
-            if policies["ppo"].observation_shape != expected:
-                raise PolicyChoiceError(f"--model {model}: takes observations of shape "
-                                        f"{policies['ppo'].observation_shape}, the env gives {expected}")
+        if ppo is not None:
+            policies["ppo"] = ppo
+        elif model_exists(model):
+            policies["ppo"] = load_ppo(model)
         elif names is None:
             print(f"note: no trained model at {model}; PPO skipped")
             wanted.remove("ppo")
         else:
             raise FileNotFoundError(f"--policies ppo: no trained model at {model} (see --model)")
+    if ORACLE in wanted:
+        table, _ = measure_lookup(config, DEFAULT_TRAIN_EPISODES, backend)
+        policies[ORACLE] = choose_oracle(config, all_oracles(config, table), backend)
     return {name: policies[name] for name in wanted}
+
+
+def check_data(plan: list[Episode]) -> None:
+    """Read the data of every planned group that needs it (the NGSIM file, the OpenACC runs) before any other work,
+    by resetting one env as its first episode will be: a file that cannot be used raises a ``ValueError`` naming the
+    group and (the leaders' message) the file, now rather than after the other policies have run."""
+    for group in dict.fromkeys(episode.group for episode in plan):
+        if GROUPS[group].data is None:
+            continue
+        seed = next(episode.seed for episode in plan if episode.group == group)
+        venv = gym.make_vec(timegap_env.ENV_ID, num_envs=1, vectorization_mode="vector_entry_point",
+                            config=GROUPS[group].config)
+        try:
+            venv.reset(seed=[seed], options=GROUPS[group].options)
+        except (ValueError, OSError, EOFError) as error:
+            raise ValueError(f"held-out group {group!r} ({GROUPS[group].data} data): {error}") from error
+        finally:
+            venv.close()
 
 
 def run_batch(
@@ -562,9 +602,10 @@ def main(argv: Sequence[str] | None = None) -> None:
                         help="rule_platoon rule_per_vehicle chart_step fixed_<level> (e.g. fixed_1.6) v2v_aware oracle "
                              "ppo (default: all, ppo if --model exists)")
     parser.add_argument("--model", type=Path,
-                        help="SB3 PPO zip or a run directory holding model.zip; vecnormalize.pkl and env.json beside "
-                             f"it are used if present (default {DEFAULT_MODEL}, skipped if absent); or a run of "
-                             "train.train_rllib (results/rllib or its checkpoint/; needs the ray extra)")
+                        help="a run of train.train_ppo (its directory or its model.zip; env.json beside it, and "
+                             "vecnormalize.pkl if the run normalised, are required and checked against the model) "
+                             f"(default {DEFAULT_MODEL}, skipped if absent); or a run of train.train_rllib "
+                             "(results/rllib or its checkpoint/; needs the ray extra); checked before any other work")
     parser.add_argument("--reference", default=DEFAULT_REFERENCE,
                         help=f"policy the paired return differences are taken against (default {DEFAULT_REFERENCE})")
     parser.add_argument("--profile-group", default="training_mix",
@@ -575,20 +616,27 @@ def main(argv: Sequence[str] | None = None) -> None:
     args = parser.parse_args(argv)
     try:
         backend = Backend.from_args(args)
-    except ValueError as error:
+        cli.output_dir(args.out)
+    except (ValueError, OSError) as error:
         parser.error(str(error))
-    if args.model is not None and not (args.model.is_file() or (args.model / MODEL_FILE).is_file()
-                                       or find_checkpoint(args.model) is not None):
+    if args.model is not None and not model_exists(args.model):
         parser.error(f"--model {args.model}: no such model zip or RLlib checkpoint")
     args.model = args.model or DEFAULT_MODEL
+    ppo = None  # the learned policy, loaded first: a model that cannot be used is named before any other work
+    if (args.policies is None or "ppo" in args.policies) and model_exists(args.model):
+        try:
+            ppo = load_ppo(args.model)
+        except PolicyChoiceError as error:
+            parser.error(str(error))
 
     start = time.perf_counter()
     groups, data_note = available_groups()
     plan = plan_episodes(args.episodes, groups)
     planned_groups = list(dict.fromkeys(episode.group for episode in plan))
     profile_group = args.profile_group if args.profile_group in planned_groups else planned_groups[0]
+    check_data(plan)  # a truncated data file named now, not after the other groups
     try:
-        policies = build_policies(args.policies, args.model, backend)
+        policies = build_policies(args.policies, args.model, backend, ppo)
     except (PolicyChoiceError, FileNotFoundError) as error:  # unknown names, a model that cannot be used: no traceback
         parser.error(str(error))
     reference = args.reference if args.reference in policies else None
@@ -635,4 +683,4 @@ def main(argv: Sequence[str] | None = None) -> None:
 
 
 if __name__ == "__main__":
-    main()
+    cli.run(main, "python -m train.evaluate")

@@ -97,6 +97,7 @@ def test_two_episodes_write_tables_and_figures(tmp_path, monkeypatch):
     monkeypatch.setattr(value_of_information, "SELECTION_EPISODES", 2)
     model = PPO("MlpPolicy", gym.make(timegap_env.ENV_ID), n_steps=64, batch_size=32, n_epochs=1, seed=0, device="cpu")
     model.learn(64).save(tmp_path / "model.zip")
+    (tmp_path / "env.json").write_text(json.dumps({"env_kwargs": {}, "frame_stack": 1, "normalize": False}))
     out = tmp_path / "eval"
     evaluate.main(["--episodes", "2", "--policies", "rule_platoon", "rule_per_vehicle", "fixed_1.6", "oracle", "ppo",
                    "--model", str(tmp_path / "model.zip"), "--out", str(out)])
@@ -141,10 +142,12 @@ def test_a_missing_or_corrupted_model_is_named_without_a_traceback(tmp_path, cap
     with pytest.raises(SystemExit):  # explicitly asked for, even with the default policies
         evaluate.main(["--episodes", "1", "--model", str(tmp_path / "absent.zip")])
     (tmp_path / "model.zip").write_bytes(b"garbage")
+    (tmp_path / "env.json").write_text(json.dumps({"env_kwargs": {}, "frame_stack": 1, "normalize": False}))
     with pytest.raises(SystemExit):
         evaluate.main(["--episodes", "1", "--policies", "ppo", "--model", str(tmp_path / "model.zip")])
     assert f"model = '{tmp_path / 'model.zip'}': not a readable PPO model zip" in capsys.readouterr().err
     PPO("MlpPolicy", gym.make(timegap_env.ENV_ID), device="cpu").save(tmp_path / "model.zip")
+    (tmp_path / "env.json").write_text(json.dumps({"env_kwargs": {}, "frame_stack": 1, "normalize": True}))
     (tmp_path / "vecnormalize.pkl").write_bytes(b"garbage")
     with pytest.raises(SystemExit):
         evaluate.main(["--episodes", "1", "--policies", "ppo", "--model", str(tmp_path)])
