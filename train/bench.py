@@ -36,6 +36,7 @@ import gymnasium as gym
 import numpy as np
 
 import timegap_env
+from timegap_env import cli
 from timegap_env.config import MonitorConfig, PlatoonConfig
 from timegap_env.sim import Platoon
 from train import bench_cold, bench_ppo, bench_single, bench_vector
@@ -353,6 +354,7 @@ def main() -> None:
     parser.add_argument("--quick", action="store_true", help="tiny sizes, for a smoke test (numbers meaningless)")
     parser.add_argument("--out", type=Path, default=Path("results/bench.md"))
     args = parser.parse_args()
+    cli.output_file(args.out)
     sizes = QUICK if args.quick else FULL
     started = time.perf_counter()
 
@@ -374,4 +376,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    cli.run(main, "python -m train.bench")

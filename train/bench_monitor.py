@@ -19,6 +19,7 @@ from collections.abc import Callable
 
 import numpy as np
 
+from timegap_env import cli
 from timegap_env.config import MonitorConfig
 from timegap_env.monitoring.monitor import N_SUMS, TimeGapMonitor
 from timegap_env.monitoring.posterior import Prior, WindowSums, posterior_moments
@@ -95,4 +96,4 @@ def main(argv: list[str] | None = None) -> None:
 
 
 if __name__ == "__main__":
-    main()
+    cli.run(main, "python -m train.bench_monitor")

@@ -43,6 +43,7 @@ from typing import Any
 from agents.policies import FixedPolicy, PaperRulePolicy
 from train import detection_benchmark, evaluate, value_of_information
 from train.backends import Backend
+from timegap_env import cli
 
 DEFAULT_OUT = Path("results/ray/scaling.md")
 NOOP_TASKS = 200  # empty tasks mapped at once to measure Ray's cost per task [-]
@@ -198,6 +199,7 @@ def main(argv: Sequence[str] | None = None) -> None:
     parser.add_argument("--quick", action="store_true", help="tiny sizes, for a smoke test (numbers meaningless)")
     parser.add_argument("--out", type=Path, default=DEFAULT_OUT, help="output file (default %(default)s)")
     args = parser.parse_args(argv)
+    cli.output_file(args.out)
     size = QUICK if args.quick else FULL
     try:
         import ray
@@ -386,4 +388,4 @@ def duration(seconds: float) -> str:
 
 
 if __name__ == "__main__":
-    main()
+    cli.run(main, "python -m train.bench_ray")

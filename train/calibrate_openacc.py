@@ -36,6 +36,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
+from timegap_env import cli
 from timegap_env.config import LeaderConfig, PlatoonConfig
 from timegap_env.leaders.openacc import (
     TICK, OpenAccRun, default_openacc_dir, lead_car_speeds, openacc_paths, read_openacc, repeated_runs, standstill_spacings,
@@ -182,6 +183,9 @@ def main(argv: Sequence[str] | None = None) -> None:
     parser.add_argument("--presets", type=Path, help="where the presets go (default: the package's; none with --cars)")
     parser.add_argument("--cars", nargs="+", metavar="CAR", help="calibrate only these car models (default: all)")
     args = parser.parse_args(argv)
+    cli.output_dir(args.out)
+    if args.presets is not None:
+        cli.output_file(args.presets, "--presets")
     directory = default_openacc_dir()
     if not directory.exists():
         raise SystemExit(f"OpenACC data not found at {directory}: set $TIMEGAP_OPENACC_PATH to a directory of OpenACC files")
@@ -448,4 +452,4 @@ def _errors(errors: dict[str, dict[str, float]]) -> str:
 
 
 if __name__ == "__main__":
-    main()
+    cli.run(main, "python -m train.calibrate_openacc")

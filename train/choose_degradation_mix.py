@@ -31,6 +31,7 @@ import numpy as np
 from agents.oracles import NOMINAL
 from agents.policies import seconds
 from agents.protocol import EVAL_SEED_START
+from timegap_env import cli
 from timegap_env.config import DEGRADATION_KINDS, EnvConfig
 from timegap_env.envs.info import truth_of
 from train.value_of_information import (
@@ -98,6 +99,7 @@ def main(argv: Sequence[str] | None = None) -> None:
                         help="training episodes per condition of the lookup oracle (default %(default)s)")
     parser.add_argument("--out", type=Path, default=DEFAULT_OUT, help="output directory (default %(default)s)")
     args = parser.parse_args(argv)
+    cli.output_dir(args.out)
     started = time.perf_counter()
     config = EnvConfig()
     levels = config.setting_levels
@@ -157,4 +159,4 @@ def main(argv: Sequence[str] | None = None) -> None:
 
 
 if __name__ == "__main__":
-    main()
+    cli.run(main, "python -m train.choose_degradation_mix")

@@ -27,6 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
+from timegap_env import cli
 from timegap_env.config import ChartConfig, EnvConfig, MonitorConfig, PlatoonConfig, SensorConfig
 from timegap_env.leaders import make_leader
 from timegap_env.monitoring import MonitoredPlatoon
@@ -88,6 +89,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--out", type=Path, default=Path("results/monitor_window.md"))
     args = parser.parse_args()
+    cli.output_file(args.out)
 
     profiles = [make_leader(family, seed) for family in FAMILIES for seed in SEEDS]
     speeds = np.stack([p.speed for p in profiles])
@@ -136,4 +138,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    cli.run(main, "python -m train.choose_window")

@@ -18,6 +18,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
+from timegap_env import cli
 from timegap_env import Trajectory, platoon_string_stability, simulate
 
 
@@ -67,6 +68,7 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=0, help="seed of the paper scenario's leader")
     parser.add_argument("--out", type=Path, default=Path("results"), help="output directory")
     args = parser.parse_args()
+    cli.output_dir(args.out)
 
     trajectory = simulate("paper", seed=args.seed)
     plot_scenario(trajectory, args.out / "paper_scenario.png")
@@ -77,4 +79,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    cli.run(main, "python -m train.demo")

@@ -53,6 +53,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from agents.protocol import EVAL_SEED_START
+from timegap_env import cli
 from timegap_env.config import DEGRADATION_KINDS, SIZE_RANGE_FIELDS, ChartConfig, DegradationConfig, LeaderConfig, PlatoonConfig
 from timegap_env.leaders.openacc import default_openacc_dir, openacc_paths, read_openacc, repeated_runs
 from timegap_env.leaders.scenarios import make_leader
@@ -270,6 +271,7 @@ def main(argv: Sequence[str] | None = None) -> None:
     parser.add_argument("--out", type=Path, default=Path("results/monitoring"), help="output directory")
     add_arguments(parser)
     args = parser.parse_args(argv)
+    cli.output_dir(args.out)
     try:
         backend = Backend.from_args(args)
     except ValueError as error:
@@ -392,4 +394,4 @@ def plot(path: Path, rows: list[dict[str, Any]], labels: list[str]) -> None:
 
 
 if __name__ == "__main__":
-    main()
+    cli.run(main, "python -m train.detection_benchmark")

@@ -43,6 +43,7 @@ import matplotlib.pyplot as plt
 import matplotlib.ticker
 import numpy as np
 
+from timegap_env import cli
 from timegap_env.config import ChartConfig, MonitorConfig, PlatoonConfig, SensorConfig
 from timegap_env.leaders import make_leader
 from timegap_env.leaders.openacc import (
@@ -686,6 +687,7 @@ def main() -> None:
     parser.add_argument("--out", type=Path, default=Path("results/field"), help="where the report and figures go")
     parser.add_argument("--runs", nargs="+", metavar="NAME", help="only these runs (file names without suffix)")
     args = parser.parse_args()
+    cli.output_dir(args.out)
     if not args.data.is_dir():  # make demo goes on without it: the committed report stays
         print(f"field_validation: skipped, OpenACC data not found at {args.data} (set --data or $TIMEGAP_OPENACC_PATH)")
         return
@@ -1082,4 +1084,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    cli.run(main, "python -m train.field_validation")

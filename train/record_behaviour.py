@@ -34,6 +34,7 @@ import gymnasium as gym
 import numpy as np
 
 import timegap_env
+from timegap_env import cli
 
 EPISODES: list[dict[str, Any]] = [  # gym.make config, reset seed and options, action generator seed
     {"config": None, "seed": 0, "options": None, "actions": 100},
@@ -170,12 +171,23 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--rename", action="append", default=[], metavar="OLD=NEW",
                         help="read the earlier recording's dict key OLD as NEW (repeatable)")
     args = parser.parse_args(argv)
+    cli.output_file(args.out)
+    for pair in args.rename:
+        if "=" not in pair:
+            raise ValueError(f"--rename {pair!r}: must be OLD=NEW")
     renamed = dict(pair.split("=", 1) for pair in args.rename)
+    earlier = None
+    if args.compare is not None:  # read before the recording's work: a file that cannot be read is named now
+        try:
+            earlier = pickle.loads(args.compare.read_bytes())
+        except (pickle.UnpicklingError, EOFError, AttributeError, ImportError, IndexError, TypeError) as error:
+            raise ValueError(f"--compare {args.compare}: not a recording of train.record_behaviour "
+                             f"({type(error).__name__}: {error})") from error
     recording = record()
     args.out.write_bytes(pickle.dumps(recording))
     print(f"wrote {args.out}")
     if args.compare is not None:
-        found = list(differences(pickle.loads(args.compare.read_bytes()), recording, renamed))
+        found = list(differences(earlier, recording, renamed))
         for line in found[:50]:
             print(line)
         print(f"{len(found)} difference(s) from {args.compare}")
@@ -183,4 +195,4 @@ def main(argv: list[str] | None = None) -> None:
 
 
 if __name__ == "__main__":
-    main()
+    cli.run(main, "python -m train.record_behaviour")

@@ -18,6 +18,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 
 import timegap_env
+from timegap_env import cli
 
 SWITCH_STEP, FRAME_STEP = 10, 40  # [steps of 1 s]
 
@@ -27,6 +28,7 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--out", type=Path, default=Path("results/env_frame.png"))
     args = parser.parse_args()
+    cli.output_file(args.out)
     levels = list(timegap_env.EnvConfig().setting_levels)
     env = gym.make(timegap_env.ENV_ID, render_mode="rgb_array", config={"degradation": {"kind_weights": {"none": 1.0}}})
     env.reset(seed=args.seed, options={"scenario": "aggressive_cycles"})
@@ -39,4 +41,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    cli.run(main, "python -m train.render_frame")

@@ -29,6 +29,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
+from timegap_env import cli
 from timegap_env.config import (
     MONITOR_PRESETS, AggressiveCyclesConfig, ChartConfig, MonitorConfig, PlatoonConfig, SensorConfig,
 )
@@ -140,6 +141,7 @@ def main() -> None:
     parser.add_argument("--seeds", type=int, default=50, help="leader seeds 0..N-1 run at once")
     parser.add_argument("--out", type=Path, default=Path("results/paper"))
     args = parser.parse_args()
+    cli.output_dir(args.out)
     args.out.mkdir(parents=True, exist_ok=True)
 
     profiles = [make_leader("paper", seed) for seed in range(args.seeds)]
@@ -229,4 +231,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    cli.run(main, "python -m train.reproduce_paper")

@@ -64,6 +64,7 @@ import timegap_env
 from agents.oracles import NOMINAL
 from agents.policies import ChartStepPolicy, FixedPolicy, NamedPolicy, PaperRulePolicy, V2VAwarePolicy, seconds
 from agents.protocol import ENV_FILE, EVAL_SEED_START, MODEL_FILE, VECNORMALIZE_FILE
+from timegap_env import cli
 from timegap_env.config import NESTED_CONFIGS, EnvConfig
 from timegap_env.envs.info import summary_of, truth_of
 from timegap_env.envs.observation import observation_space
@@ -565,6 +566,7 @@ def main(argv: Sequence[str] | None = None) -> None:
                              "at least the cluster's CPUs keeps them all busy")
     add_arguments(parser)
     args = parser.parse_args(argv)
+    cli.output_dir(args.out if args.out is not None else DEFAULT_OUT / args.grid.stem)
     backend = Backend.from_args(args)
     try:
         grid = load_grid(args.grid)
@@ -574,4 +576,4 @@ def main(argv: Sequence[str] | None = None) -> None:
 
 
 if __name__ == "__main__":
-    main()
+    cli.run(main, "python -m train.sweep")

@@ -61,6 +61,7 @@ import numpy as np
 
 from agents.protocol import ENV_FILE, EVAL_SEED_START
 from agents.rllib_policy import CHECKPOINT_DIR, RLlibPolicy
+from timegap_env import cli
 from timegap_env import ENV_ID
 from train.backends import runtime_env
 
@@ -126,7 +127,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                         help="seed of RLlib and the envs: runner w's platoon i gets (seed + w) x envs + i (default: 0)")
     parser.add_argument("--hyperparams", type=Path, default=Path("hyperparams/ppo.yml"),
                         help="the SB3 run's rl-zoo3-style yml the env and PPO settings come from (default: %(default)s)")
-    parser.add_argument("--env-config", type=json.loads, default={},
+    parser.add_argument("--env-config", type=cli.json_object, default={},
                         help="EnvConfig overrides as JSON, merged into env_kwargs' config (default: none)")
     parser.add_argument("--eval-episodes", type=int, default=None,
                         help="held-out episodes of train.evaluate for the report, 0: none (default: its 112)")
@@ -570,6 +571,7 @@ def select_scale(args: argparse.Namespace, settings: Settings, command: str, ray
 
 def main(argv: list[str] | None = None) -> None:
     args = parse_args(argv)
+    cli.output_dir(args.out)
     started = time.perf_counter()
     settings = Settings.from_args(args)
     command = shlex.join(["python", "-m", "train.train_rllib", *(sys.argv[1:] if argv is None else argv)])
@@ -609,7 +611,4 @@ def main(argv: list[str] | None = None) -> None:
 
 
 if __name__ == "__main__":
-    try:
-        main()
-    except ValueError as error:  # a setting to fix, not a bug: its message, no traceback
-        sys.exit(f"python -m train.train_rllib: error: {error}")
+    cli.run(main, "python -m train.train_rllib")

@@ -28,6 +28,7 @@ import timegap_env
 from agents.oracles import NOMINAL
 from agents.policies import ChartStepPolicy, FixedPolicy, NamedPolicy, PaperRulePolicy, seconds
 from agents.protocol import EVAL_SEED_START
+from timegap_env import cli
 from timegap_env.config import EnvConfig
 from timegap_env.envs.info import summary_of
 from train.value_of_information import SELECTION_SEED_START, kind_groups
@@ -78,6 +79,7 @@ def main(argv: Sequence[str] | None = None) -> None:
     parser.add_argument("--min-setting", type=float, nargs="+", default=MIN_SETTINGS,
                         help="grid of min_setting [s] (default %(default)s)")
     args = parser.parse_args(argv)
+    cli.output_dir(args.out)
     if not 1 <= args.episodes <= SELECTION_SEED_START - TUNING_SEED_START:
         parser.error(f"--episodes {args.episodes}: must be in [1, {SELECTION_SEED_START - TUNING_SEED_START}], "
                      f"the seeds below the selection seeds")
@@ -185,4 +187,4 @@ def write_report(path: Path, config: EnvConfig, seeds: Sequence[int], cells: Seq
 
 
 if __name__ == "__main__":
-    main()
+    cli.run(main, "python -m train.tune_rule")

@@ -53,6 +53,7 @@ import timegap_env
 from agents.oracles import NOMINAL, LookupOracle, StabilityOracle, TruthPolicy, bin_centres
 from agents.policies import seconds
 from agents.protocol import EVAL_SEED_START
+from timegap_env import cli
 from timegap_env.config import DEGRADATION_KINDS, SIZE_RANGE_FIELDS, EnvConfig
 from timegap_env.envs.info import summary_of, truth_of
 from timegap_env.sim.degradation import round_to_tick
@@ -225,6 +226,7 @@ def main(argv: Sequence[str] | None = None) -> None:
                         help="EnvConfig overrides as JSON, e.g. '{\"preferred_setting\": 1.0}' (default: none)")
     add_arguments(parser)
     args = parser.parse_args(argv)
+    cli.output_dir(args.out)
     try:
         backend = Backend.from_args(args)
     except ValueError as error:
@@ -395,4 +397,4 @@ def plot(path: Path, kinds: np.ndarray, fixed: dict[str, np.ndarray], blind: int
 
 
 if __name__ == "__main__":
-    main()
+    cli.run(main, "python -m train.value_of_information")
