@@ -351,7 +351,7 @@ def read_curve(path: Path) -> list[tuple[int, float]]:
 
 def work_directory(out: Path, resume: bool) -> Path:
     """A new directory beside ``out`` for the run to write into (a copy of ``out`` to resume from)."""
-    out = Path(os.path.abspath(out))
+    out = Path(os.path.realpath(out))  # beside the directory itself when --out is a symlink to it
     out.parent.mkdir(parents=True, exist_ok=True)
     work = Path(tempfile.mkdtemp(prefix=f"{out.name}{PARTIAL_SUFFIX}", dir=out.parent))
     umask = os.umask(0o022)
@@ -364,14 +364,14 @@ def work_directory(out: Path, resume: bool) -> Path:
 
 def publish(work: Path, out: Path) -> None:
     """Move the finished run ``work`` to ``out``, the previous content of ``out`` deleted only once it is there."""
-    out = Path(os.path.abspath(out))
+    out = Path(os.path.realpath(out))  # a symlink --out keeps pointing at the run
     if not out.exists():
         os.rename(work, out)
         return
     previous = Path(tempfile.mkdtemp(prefix=f"{out.name}.replaced-", dir=out.parent))
     os.rename(out, previous)  # (rename onto an existing non-empty directory fails)
     os.rename(work, out)
-    shutil.rmtree(previous)
+    shutil.rmtree(previous, ignore_errors=True)
 
 
 def share_text(reference: CurveReference, learned: float) -> str:

@@ -123,3 +123,14 @@ def test_training_md_says_why_there_is_no_share_of_the_oracle_gap() -> None:
     assert train_ppo.share_text(reference, -160.0) == ("n/a: the oracle (-162.4) does not beat the best constant "
                                                        "(-159.6) on these episodes, so there is no gap to capture")
     assert train_ppo.share_text(train_ppo.CurveReference([9000], 1.0, -160.0, "o", -150.0), -155.0) == "0.50"
+
+
+def test_a_run_into_a_symlinked_directory_replaces_the_directory_it_points_to(tmp_path: Path) -> None:
+    target, link = tmp_path / "runs" / "ppo-1", tmp_path / "latest"
+    train_ppo.main(tiny(tmp_path, target, "--tensorboard-log", str(tmp_path / "tb")))
+    link.symlink_to(target, target_is_directory=True)
+    before = contents(target)
+    train_ppo.main(tiny(tmp_path, link, "--seed", "3", "--tensorboard-log", str(tmp_path / "tb")))
+    assert link.is_symlink() and link.resolve() == target
+    assert contents(target)["model.zip"] != before["model.zip"]
+    assert sorted(path.name for path in target.parent.iterdir()) == ["ppo-1"]  # no work or replaced directory left
