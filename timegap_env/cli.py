@@ -22,13 +22,16 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import sys
+import tempfile
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 INPUT_ERRORS: tuple[type[BaseException], ...] = (ValueError, OSError, EOFError)  # bad input, named in the message
 TRACEBACK_VARIABLE = "TIMEGAP_TRACEBACK"  # set to 1: bad input raises with its traceback
+PARTIAL_SUFFIX = ".partial-"  # a run's work directory beside its --out: <out>.partial-<random>
 
 
 def run(main: Callable[[], Any], prog: str) -> None:
@@ -89,3 +92,30 @@ def json_object(text: str) -> dict[str, Any]:
     if not isinstance(value, dict):
         raise argparse.ArgumentTypeError(f"{text!r}: must be a JSON object ({{...}}), not {type(value).__name__}")
     return value
+
+
+def work_directory(out: str | Path, copy: bool = False) -> Path:
+    """A new directory beside ``out`` for a run to write into, ``<out>.partial-<random>`` (with ``copy``, holding a
+    copy of ``out``'s files, to resume from or to keep the ones the run does not write); :func:`publish` moves it to
+    ``out`` when the run has ended, so that a run stopped before leaves ``out`` whole."""
+    out = Path(os.path.realpath(out))  # beside the directory itself when out is a symlink to it
+    out.parent.mkdir(parents=True, exist_ok=True)
+    work = Path(tempfile.mkdtemp(prefix=f"{out.name}{PARTIAL_SUFFIX}", dir=out.parent))
+    umask = os.umask(0o022)
+    os.umask(umask)
+    os.chmod(work, 0o777 & ~umask)  # as mkdir would make it (mkdtemp's is private)
+    if copy and out.is_dir():
+        shutil.copytree(out, work, dirs_exist_ok=True)
+    return work
+
+
+def publish(work: Path, out: str | Path) -> None:
+    """Move the finished run ``work`` to ``out``, the previous content of ``out`` deleted only once it is there."""
+    out = Path(os.path.realpath(out))  # a symlink out keeps pointing at the run
+    if not out.exists():
+        os.rename(work, out)
+        return
+    previous = Path(tempfile.mkdtemp(prefix=f"{out.name}.replaced-", dir=out.parent))
+    os.rename(out, previous)  # (rename onto an existing non-empty directory fails)
+    os.rename(work, out)
+    shutil.rmtree(previous, ignore_errors=True)

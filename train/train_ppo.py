@@ -60,7 +60,6 @@ import os
 import shlex
 import shutil
 import sys
-import tempfile
 import time
 from pathlib import Path
 from typing import Any
@@ -91,7 +90,6 @@ REPORT_FILE = "training.md"
 CURVE_FILE, CURVE_FIGURE = "curve.csv", "curve.png"
 TENSORBOARD_DIR = "tensorboard"  # TensorBoard's logs in the run directory, unless --tensorboard-log
 RUN_CONTENTS = {MODEL_FILE, VECNORMALIZE_FILE, ENV_FILE, REPORT_FILE, CURVE_FILE, CURVE_FIGURE, TENSORBOARD_DIR}
-PARTIAL_SUFFIX = ".partial-"  # the work directory beside --out: <out>.partial-<random>
 EVAL_SEED = 9_000  # first seed of the end-of-training check, below EVAL_SEED_START [-]
 EVAL_EPISODES = 32  # episodes of the end-of-training check [-]
 RUN_KEYS = {"n_envs", "n_timesteps", "policy", "normalize", "frame_stack", "env_kwargs"}  # rl-zoo3's; the rest: PPO's
@@ -349,31 +347,6 @@ def read_curve(path: Path) -> list[tuple[int, float]]:
         raise RunFileError(f"{path}: not a learning curve of train_ppo ({type(error).__name__}: {error})") from error
 
 
-def work_directory(out: Path, resume: bool) -> Path:
-    """A new directory beside ``out`` for the run to write into (a copy of ``out`` to resume from)."""
-    out = Path(os.path.realpath(out))  # beside the directory itself when --out is a symlink to it
-    out.parent.mkdir(parents=True, exist_ok=True)
-    work = Path(tempfile.mkdtemp(prefix=f"{out.name}{PARTIAL_SUFFIX}", dir=out.parent))
-    umask = os.umask(0o022)
-    os.umask(umask)
-    os.chmod(work, 0o777 & ~umask)  # as mkdir would make it (mkdtemp's is private)
-    if resume:
-        shutil.copytree(out, work, dirs_exist_ok=True)
-    return work
-
-
-def publish(work: Path, out: Path) -> None:
-    """Move the finished run ``work`` to ``out``, the previous content of ``out`` deleted only once it is there."""
-    out = Path(os.path.realpath(out))  # a symlink --out keeps pointing at the run
-    if not out.exists():
-        os.rename(work, out)
-        return
-    previous = Path(tempfile.mkdtemp(prefix=f"{out.name}.replaced-", dir=out.parent))
-    os.rename(out, previous)  # (rename onto an existing non-empty directory fails)
-    os.rename(work, out)
-    shutil.rmtree(previous, ignore_errors=True)
-
-
 def share_text(reference: CurveReference, learned: float) -> str:
     """The share of the oracle gap captured for training.md, or why there is none."""
     share = reference.share(learned)
@@ -464,7 +437,7 @@ def main(argv: list[str] | None = None) -> None:
     steps_before = model.num_timesteps if model else 0
 
     # ---------------------------------------------------------------- train, phase by phase, in a work directory
-    work = work_directory(args.out, args.resume)
+    work = cli.work_directory(args.out, copy=args.resume)
     tensorboard = args.tensorboard_log if args.tensorboard_log is not None else work / TENSORBOARD_DIR
     shown_tensorboard = args.tensorboard_log if args.tensorboard_log is not None else args.out / TENSORBOARD_DIR
     checkpoint = Checkpoint(args.checkpoint_freq, work)
@@ -548,7 +521,7 @@ Files: {files}, this report; TensorBoard logs in `{shown_tensorboard}/`.
 """
         (work / REPORT_FILE).write_text(report)
         env.close()
-        publish(work, args.out)
+        cli.publish(work, args.out)
     except BaseException:  # interrupted or failed: args.out stays as it was
         if env is not None:
             env.close()

@@ -38,7 +38,9 @@ seeded below the check episodes'.
 ``env.json`` added), which ``agents.rllib_policy.RLlibPolicy.load`` reads, and ``training.md``: the
 command, every iteration (env steps, episodes ended and their mean return, time, throughput), the wall time,
 the policy's mean return on the check episodes and, unless ``--eval-episodes 0``, on ``train.evaluate``'s
-held-out episodes beside the paper's rule and the fixed 1.6 s setting.
+held-out episodes beside the paper's rule and the fixed 1.6 s setting. The run writes into
+``<out>.partial-<random>`` (a copy of ``--out``, so its ``selection.md`` stays) and replaces ``--out`` only when
+it has ended: stopped or failed before, it leaves ``--out`` as it was.
 """
 
 from __future__ import annotations
@@ -47,6 +49,7 @@ import argparse
 import dataclasses
 import json
 import math
+import os
 import shlex
 import shutil
 import sys
@@ -436,12 +439,12 @@ class Run:
     wall_seconds: float  # the command's start to the checkpoint [s]
     checked: Checked  # the policy on the check episodes
 
-    def report(self, hyperparams: Path, policy: Any, held_out: HeldOut | None) -> str:
+    def report(self, hyperparams: Path, policy: Any, held_out: HeldOut | None, out: Path) -> str:
         """training.md: the command, the settings, the iterations, throughput, the return on the check episodes,
         how the reward scale was chosen and the held-out returns."""
         s, trained = self.settings, self.trained
-        steps, checkpoint = trained.iterations[-1].steps, trained.checkpoint
-        size = sum(path.stat().st_size for path in checkpoint.rglob("*") if path.is_file())
+        steps, checkpoint = trained.iterations[-1].steps, out / CHECKPOINT_DIR  # where the run is published
+        size = sum(path.stat().st_size for path in trained.checkpoint.rglob("*") if path.is_file())
         recent, episodes = trained.recent_return(s.runners * s.envs)
         default_scale = s.reward_scale == REWARD_SCALE
         c = self.checked
@@ -565,7 +568,9 @@ def select_scale(args: argparse.Namespace, settings: Settings, command: str, ray
             candidates.append(Candidate(scale, trained, checked))
     report = selection_report(command, settings, args.seed, ray, candidates, time.perf_counter() - started)
     args.out.mkdir(parents=True, exist_ok=True)
-    (args.out / SELECTION_FILE).write_text(report)
+    partial = args.out / f"{SELECTION_FILE}{cli.PARTIAL_SUFFIX}"
+    partial.write_text(report)
+    os.replace(partial, args.out / SELECTION_FILE)  # whole or not at all
     return report
 
 
@@ -595,18 +600,28 @@ def main(argv: list[str] | None = None) -> None:
         if args.select_scale is not None:
             print(select_scale(args, settings, command, description, started))
             return
-        trained = train(settings, args.seed, args.timesteps, args.out)
+        work = cli.work_directory(args.out, copy=True)  # --out's other files (selection.md) kept; --out whole till the end
+        try:
+            trained = train(settings, args.seed, args.timesteps, work)
+        except BaseException:
+            shutil.rmtree(work, ignore_errors=True)
+            raise
     finally:
         ray.shutdown()
     wall = time.perf_counter() - started  # the command's start to the checkpoint
 
     # ---------------------------------------------------------------- check and held-out episodes, report
-    policy = RLlibPolicy.load(trained.checkpoint)
-    checked = check_returns(policy, settings.env_kwargs)
-    held_out = held_out_returns(policy, args.eval_episodes) if args.eval_episodes != 0 else None
-    run = Run(command, settings, args.seed, description, trained, wall, checked)
-    report = run.report(args.hyperparams, policy, held_out)
-    (args.out / REPORT_FILE).write_text(report)
+    try:
+        policy = RLlibPolicy.load(trained.checkpoint)
+        checked = check_returns(policy, settings.env_kwargs)
+        held_out = held_out_returns(policy, args.eval_episodes) if args.eval_episodes != 0 else None
+        run = Run(command, settings, args.seed, description, trained, wall, checked)
+        report = run.report(args.hyperparams, policy, held_out, args.out)
+        (work / REPORT_FILE).write_text(report)
+        cli.publish(work, args.out)
+    except BaseException:
+        shutil.rmtree(work, ignore_errors=True)
+        raise
     print(report)
 
 

@@ -133,3 +133,25 @@ def test_a_truncated_data_file_is_one_line_naming_it(command: list[str], tmp_pat
     last = done.stderr.strip().splitlines()[-1]
     assert last.startswith(f"python -m {command[0]}: error: ") and str(data / OPENACC_FILE) in last, last
     assert not (tmp_path / "out").exists() and not (tmp_path / "presets.json").exists()
+
+
+def test_a_work_directory_is_published_whole_or_not_at_all(tmp_path: Path) -> None:
+    """What train_ppo and train_rllib write through: a run in <out>.partial-*, --out replaced only at the end."""
+    from timegap_env import cli
+
+    out = tmp_path / "run"
+    out.mkdir()
+    (out / "selection.md").write_text("kept")
+    (out / "training.md").write_text("old")
+    work = cli.work_directory(out, copy=True)
+    assert work.parent == tmp_path and work.name.startswith(f"run{cli.PARTIAL_SUFFIX}")
+    assert (work / "selection.md").read_text() == "kept"  # a copy: the files the run does not write stay
+    (work / "training.md").write_text("new")
+    assert (out / "training.md").read_text() == "old"  # --out untouched while the run works
+    cli.publish(work, out)
+    assert (out / "training.md").read_text() == "new" and (out / "selection.md").read_text() == "kept"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["run"]  # no work or replaced directory left
+    fresh = cli.work_directory(tmp_path / "new", copy=True)  # nothing to copy yet
+    assert not any(fresh.iterdir())
+    cli.publish(fresh, tmp_path / "new")
+    assert (tmp_path / "new").is_dir()
