@@ -52,7 +52,7 @@ def measure(calls: int) -> SingleEnvSplit:
     """The split, each timing ``calls`` calls (a few for 256 envs)."""
     times = {}
     for n_envs in (1, ARITHMETIC_ENVS):
-        env = TimeGapMonitorVectorEnv(n_envs, step_diagnostics=False)
+        env = TimeGapMonitorVectorEnv(n_envs, step_diagnostics=False, autoreset_mode="same_step")
         env.reset(seed=0)
         task = env.task
         action = task.ladder.check(np.full(task.ladder.shape, 5))

@@ -69,7 +69,7 @@ def restart_peak_rss() -> int | None:
 def make_native(n_envs: int, step_diagnostics: bool) -> gym.vector.VectorEnv:
     """The native vector env of n_envs platoons."""
     return gym.make_vec(ENV_ID, num_envs=n_envs, vectorization_mode="vector_entry_point",
-                        step_diagnostics=step_diagnostics)
+                        step_diagnostics=step_diagnostics, autoreset_mode="same_step")
 
 
 class Stepper:

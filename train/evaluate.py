@@ -266,7 +266,7 @@ def check_data(plan: list[Episode]) -> None:
             continue
         seed = next(episode.seed for episode in plan if episode.group == group)
         venv = gym.make_vec(timegap_env.ENV_ID, num_envs=1, vectorization_mode="vector_entry_point",
-                            config=GROUPS[group].config)
+                            config=GROUPS[group].config, autoreset_mode="same_step")
         try:
             venv.reset(seed=[seed], options=GROUPS[group].options)
         except (ValueError, OSError, EOFError) as error:
@@ -284,7 +284,7 @@ def run_batch(
     """
     n = len(seeds)
     venv = gym.make_vec(timegap_env.ENV_ID, num_envs=n, vectorization_mode="vector_entry_point",
-                        config={**GROUPS[group].config, "action_mode": policy.action_mode})
+                        config={**GROUPS[group].config, "action_mode": policy.action_mode}, autoreset_mode="same_step")
     obs, infos = venv.reset(seed=seeds, options=GROUPS[group].options)
     task, config = venv.unwrapped.task, venv.unwrapped.config
     prints = [task.fingerprint(env) for env in range(n)]
@@ -389,7 +389,7 @@ def profile_first(group: str, seeds: list[int]) -> list[int]:
     """``seeds`` with the first one whose episode degrades a follower midway (a hidden kind) moved to the front, so
     that profiles.png shows an onset; unchanged if there is none."""
     venv = gym.make_vec(timegap_env.ENV_ID, num_envs=len(seeds), vectorization_mode="vector_entry_point",
-                        config=GROUPS[group].config)
+                        config=GROUPS[group].config, autoreset_mode="same_step")
     _, infos = venv.reset(seed=seeds, options=GROUPS[group].options)
     venv.close()
     truth = truth_of(infos)

@@ -94,7 +94,7 @@ def record_episode(spec: dict[str, Any]) -> dict[str, Any]:
 
 def record_vector_env() -> dict[str, Any]:
     envs = gym.make_vec(timegap_env.ENV_ID, num_envs=VECTOR_ENVS, vectorization_mode="vector_entry_point",
-                        config={"action_mode": "per_vehicle"})
+                        config={"action_mode": "per_vehicle"}, autoreset_mode="same_step")
     obs, infos = envs.reset(seed=20)
     steps = [{"obs": obs, "infos": infos}]
     generator = actions(len(envs.unwrapped.config.setting_levels), envs.action_space.shape, 200)

@@ -342,7 +342,7 @@ def play(policy: NamedPolicy, overrides: dict[str, Any], seeds: tuple[int, ...])
     """The episodes of :func:`run_piece` under ``policy``."""
     n = len(seeds)
     venv = gym.make_vec(timegap_env.ENV_ID, num_envs=n, vectorization_mode="vector_entry_point",
-                        config={**overrides, "action_mode": policy.action_mode})
+                        config={**overrides, "action_mode": policy.action_mode}, autoreset_mode="same_step")
     obs, infos = venv.reset(seed=list(seeds))
     scenarios = [str(name) for name in venv.unwrapped.scenario]
     kinds = [next((str(k) for k in row if k != NOMINAL), NOMINAL) for row in truth_of(infos)["kind"]]

@@ -48,7 +48,7 @@ def run(seeds: Sequence[int], policies: Sequence[NamedPolicy]) -> dict[str, np.n
     (n_policies, n_seeds), and the kind of degradation of each seed's episode (n_seeds,)."""
     n, m = len(seeds), len(policies)
     venv = gym.make_vec(timegap_env.ENV_ID, num_envs=n * m, vectorization_mode="vector_entry_point",
-                        step_diagnostics=False)
+                        step_diagnostics=False, autoreset_mode="same_step")
     obs, _ = venv.reset(seed=list(seeds) * m)
     kinds = np.array([next((k for k in row if k != NOMINAL), NOMINAL) for row in venv.ground_truth()["kind"][:n]],
                      dtype=object)

@@ -77,7 +77,8 @@ def run(config: EnvConfig, seeds: Sequence[int], choose: Chooser, options: dict[
     of degradation drawn (or pinned) and the episode summary."""
     n = len(seeds)
     fields = {field.name: getattr(config, field.name) for field in dataclasses.fields(config)}
-    venv = gym.make_vec(timegap_env.ENV_ID, num_envs=n, vectorization_mode="vector_entry_point", config=fields)
+    venv = gym.make_vec(timegap_env.ENV_ID, num_envs=n, vectorization_mode="vector_entry_point", config=fields,
+                        autoreset_mode="same_step")
     obs, infos = venv.reset(seed=list(seeds), options=options)
     kinds = [next((k for k in row if k != NOMINAL), NOMINAL) for row in truth_of(infos)["kind"]]
     returns, active = np.zeros(n), np.ones(n, dtype=bool)

@@ -202,8 +202,9 @@ def _assert_info_masks(infos: dict[str, Any], n: int, where: str = "infos") -> N
 def test_cleanrl_style_loop_reads_final_obs_and_info_masks(mode: str) -> None:
     """The loop of CleanRL's PPO: the true next observation of a finished episode is ``infos["final_obs"][i]``."""
     n = 3
-    vector_kwargs = {"autoreset_mode": AutoresetMode.SAME_STEP} if mode == "sync" else {}  # native: the default
-    envs = gym.make_vec(ENV_ID, num_envs=n, vectorization_mode=mode, vector_kwargs=vector_kwargs, config=SHORT)
+    same_step = {"vector_kwargs": {"autoreset_mode": AutoresetMode.SAME_STEP}} if mode == "sync" else \
+        {"autoreset_mode": "same_step"}  # CleanRL's loop reads final_obs, which same-step autoresets give
+    envs = gym.make_vec(ENV_ID, num_envs=n, vectorization_mode=mode, config=SHORT, **same_step)
     assert envs.metadata["autoreset_mode"] == AutoresetMode.SAME_STEP
     space = envs.single_observation_space
     _, infos = envs.reset(seed=0)

@@ -149,7 +149,8 @@ def test_vector_env_without_step_diagnostics_steps_the_same():
 
 def test_a_finished_episode_reports_its_last_observation_and_summary_then_restarts():
     config = {"episode_duration": 3.0}
-    envs = gym.make_vec("TimeGapMonitor-v0", num_envs=2, vectorization_mode="vector_entry_point", config=config)
+    envs = gym.make_vec("TimeGapMonitor-v0", num_envs=2, vectorization_mode="vector_entry_point", config=config,
+                        autoreset_mode="same_step")
     envs.reset(seed=0)
     for _ in range(2):
         _, _, terminated, truncated, infos = envs.step(np.array([5, 5]))
@@ -171,7 +172,8 @@ def test_envs_that_do_not_reset_keep_their_v2v_status_when_others_do():
     config = {"degradation": {"kind_weights": {"v2v_outage": 1.0}, "v2v_outage_duration_range": (3.0, 6.0)},
               "episode_duration": 40.0}
     n = 32
-    native = gym.make_vec("TimeGapMonitor-v0", num_envs=n, vectorization_mode="vector_entry_point", config=config)
+    native = gym.make_vec("TimeGapMonitor-v0", num_envs=n, vectorization_mode="vector_entry_point", config=config,
+                          autoreset_mode="same_step")
     reference = SyncVectorEnv([lambda: gym.make("TimeGapMonitor-v0", config=config) for _ in range(n)],
                               autoreset_mode=AutoresetMode.SAME_STEP)
     options = {"scenario": "ngsim_in_band"}
@@ -185,3 +187,26 @@ def test_envs_that_do_not_reset_keep_their_v2v_status_when_others_do():
         done = got[2] | got[3]
         partial_resets += bool(done.any() and not done.all())
     assert partial_resets > 10
+
+
+def test_the_default_autoreset_is_gymnasiums_and_its_vector_wrappers_take_the_env():
+    """Issue 22: switching vectorization_mode between "sync" and "vector_entry_point" changes nothing by default
+    (the native env autoreset same-step while gymnasium's default is next-step), and gymnasium's vector observation
+    wrappers, which assert next-step autoresets, wrap the native env as it comes."""
+    from gymnasium.wrappers.vector import NormalizeObservation
+
+    config = {"episode_duration": 3.0}
+    native = gym.make_vec("TimeGapMonitor-v0", num_envs=2, vectorization_mode="vector_entry_point", config=config)
+    synced = gym.make_vec("TimeGapMonitor-v0", num_envs=2, vectorization_mode="sync", config=config)
+    assert native.metadata["autoreset_mode"] == synced.metadata["autoreset_mode"] == AutoresetMode.NEXT_STEP
+    for envs in (native, synced):
+        envs.reset(seed=5)
+    for step in range(8):
+        actions = np.array([step % 9, (step * 4) % 9])
+        got, want = native.step(actions), synced.step(actions)
+        for a, b in zip(got[:4], want[:4]):
+            np.testing.assert_array_equal(a, b)
+        assert_same_infos(got[4], want[4], f"step {step}")
+    wrapped = NormalizeObservation(gym.make_vec("TimeGapMonitor-v0", num_envs=2, vectorization_mode="vector_entry_point"))
+    wrapped.reset(seed=0)
+    wrapped.step(np.array([1, 2]))

@@ -52,7 +52,7 @@ class TimeGapVecEnv(VecEnv):
     ) -> None:
         limit = {} if max_episode_steps is None else {"max_episode_steps": max_episode_steps}
         self.venv = gym.make_vec(ENV_ID, num_envs=n_envs, vectorization_mode="vector_entry_point", config=config,
-                                 step_diagnostics=False, **limit)
+                                 step_diagnostics=False, autoreset_mode="same_step", **limit)
         super().__init__(n_envs, self.venv.single_observation_space, self.venv.single_action_space)
         self.config = self.venv.config
         self._actions: np.ndarray | None = None

@@ -71,12 +71,13 @@ class TimeGapMonitorVectorEnv(VectorEnv):
     ``autoreset_mode`` (gymnasium's :class:`~gymnasium.vector.AutoresetMode` or its name) says what
     happens when a sub-env's episode ends, as in ``SyncVectorEnv``:
 
-    - ``"same_step"`` (default): it is reset in the same step; the returned observation and infos are the
-      new episode's, the last observation is in ``infos["final_obs"]`` (an object array of float32 rows,
-      None where no episode ended) and the last step's info, its summary ``episode_<name>`` included,
-      in ``infos["final_info"]``;
-    - ``"next_step"``: the step returns the last observation and info (with ``episode_<name>``); the next
-      step ignores that sub-env's action and returns its reset (reward 0, not terminated or truncated);
+    - ``"next_step"`` (default, as in gymnasium's own vector envs): the step returns the last observation and info
+      (with ``episode_<name>``); the next step ignores that sub-env's action and returns its reset (reward 0, not
+      terminated or truncated);
+    - ``"same_step"`` (what Stable-Baselines3 expects; :class:`~timegap_env.envs.sb3.TimeGapVecEnv` uses it): it is
+      reset in the same step; the returned observation and infos are the new episode's, the last observation is in
+      ``infos["final_obs"]`` (an object array of float32 rows, None where no episode ended) and the last step's
+      info, its summary ``episode_<name>`` included, in ``infos["final_info"]``;
     - ``"disabled"``: the caller resets ended sub-envs with ``reset(options={"reset_mask": mask})``;
       stepping one before raises ``ResetNeeded``.
 
@@ -85,7 +86,7 @@ class TimeGapMonitorVectorEnv(VectorEnv):
     ground truth then is never worked out (its smallest string-stable settings take milliseconds per episode).
     """
 
-    metadata = {"autoreset_mode": AutoresetMode.SAME_STEP, "render_modes": []}
+    metadata = {"autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": []}
 
     def __init__(
         self,
@@ -93,7 +94,7 @@ class TimeGapMonitorVectorEnv(VectorEnv):
         config: Mapping[str, Any] | None = None,
         max_episode_steps: int | None = None,
         step_diagnostics: bool = True,
-        autoreset_mode: str | AutoresetMode = AutoresetMode.SAME_STEP,
+        autoreset_mode: str | AutoresetMode = AutoresetMode.NEXT_STEP,
     ) -> None:
         if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) or num_envs < 1:
             raise ValueError(f"num_envs = {shown(num_envs)}: must be an integer >= 1")
