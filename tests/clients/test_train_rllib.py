@@ -207,6 +207,8 @@ def test_train_rllib_end_to_end_then_the_policy_acts(tmp_path: Path) -> None:
     finally:
         ray.shutdown()  # main shuts Ray down; this covers a failure before it did
     report = (out / REPORT_FILE).read_text()
+    assert not any(".partial-" in path.name for path in tmp_path.iterdir())  # the work directory became --out
+    assert f"`{out / CHECKPOINT_DIR}/`" in report  # where the run was published, not where it worked
     iterations = [line for line in report.splitlines() if re.fullmatch(r"\| \d+ \| [\d,]+ \| .*", line)]
     assert len(iterations) >= 2  # 80 env steps each, up to 160
     assert "## Held-out evaluation (7 episodes per policy" in report
