@@ -79,8 +79,11 @@ def check_statistics(saved: VecNormalize, where: str) -> None:
         for key, part in parts:
             if part is not None:
                 prefix = f"{name}[{key!r}]" if key else name
-                fields[f"{prefix}.mean"] = ("mean", getattr(part, "mean", None))
-                fields[f"{prefix}.var"] = ("var", getattr(part, "var", None))
+                mean, var = getattr(part, "mean", None), getattr(part, "var", None)
+                fields[f"{prefix}.mean"], fields[f"{prefix}.var"] = ("mean", mean), ("var", var)
+                if np.shape(mean) != np.shape(var):
+                    raise RunFileError(f"vecnormalize = {where!r}: {prefix}.mean has shape {np.shape(mean)}, its var "
+                                       f"{np.shape(var)}: they must match (is the file damaged?)")
     for name, (kind, value) in fields.items():
         try:
             values = np.asarray(value, dtype=np.float64)

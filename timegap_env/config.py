@@ -258,8 +258,8 @@ class LeaderConfig(ConfigMixin):
     """What every leader profile shares: its tick, length and speed band."""
 
     dt: float = PlatoonConfig.dt  # sample period of the profile [s], [MIN_DT, MAX_DT]
-    duration: float = 250.0  # length of a synthetic profile [s], at most MAX_EPISODE_TICKS ticks; in the env it is
-    # EnvConfig.episode_duration
+    duration: float = 250.0  # length of a synthetic profile [s], at least one tick dt, at most MAX_EPISODE_TICKS ticks;
+    # in the env it is EnvConfig.episode_duration
     speed_band: tuple[float, float] = (20 * MPH, 80 * MPH)  # speeds a profile is kept within [m/s], in [0, MAX_SPEED]
     initial_speed: float = 22.0  # speed at t = 0 of an integrated profile [m/s], within speed_band
     min_recorded_duration: float = 30.0  # shortest recorded leader (NGSIM vehicle, OpenACC lead car) drawn [s],
@@ -267,7 +267,7 @@ class LeaderConfig(ConfigMixin):
 
     def __post_init__(self) -> None:
         self._number("dt", MIN_DT, MAX_DT)
-        self._number("duration", 0.0, MAX_EPISODE_TICKS * self.dt, open_low=True)
+        self._number("duration", self.dt, MAX_EPISODE_TICKS * self.dt)
         self._number("min_recorded_duration", 0.0, MAX_DURATION, open_low=True)
         low, high = self._pair("speed_band", 0.0, MAX_SPEED)
         speed = self._number("initial_speed", 0.0, MAX_SPEED)
@@ -345,7 +345,8 @@ class StochasticHumanConfig(ConfigMixin):
 class HumanLeaderConfig(ConfigMixin):
     """highway-env's IDM driver as a human leader behind a scripted disturbance (``timegap_env.leaders.idm``)."""
 
-    desired_speed_factor: float = 1.2  # driver's desired speed over the disturbance's top speed [-], (0, 10]
+    desired_speed_factor: float = 1.2  # driver's desired speed over the disturbance's top speed, above 1 so that it
+    # follows the disturbance rather than cruising below it [-], (1, 10]
     time_wanted_range: tuple[float, float] = (1.0, 2.0)  # desired time gap of a seeded driver (highway-env: 1.5) [s],
     # in (0, MAX_TIME_GAP]
     comfort_accel_range: tuple[float, float] = (2.0, 4.0)  # desired acceleration of a seeded driver (highway-env: 3)
@@ -353,7 +354,7 @@ class HumanLeaderConfig(ConfigMixin):
     max_initial_gap: float = 500.0  # longest accepted initial bumper-to-bumper gap [m], (0, 10000]
 
     def __post_init__(self) -> None:
-        self._number("desired_speed_factor", 0.0, 10.0, open_low=True)
+        self._number("desired_speed_factor", 1.0, 10.0, open_low=True)
         self._pair("time_wanted_range", 0.0, MAX_TIME_GAP, open_low=True)
         self._pair("comfort_accel_range", 0.0, MAX_ACCEL, open_low=True)
         self._number("max_initial_gap", 0.0, 10_000.0, open_low=True)
@@ -611,13 +612,14 @@ class EnvConfig(ConfigMixin):
     dropout_probability_range: tuple[float, float] = (0.0, 0.05)  # per-episode sensor dropout rate drawn from [-],
     # 0 <= low <= high < 1
     ttc_threshold: float = 4.0  # time-to-collision below which safety is penalised [s], (0, 60]
-    jerk_reference: float = 2.0  # jerk that costs one comfort unit [m/s^3], (0, MAX_JERK]
+    jerk_reference: float = 2.0  # jerk that costs one comfort unit [m/s^3], [0.01, MAX_JERK] (smaller would let the
+    # squared term overflow)
     tracking_reference: float = 0.25  # a tick's |actual time gap - setting| costing one tracking unit [s],
-    # (0, MAX_TIME_GAP]
+    # [0.001, MAX_TIME_GAP] (smaller would make the term, tracking_cap over it, absurdly large)
     tracking_cap: float = 0.5  # a tick's |actual time gap - setting| counts up to this in the tracking term [s],
     # (0, MAX_TIME_GAP]
     accel_growth_reference: float = 1.0  # growth of the peak acceleration down the platoon costing one unit [m/s^2],
-    # (0, MAX_ACCEL]
+    # [0.001, MAX_ACCEL]
     accel_envelope_time: float = 5.0  # time constant of the decaying peak acceleration the growth compares [s],
     # (0, MAX_DURATION]
 
@@ -661,10 +663,10 @@ class EnvConfig(ConfigMixin):
                        f"must stay within platoon.max_v2v_latency = {self.platoon.max_v2v_latency} s")
         self._pair("dropout_probability_range", 0.0, 1.0, open_high=True, strict=False)
         self._number("ttc_threshold", 0.0, 60.0, open_low=True)
-        self._number("jerk_reference", 0.0, MAX_JERK, open_low=True)
-        for field in ("tracking_reference", "tracking_cap"):
-            self._number(field, 0.0, MAX_TIME_GAP, open_low=True)
-        self._number("accel_growth_reference", 0.0, MAX_ACCEL, open_low=True)
+        self._number("jerk_reference", 0.01, MAX_JERK)
+        self._number("tracking_reference", 0.001, MAX_TIME_GAP)
+        self._number("tracking_cap", 0.0, MAX_TIME_GAP, open_low=True)
+        self._number("accel_growth_reference", 0.001, MAX_ACCEL)
         self._number("accel_envelope_time", 0.0, MAX_DURATION, open_low=True)
 
     @classmethod

@@ -109,6 +109,17 @@ def test_statistics_that_would_turn_observations_into_nan_are_refused_at_load(
         LearnedPolicy.load(run)
 
 
+def test_statistics_whose_mean_and_var_differ_in_shape_are_refused_at_load(run: Path) -> None:
+    with open(run / VECNORMALIZE_FILE, "rb") as file:
+        saved = pickle.load(file)
+    saved.obs_rms.var = saved.obs_rms.var[:27]
+    saved.venv, saved.class_attributes, saved.returns = None, {}, None
+    with open(run / VECNORMALIZE_FILE, "wb") as file:
+        pickle.dump(saved, file)
+    with pytest.raises(RunFileError, match=r"obs_rms.mean has shape \(45,\), its var \(27,\): they must match"):
+        LearnedPolicy.load(run)
+
+
 def test_loading_puts_torch_on_one_thread(run: Path) -> None:
     before = torch.get_num_threads()
     try:

@@ -630,8 +630,8 @@ NAMED_LEADER_CASES = {
 @pytest.mark.parametrize("name", list(NAMED_LEADER_CASES))
 def test_named_leader_configs_make_a_profile_or_are_refused_by_name(name):
     cls, changes, leader_changes = NAMED_LEADER_CASES[name]
-    params, leader = cls(**changes), LeaderConfig(**leader_changes)
-    profile, error = call(lambda: LEADER_FAMILIES[cls](0, params, leader))
+    profile, error = call(lambda: LEADER_FAMILIES[cls](0, cls(**changes), LeaderConfig(**leader_changes)))
+    leader = LeaderConfig(**leader_changes) if error is None else None
     if error is None:
         assert bad_profile(profile, leader) == []
     else:

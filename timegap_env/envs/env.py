@@ -172,8 +172,10 @@ class TimeGapMonitorEnv(gym.Env):
                 and not isinstance(action, (bool, np.bool_)) and 0 <= action < self.action_space.n:
             self._action[0, 0] = action  # the common case, without NumPy's checks
             return self._action
-        indices = np.asarray(action)  # bools count as 0 and 1, as gymnasium's spaces take them
-        if indices.dtype.kind not in "iub" or not self.action_space.contains(indices.astype(np.int64)):
+        indices = np.asarray(action)  # bools count as 0 and 1 where gymnasium's space takes them (not np.bool_ in Discrete)
+        discrete = isinstance(self.action_space, gym.spaces.Discrete)
+        if (indices.dtype.kind not in "iub" or (discrete and indices.dtype.kind == "b" and not isinstance(action, bool))
+                or not self.action_space.contains(indices.astype(np.int64))):
             raise ValueError(f"action = {shown(action)} is outside the action space {self.action_space}")
         return self.task.ladder.check(indices.astype(np.int64)[None])
 

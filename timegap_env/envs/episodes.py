@@ -45,11 +45,16 @@ def check_reset_options(options: Mapping[str, Any] | None) -> dict[str, Any]:
     if "leader_speed" in options:
         if "scenario" in options:
             raise ValueError("reset options scenario and leader_speed: give one (leader_speed is the user's own leader)")
+        speed = options["leader_speed"]
         try:
-            options["leader_speed"] = np.asarray(options["leader_speed"], dtype=float)
+            kind = np.asarray(speed).dtype.kind
+            options["leader_speed"] = np.asarray(speed, dtype=float)
         except (TypeError, ValueError, OverflowError) as error:
-            raise ValueError(f"reset option leader_speed = {shown(options['leader_speed'])}: must be a series of "
-                             f"speeds [m/s] ({error})") from None
+            raise ValueError(f"reset option leader_speed = {shown(speed)}: must be a series of speeds [m/s] "
+                             f"({error})") from None
+        if kind not in "iuf":  # NumPy would read strings ("20") and bools as speeds
+            raise ValueError(f"reset option leader_speed = {shown(speed)}: must be a series of numbers [m/s], "
+                             f"not of {np.asarray(speed).dtype}")
     return options
 
 
@@ -122,7 +127,11 @@ class Episodes:
             for family, (members, seeds) in families.items():
                 for first in range(0, len(seeds), LEADER_BATCH):  # a batch's arrays stay small enough to reuse
                     loaded = first
-                    for batch in make_leaders(family, seeds[first : first + LEADER_BATCH], cfg.leader):
+                    try:
+                        batches = list(make_leaders(family, seeds[first : first + LEADER_BATCH], cfg.leader))
+                    except ValueError as error:  # e.g. a recorded family at another tick than platoon.dt
+                        raise ValueError(f"scenario {family!r} with platoon.dt = {dt} s: {error}") from error
+                    for batch in batches:
                         if not math.isclose(batch.dt, dt, rel_tol=1e-9):
                             raise ValueError(f"scenario {family!r} has dt = {batch.dt} s; the env runs at {dt} s")
                         self._load_leaders(np.array(members[loaded : loaded + len(batch)]), batch)

@@ -135,6 +135,17 @@ class PlatoonTask:
                                                   np.array(self._weights), tuple(self._scales)))
         self._state: tuple | None = None  # the fused step's StepState, built at each reset
 
+    def __getstate__(self) -> dict[str, Any]:
+        """For copy and pickle: everything but the fused step's state, whose views of the task's arrays (the reward
+        terms' rows) a copy would detach from them; :meth:`__setstate__` builds it again from the copy's arrays."""
+        return {**self.__dict__, "_state": None, "_state_built": self._state is not None}
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        built = state.pop("_state_built")
+        self.__dict__.update(state)
+        if built:
+            self._state = self._step_state()
+
     @staticmethod
     def bytes_per_env(config: EnvConfig) -> int:
         """Bytes of NumPy state each env of a task with ``config`` holds (what one more env costs) [B]."""

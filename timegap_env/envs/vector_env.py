@@ -23,6 +23,7 @@ from timegap_env.envs.action import action_space
 from timegap_env.envs.info import (
     EPISODE_PREFIX, REWARD_PREFIX, TRUTH_PREFIX, no_rewards, prefixed, step_diagnostics_flag, truth_of, with_masks,
 )
+from timegap_env.envs.episodes import RESET_OPTIONS
 from timegap_env.envs.observation import observation_space
 from timegap_env.envs.task import PlatoonTask
 
@@ -48,7 +49,8 @@ def check_fits(num_envs: int, bytes_per_env: int, available: int | None) -> None
     need more than ``available`` [B] (None: unknown, nothing refused)."""
     needed = num_envs * bytes_per_env
     if available is not None and needed > available:
-        raise ValueError(f"num_envs = {num_envs}: the sub-envs' state needs about {needed / 1e9:.3g} GB "
+        gigabytes = f"{needed / 1e9:.3g}" if needed < 1e300 else "more than 1e291"
+        raise ValueError(f"num_envs = {shown(num_envs)}: the sub-envs' state needs about {gigabytes} GB "
                          f"({bytes_per_env / 1e3:.3g} kB each with this config), more than the {available / 1e9:.3g} GB "
                          "of memory available now; use fewer envs (or a shorter episode_duration, fewer followers)")
 
@@ -80,6 +82,9 @@ class TimeGapMonitorVectorEnv(VectorEnv):
       info, its summary ``episode_<name>`` included, in ``infos["final_info"]``;
     - ``"disabled"``: the caller resets ended sub-envs with ``reset(options={"reset_mask": mask})``;
       stepping one before raises ``ResetNeeded``.
+
+    A ``reset`` that raises leaves the sub-envs it was to reset (every one, if it raised before its mask was read)
+    refusing to step, with ``ResetNeeded``, until a reset of theirs succeeds, as a single env does.
 
     ``step_diagnostics=False`` leaves the per-step keys (monitor, reward terms, ground truth) out of
     ``reset``'s and ``step``'s infos, for learners that never read them; the episode summaries stay. The
@@ -126,20 +131,21 @@ class TimeGapMonitorVectorEnv(VectorEnv):
     ) -> tuple[np.ndarray, dict[str, Any]]:
         """Reset every sub-env, or those of ``options["reset_mask"]`` ((num_envs,) bool); sub-env i is seeded
         with ``seed + i`` (an int) or ``seed[i]`` (a list); other options as the single env's."""
-        options = dict(options or {})
-        mask = self._reset_mask(options.pop("reset_mask", None))
-        if seed is None:
-            seeds: list[int | None] = [None] * self.num_envs
-        elif isinstance(seed, (int, np.integer)):
-            seeds = [int(seed) + i for i in range(self.num_envs)]
-        else:
-            seeds = list(seed)
-            if len(seeds) != self.num_envs:
-                raise ValueError(f"seed has {len(seeds)} entries: must have num_envs = {self.num_envs}")
-        for env in np.flatnonzero(mask):  # unseeded, a sub-env's generator carries on, as a single env's would
-            if seeds[env] is not None:
-                self._rngs[env] = seeding.np_random(seeds[env])[0]
-        self._reset_task(mask, options or None)
+        mask = np.ones(self.num_envs, dtype=bool)  # until the options say which
+        try:  # a reset that raises leaves its sub-envs (all, if it did not get as far as the mask) refusing to step
+            if options is not None and not isinstance(options, Mapping):
+                raise ValueError(f"reset options = {shown(options)}: must be a dict with keys among "
+                                 f"{list(RESET_OPTIONS)} and 'reset_mask'")
+            options = dict(options or {})
+            mask = self._reset_mask(options.pop("reset_mask", None))
+            seeds = self._seeds(seed)
+            for env in np.flatnonzero(mask):  # unseeded, a sub-env's generator carries on, as a single env's would
+                if seeds[env] is not None:
+                    self._rngs[env] = seeding.np_random(seeds[env])[0]
+            self._reset_task(mask, options or None)
+        except BaseException:
+            self._half_reset |= mask & self._was_reset
+            raise
         self._was_reset = True
         self._steps[mask] = 0
         self._ended[mask] = False
@@ -153,6 +159,17 @@ class TimeGapMonitorVectorEnv(VectorEnv):
         names), arrays (num_envs, n_followers), whatever ``step_diagnostics`` puts in the infos: for oracles and
         evaluation, never in the observation."""
         return truth_of(prefixed(TRUTH_PREFIX, self.task.ground_truth()))
+
+    def _seeds(self, seed: int | list[int | None] | None) -> list[int | None]:
+        """Each sub-env's seed: None, ``seed + i`` for an int, ``seed[i]`` for a list."""
+        if seed is None:
+            return [None] * self.num_envs
+        if isinstance(seed, (int, np.integer)):
+            return [int(seed) + i for i in range(self.num_envs)]
+        seeds = list(seed)
+        if len(seeds) != self.num_envs:
+            raise ValueError(f"seed has {len(seeds)} entries: must have num_envs = {self.num_envs}")
+        return seeds
 
     def _reset_mask(self, mask: Any) -> np.ndarray:
         if mask is None:

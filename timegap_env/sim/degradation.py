@@ -192,11 +192,11 @@ def draw_degradation(rng: np.random.Generator, config: DegradationConfig, n_foll
     midway, recovers = rng.random() < config.midway_onset_probability, rng.random() < config.recovery_probability
     onset = round_to_tick(rng.uniform(0.25, 0.75) * duration, dt) if midway else 0.0
     end = round_to_tick(onset + rng.uniform(0.2, 0.5) * duration, dt) if recovers else None
-    end = end if end is not None and end < duration else None
+    end = end if end is not None and onset < end < duration else None  # (in a one-tick episode both round to 0)
     if kind == "none":
         return ()
     if kind == "v2v_outage":
-        length = round_to_tick(rng.uniform(*config.v2v_outage_duration_range), dt)
+        length = max(round_to_tick(rng.uniform(*config.v2v_outage_duration_range), dt), dt)  # at least a tick
         onset = round_to_tick(rng.uniform(0.0, max(duration - length, 0.0)), dt)
         return (Degradation(kind, followers, onset=onset, end=onset + length),)
     if kind == "commercial_acc":
