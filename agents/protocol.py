@@ -71,7 +71,7 @@ def read_env_file(path: str | Path) -> RunEnv:
                            "without it the model cannot be evaluated as it was trained")
     try:
         run = json.loads(path.read_text())
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as error:
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError, RecursionError) as error:  # (nested beyond Python's stack)
         raise RunFileError(f"{path}: not readable JSON ({type(error).__name__}: {error})") from error
     if not isinstance(run, dict) or not {"env_kwargs", "frame_stack"} <= set(run) or set(run) - ENV_FILE_KEYS:
         raise RunFileError(f"{path}: must be a JSON object with the keys env_kwargs, frame_stack and optionally "

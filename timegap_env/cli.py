@@ -43,7 +43,7 @@ def run(main: Callable[[], Any], prog: str) -> None:
         if os.environ.get(TRACEBACK_VARIABLE, "") not in ("", "0"):
             raise
         message = " ".join(str(error).split()) or type(error).__name__  # one line, whatever the message held
-        sys.exit(f"{prog}: error: {message}")
+        sys.exit(f"{prog}: error: {message} ({TRACEBACK_VARIABLE}=1 shows the traceback)")
     except KeyboardInterrupt:
         print(f"{prog}: interrupted", file=sys.stderr)
         sys.exit(130)
@@ -87,7 +87,7 @@ def json_object(text: str) -> dict[str, Any]:
 
     try:
         value = json.loads(text)
-    except json.JSONDecodeError as error:
+    except (json.JSONDecodeError, RecursionError) as error:  # (nested beyond Python's stack)
         raise argparse.ArgumentTypeError(f"{text!r}: not JSON ({error})") from error
     if not isinstance(value, dict):
         raise argparse.ArgumentTypeError(f"{text!r}: must be a JSON object ({{...}}), not {type(value).__name__}")
@@ -117,5 +117,9 @@ def publish(work: Path, out: str | Path) -> None:
         return
     previous = Path(tempfile.mkdtemp(prefix=f"{out.name}.replaced-", dir=out.parent))
     os.rename(out, previous)  # (rename onto an existing non-empty directory fails)
-    os.rename(work, out)
+    try:
+        os.rename(work, out)
+    except BaseException:  # out back in place: a failed publish changes nothing
+        os.rename(previous, out)
+        raise
     shutil.rmtree(previous, ignore_errors=True)

@@ -445,8 +445,6 @@ def main(argv: list[str] | None = None) -> None:
     try:
         (work / ENV_FILE).write_text(json.dumps({"env_kwargs": env_kwargs, "frame_stack": frame_stack,
                                                  "normalize": bool(normalize)}, indent=1, sort_keys=True) + "\n")
-        for stale in (REPORT_FILE, CURVE_FILE, CURVE_FIGURE) if not args.resume else ():
-            (work / stale).unlink(missing_ok=True)
         if model is not None:
             model.tensorboard_log = str(tensorboard)
         reference = CurveReference.measure(evaluated)
@@ -487,6 +485,7 @@ def main(argv: list[str] | None = None) -> None:
             timings.append((label, model.num_timesteps - phase_start, time.perf_counter() - clock))
         assert model is not None and env is not None  # the last phase always trains: total_timesteps > steps_before
         save_run(model, work)
+        checkpoint.saved_at = model.num_timesteps  # the finished model: whatever fails from here on keeps it
         final = LearningCurve(args.curve_freq, evaluated, reference, work, curve, frame_stack)
         final.init_callback(model)
         final.add_point()  # the end of the run
@@ -522,13 +521,15 @@ Files: {files}, this report; TensorBoard logs in `{shown_tensorboard}/`.
         (work / REPORT_FILE).write_text(report)
         env.close()
         cli.publish(work, args.out)
-    except BaseException:  # interrupted or failed: args.out stays as it was
+    except BaseException:  # interrupted or failed: args.out stays as it was, unless publish got as far as moving it
         if env is not None:
             env.close()
-        if checkpoint.saved_at is not None:
+        if not work.exists():
+            print(f"train_ppo: the run was published to --out {args.out} before it stopped", file=sys.stderr)
+        elif checkpoint.saved_at is not None:
             print(f"train_ppo: stopped; --out {args.out} is unchanged. This run's checkpoint at "
-                  f"{checkpoint.saved_at:,} steps is in {work} (continue it with --resume --out {work}, or delete "
-                  "it)", file=sys.stderr)
+                  f"{checkpoint.saved_at:,} steps is in {work}: to continue it, move it to --out's place (replacing "
+                  f"the run there) and run again with --resume --out {args.out}; or delete it", file=sys.stderr)
         else:
             shutil.rmtree(work, ignore_errors=True)
         raise

@@ -423,7 +423,8 @@ def train(settings: Settings, seed: int, timesteps: int, out: Path) -> Trained:
         algo.save(checkpoint.resolve())
     finally:
         algo.stop()
-    (checkpoint / ENV_FILE).write_text(json.dumps({"env_kwargs": settings.env_kwargs, "frame_stack": 1}, indent=2) + "\n")
+    (checkpoint / ENV_FILE).write_text(json.dumps({"env_kwargs": settings.env_kwargs, "frame_stack": 1,
+                                                   "normalize": False}, indent=2) + "\n")  # observations as they come
     return Trained(rows, seconds, checkpoint)
 
 
@@ -619,8 +620,11 @@ def main(argv: list[str] | None = None) -> None:
         report = run.report(args.hyperparams, policy, held_out, args.out)
         (work / REPORT_FILE).write_text(report)
         cli.publish(work, args.out)
-    except BaseException:
-        shutil.rmtree(work, ignore_errors=True)
+    except BaseException:  # the trained checkpoint is kept: the checks and the report can be run again on it
+        if work.exists():
+            print(f"train_rllib: stopped after training; --out {args.out} is unchanged. The trained checkpoint is in "
+                  f"{work / CHECKPOINT_DIR} (agents.rllib_policy.RLlibPolicy.load reads it); delete {work} if not "
+                  "wanted", file=sys.stderr)
         raise
     print(report)
 

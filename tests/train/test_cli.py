@@ -36,7 +36,8 @@ def test_run_turns_bad_input_into_one_line_and_keeps_bugs_tracebacks(monkeypatch
                   IsADirectoryError("--out d: is a directory"), EOFError("truncated")):
         with pytest.raises(SystemExit) as stopped:
             cli.run(bad(error), "python -m train.x")
-        assert stopped.value.code == f"python -m train.x: error: {' '.join(str(error).split())}"  # exit status 1
+        assert stopped.value.code == (f"python -m train.x: error: {' '.join(str(error).split())} "
+                                      "(TIMEGAP_TRACEBACK=1 shows the traceback)")  # exit status 1
     with pytest.raises(KeyError):  # a bug: its traceback
         cli.run(bad(KeyError("a")), "python -m train.x")
     with pytest.raises(SystemExit) as stopped:

@@ -134,3 +134,42 @@ def test_a_run_into_a_symlinked_directory_replaces_the_directory_it_points_to(tm
     assert link.is_symlink() and link.resolve() == target
     assert contents(target)["model.zip"] != before["model.zip"]
     assert sorted(path.name for path in target.parent.iterdir()) == ["ppo-1"]  # no work or replaced directory left
+
+
+def test_a_run_that_fails_after_training_keeps_its_model(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                                         capsys: pytest.CaptureFixture[str]) -> None:
+    """A failure between the final save and the publishing (the report here; the check episodes, a full disk) keeps the
+    trained model in the work directory, whatever the checkpoint frequency (this run writes no periodic one)."""
+    out = tmp_path / "run"
+
+    def broken(*args: object) -> str:
+        raise OSError("disk full")
+
+    monkeypatch.setattr(train_ppo, "share_text", broken)
+    with pytest.raises(OSError, match="disk full"):
+        train_ppo.main(tiny(tmp_path, out))
+    assert not out.exists()
+    partial = [path for path in tmp_path.iterdir() if path.name.startswith("run.partial-")]
+    assert len(partial) == 1 and f"checkpoint at 32 steps is in {partial[0]}" in capsys.readouterr().err
+    assert LearnedPolicy.load(partial[0]).normalizer is not None
+
+
+def test_a_publish_that_fails_leaves_out_as_it_was(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    from timegap_env import cli
+
+    out, work = tmp_path / "run", tmp_path / "work"
+    for directory, text in ((out, "old"), (work, "new")):
+        directory.mkdir()
+        (directory / "training.md").write_text(text)
+    real_rename = cli.os.rename
+
+    def rename(source: object, target: object) -> None:
+        if Path(str(source)) == work:
+            raise PermissionError("no")
+        real_rename(source, target)
+
+    monkeypatch.setattr(cli.os, "rename", rename)
+    with pytest.raises(PermissionError):
+        cli.publish(work, out)
+    assert (out / "training.md").read_text() == "old" and (work / "training.md").read_text() == "new"
+    assert sorted(path.name for path in tmp_path.iterdir()) == ["run", "work"]

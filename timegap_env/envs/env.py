@@ -138,8 +138,8 @@ class TimeGapMonitorEnv(gym.Env):
         self._action = np.zeros((1, 1), dtype=np.int64)  # a Discrete action, as the task takes it
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict]:
+        self._needs_reset = True  # stays so if the reset below raises (a bad seed too)
         super().reset(seed=seed)
-        self._needs_reset = True  # stays so if the reset below raises
         self.task.reset(np.ones(1, dtype=bool), [self.np_random], options)
         self._needs_reset = False
         if self.task.trace is not None:

@@ -248,7 +248,7 @@ class PlatoonTask:
     # ------------------------------------------------------------------ read-outs
     @property
     def scenario(self) -> np.ndarray:
-        """The leader's name in each env's episode (n_envs,); "" where the last reset raised."""
+        """The leader's name in each env's episode (n_envs,); "" where the last reset raised while drawing it."""
         return self.episodes.scenario
 
     def observation(self) -> np.ndarray:
