@@ -269,7 +269,7 @@ def check_data(plan: list[Episode]) -> None:
                             config=GROUPS[group].config, autoreset_mode="same_step")
         try:
             venv.reset(seed=[seed], options=GROUPS[group].options)
-        except (ValueError, OSError, EOFError) as error:
+        except cli.INPUT_ERRORS as error:
             raise ValueError(f"held-out group {group!r} ({GROUPS[group].data} data): {error}") from error
         finally:
             venv.close()

@@ -569,7 +569,7 @@ def select_scale(args: argparse.Namespace, settings: Settings, command: str, ray
             candidates.append(Candidate(scale, trained, checked))
     report = selection_report(command, settings, args.seed, ray, candidates, time.perf_counter() - started)
     args.out.mkdir(parents=True, exist_ok=True)
-    partial = args.out / f"{SELECTION_FILE}{cli.PARTIAL_SUFFIX}"
+    partial = args.out / f"{SELECTION_FILE}.tmp"
     partial.write_text(report)
     os.replace(partial, args.out / SELECTION_FILE)  # whole or not at all
     return report
