@@ -14,7 +14,6 @@ tells a script whether a path is an RLlib run before it pays for them).
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Any
 
