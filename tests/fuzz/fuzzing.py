@@ -24,6 +24,24 @@ import numpy as np
 from hypothesis import HealthCheck
 
 from timegap_env.config import shown
+from timegap_env.leaders import default_ngsim_path, default_openacc_dir
+from timegap_env.leaders.scenarios import SCENARIOS
+
+RECORDED_SCENARIOS = ("ngsim", "ngsim_in_band", "openacc")  # read from ../shared/data (or $TIMEGAP_*_PATH)
+DATA_PRESENT = default_ngsim_path().is_file() and default_openacc_dir().is_dir()
+NO_DATA = (f"the NGSIM or OpenACC data are absent ({default_ngsim_path()}, {default_openacc_dir()}; set "
+           "TIMEGAP_NGSIM_PATH and TIMEGAP_OPENACC_PATH): recorded leaders left out")
+# the scenarios a reset can run here: every one but highway-env's IDM (fuzzed apart), recorded ones with their data
+PLAYABLE = [name for name in sorted(SCENARIOS) if name != "idm" and (DATA_PRESENT or name not in RECORDED_SCENARIOS)]
+
+
+def skip_without_data(config: Mapping[str, Any]) -> None:
+    """Skip the test when ``config`` (an env config) draws a recorded leader and its data are absent."""
+    weights = config.get("scenario_weights") or {}
+    if not DATA_PRESENT and any(name in RECORDED_SCENARIOS and weight for name, weight in weights.items()):
+        import pytest
+
+        pytest.skip(NO_DATA)
 
 ENV_ID = "TimeGapMonitor-v0"
 QUALIFIED_ENV_ID = "timegap_env:TimeGapMonitor-v0"

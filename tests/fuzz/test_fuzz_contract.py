@@ -31,10 +31,11 @@ from hypothesis import strategies as st
 import timegap_env  # noqa: F401 - registers the env
 from timegap_env.config import DEGRADATION_KINDS, MAX_SPEED
 from timegap_env.envs.env import TimeGapMonitorEnv
-from timegap_env.leaders.scenarios import SCENARIOS
 from timegap_env.sim.degradation import SIZED
 from timegap_env.sim.presets import acc_presets
-from tests.fuzz.fuzzing import ENV_ID, Defects, Digest, bad_step, bad_values, call, fuzz_settings, short
+from tests.fuzz.fuzzing import (
+    DATA_PRESENT, ENV_ID, NO_DATA, PLAYABLE, Defects, Digest, bad_step, bad_values, call, fuzz_settings, short,
+)
 
 N_FOLLOWERS = 3
 SHORT = {"episode_duration": 2.0}  # episodes of two steps
@@ -391,7 +392,7 @@ def tagged(pairs: list[tuple[Any, str]]) -> st.SearchStrategy:
     return st.sampled_from(pairs)
 
 
-SCENARIO_VALUES = [(name, VALID) for name in sorted(SCENARIOS) if name != "idm"] + [
+SCENARIO_VALUES = [(name, VALID) for name in PLAYABLE] + [
     (None, VALID), (np.str_("paper"), EITHER),
     ("", INVALID), (" paper", INVALID), ("PAPER", INVALID), ("bogus", INVALID), (["paper"], INVALID), (1, INVALID),
     (b"paper", INVALID), ({"paper": 1}, INVALID), (True, INVALID), ("x" * 100_000, INVALID), (math.nan, INVALID),
@@ -627,6 +628,7 @@ def test_fuzz_reset_options_long():
     fuzz_options(max_examples=3000)
 
 
+@pytest.mark.skipif(not DATA_PRESENT, reason=NO_DATA)
 def test_a_recorded_leader_at_another_tick_is_refused_by_the_option_or_the_field():
     """A NGSIM leader (0.1 s frames) in an env at dt = 1 s: a ValueError naming the scenario and platoon.dt (then
     what the reader said)."""

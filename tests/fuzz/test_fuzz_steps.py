@@ -33,12 +33,13 @@ from timegap_env.envs.vector_env import parse_autoreset_mode
 from timegap_env.leaders.scenarios import SCENARIOS
 from timegap_env.sim.presets import acc_presets
 from tests.fuzz.fuzzing import (
-    ENV_ID, Defects, Digest, bad_step, bad_values, call, first, fuzz_settings, same_infos, short,
+    ENV_ID, PLAYABLE, RECORDED_SCENARIOS, Defects, Digest, bad_step, bad_values, call, first, fuzz_settings,
+    same_infos, short, skip_without_data,
 )
 
-FAMILIES = sorted(SCENARIOS)
-SYNTHETIC = [name for name in FAMILIES if name not in ("ngsim", "ngsim_in_band", "openacc", "idm")]
-ALL_BUT_IDM = [name for name in FAMILIES if name != "idm"]
+FAMILIES = PLAYABLE
+SYNTHETIC = [name for name in sorted(SCENARIOS) if name not in (*RECORDED_SCENARIOS, "idm")]
+ALL_BUT_IDM = PLAYABLE
 
 # Valid configs (every field within its documented bounds), chosen where things meet: action modes, short and long
 # episodes, coarse and fine ticks, one or many followers, charts, dropouts, wild but valid gains and sizes.
@@ -238,6 +239,7 @@ def fuzz_single(name: str, max_examples: int, steps: int, area: str, rerun_every
     defects = Defects(area)
     totals = {"steps": 0, "episodes": 0, "refused_resets": 0, "reruns_same_bits": 0}
     config = CONFIGS[name]
+    skip_without_data(config)
     n_followers = EnvConfig.from_dict(config).platoon.n_followers
 
     @fuzz_settings(max_examples)
@@ -324,6 +326,7 @@ def fuzz_vector(name: str, autoreset_mode: str, max_examples: int, num_envs: int
     defects = Defects(area)
     totals = {"env_steps": 0, "episodes_ended": 0, "masked_resets": 0}
     config = CONFIGS[name]
+    skip_without_data(config)
 
     @fuzz_settings(max_examples)
     @given(seed=st.integers(0, 2**20), options=reset_options(EnvConfig.from_dict(config).platoon.n_followers))
@@ -403,6 +406,7 @@ def compare_with_sync(config: dict[str, Any], num_envs: int, autoreset_mode: str
 
 
 def fuzz_sync(name: str, autoreset_mode: str, max_examples: int, steps: int, area: str) -> None:
+    skip_without_data(CONFIGS[name])
     defects = Defects(area)
     totals = {"steps_compared": 0}
 
@@ -452,6 +456,7 @@ def digest_of_run(name: str, seed: int, steps: int) -> str:
                 {"degradation": {"kind": "lag", "size": 2.0, "onset": 1.0}}]
     digest = Digest()
     defects = Defects("digest")
+    skip_without_data(CONFIGS[name])
     run_single(CONFIGS[name], seed, episodes, steps, defects, name, digest)
     assert not defects.groups, defects.report()
     return digest.hexdigest()
