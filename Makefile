@@ -1,11 +1,13 @@
-# Every target creates .venv with python3 if it is missing and installs the project into it.
+# Every target creates .venv with python3 if it is missing and installs the project into it with the extras the
+# scripts and tests need (the core install, `pip install .`, is numpy, numba, gymnasium and scipy only).
 SHELL := /bin/bash
 PYTHON ?= python3
 VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
+EXTRAS := dev,train,render,docs
 
-.PHONY: install demo test clients train bench calibrate degradation clean
+.PHONY: install demo test typecheck package clients train bench calibrate degradation clean
 
 install: $(STAMP)
 
@@ -13,7 +15,7 @@ $(STAMP): pyproject.toml
 	@echo "==> Setting up $(VENV) with timegap_env and its dependencies (1-2 minutes, once; pip's progress follows)"
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install -e '.[dev]' | grep -E '^(Collecting|Successfully)'; test $${PIPESTATUS[0]} -eq 0
+	$(PY) -m pip install -e '.[$(EXTRAS)]' | grep -E '^(Collecting|Successfully)'; test $${PIPESTATUS[0]} -eq 0
 	touch $(STAMP)
 	@echo "==> $(VENV) is ready"
 
@@ -28,6 +30,12 @@ demo: $(STAMP)
 
 test: $(STAMP)
 	MPLBACKEND=Agg $(PY) -m pytest -q
+
+typecheck: $(STAMP)  # mypy over the modules pyproject's [tool.mypy] lists
+	$(PY) -m mypy
+
+package: $(STAMP)  # pip install . / the wheel / the sdist, core only, in a throwaway venv: the env steps without torch
+	bash .ci/package
 
 clients:  # the env through SB3, sb3-contrib, rl-zoo3, RLlib, TorchRL, Tianshou, gymnasium's wrappers (own venv)
 	bash .ci/clients
@@ -47,4 +55,4 @@ degradation: $(STAMP)
 	MPLBACKEND=Agg $(PY) -m train.detection_benchmark
 
 clean:
-	rm -rf $(VENV) build *.egg-info .pytest_cache
+	rm -rf $(VENV) build dist *.egg-info .pytest_cache .mypy_cache

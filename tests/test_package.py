@@ -55,15 +55,23 @@ def test_agents_are_installed_with_the_package():
 
 
 def test_the_first_import_says_the_kernels_will_compile_once(tmp_path):
-    """A new user's first step waits on numba; the import says why, and only while nothing is cached."""
+    """A new user's first step waits on numba; the import says why, only while nothing is cached, and through the
+    ``timegap_env`` logger (Python's last-resort handler shows it on stderr), never a print: a program that sets the
+    logger's level silences it."""
     code = "import timegap_env"
-    empty = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
-                           env={**os.environ, "NUMBA_CACHE_DIR": str(tmp_path)})
-    assert "compiles the simulator's kernels" in empty.stderr
+    environ = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path)}
+    empty = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, env=environ)
+    assert "compiles the simulator's kernels" in empty.stderr and not empty.stdout
+    quiet = "import logging; logging.getLogger('timegap_env').setLevel(logging.ERROR); import timegap_env"
+    silenced = subprocess.run([sys.executable, "-c", quiet], capture_output=True, text=True, check=True, env=environ)
+    assert silenced.stderr == "" and silenced.stdout == ""
+    configured = ("import logging, sys; logging.basicConfig(stream=sys.stdout, format='%(name)s %(levelname)s'); "
+                  "import timegap_env")
+    logged = subprocess.run([sys.executable, "-c", configured], capture_output=True, text=True, check=True, env=environ)
+    assert logged.stdout.strip() == "timegap_env WARNING" and logged.stderr == ""
     (tmp_path / "envs_0").mkdir()
     (tmp_path / "envs_0" / "step_kernel.fused_step-123.py311.nbi").write_bytes(b"")
-    cached = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
-                            env={**os.environ, "NUMBA_CACHE_DIR": str(tmp_path)})
+    cached = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, env=environ)
     assert "compiles" not in cached.stderr
 
 

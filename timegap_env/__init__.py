@@ -12,28 +12,41 @@ The package follows the data flow, one folder a stage:
 What users call is importable from here.
 """
 
+import logging
 import os
-import sys
+from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 
 from gymnasium.envs.registration import register, registry
+
+try:
+    __version__: str = version("timegap_env")  # the one source is pyproject.toml's [project] version
+except PackageNotFoundError:  # a clone on sys.path that was never installed
+    __version__ = "0+unknown"
+
+_log = logging.getLogger("timegap_env")
 
 
 def _say_when_compiling() -> None:
     """numba compiles the kernels at their first call and caches them where its locators say (``NUMBA_CACHE_DIR``;
     else ``__pycache__`` beside the sources, or numba's user-wide cache where those are read-only): say so while
-    the env's fused step is cached in none of them, so that the first run's wait is not a mystery."""
+    the env's fused step is cached in none of them, so that the first run's wait is not a mystery.
+
+    Said through the ``timegap_env`` logger at WARNING level, never printed: with logging unconfigured, Python's
+    last-resort handler shows it on stderr; ``logging.getLogger("timegap_env").setLevel(logging.ERROR)`` before the
+    import silences it."""
     kernel = "step_kernel.fused_step-*.nbi"
+    cached: list[Path]
     if os.environ.get("NUMBA_CACHE_DIR"):
-        cached = Path(os.environ["NUMBA_CACHE_DIR"]).glob(f"envs_*/{kernel}")
+        cached = list(Path(os.environ["NUMBA_CACHE_DIR"]).glob(f"envs_*/{kernel}"))
     else:
         from numba.misc.appdirs import AppDirs
 
         user_wide = Path(AppDirs(appname="numba", appauthor=False).user_cache_dir)
-        cached = (*Path(__file__).parent.glob(f"envs/__pycache__/{kernel}"), *user_wide.glob(f"envs_*/{kernel}"))
-    if not any(cached):
-        print("timegap_env: the first run compiles the simulator's kernels (about 12 CPU-seconds, "
-              "cached for every later run)", file=sys.stderr)
+        cached = [*Path(__file__).parent.glob(f"envs/__pycache__/{kernel}"), *user_wide.glob(f"envs_*/{kernel}")]
+    if not cached:
+        _log.warning("timegap_env: the first run compiles the simulator's kernels (about 12 CPU-seconds, "
+                     "cached for every later run)")
 
 
 _say_when_compiling()  # before the imports below, some of which compile a kernel
@@ -67,7 +80,7 @@ if ENV_ID not in registry:
     )
 
 __all__ = [
-    "COMMERCIAL_ACC", "ENV_ID", "MONITOR_PRESETS", "SCENARIOS", "AggressiveCyclesConfig", "ChartConfig", "EnvConfig",
+    "__version__", "COMMERCIAL_ACC", "ENV_ID", "MONITOR_PRESETS", "SCENARIOS", "AggressiveCyclesConfig", "ChartConfig", "EnvConfig",
     "HardBrakingConfig", "HumanLeaderConfig", "LeaderConfig", "LeaderProfile", "MonitorConfig", "OpenAccRun",
     "PlatoonConfig", "RewardWeights", "SensorConfig", "SinusoidConfig", "StochasticHumanConfig", "TimeGapEstimate", "TimeGapMonitor",
     "Trajectory", "acc_platoon", "acc_presets", "aggressive_cycles", "default_ngsim_path", "default_openacc_dir", "estimate_time_gap", "hard_braking", "idm_leader",

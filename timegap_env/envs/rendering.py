@@ -33,6 +33,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from timegap_env._extras import require
+
 if TYPE_CHECKING:
     import pygame
 
@@ -150,6 +152,7 @@ class PlatoonRenderer:
             raise ValueError(f"the picture must be at least {MIN_WIDTH} x {MIN_HEIGHT} px, got {width} x {height}")
         if not time_window > 0:
             raise ValueError(f"time_window must be > 0 s, got {time_window}")
+        require("render", "pygame", "highway_env", needed_for="Rendering (render_mode='rgb_array' or 'human')")
         os.environ.setdefault("PYGAME_HIDE_SUPPORT_PROMPT", "1")
         import pygame
         from highway_env.road.graphics import WorldSurface

@@ -32,6 +32,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from timegap_env._extras import require
 from timegap_env.config import HumanLeaderConfig
 from timegap_env.leaders.profile import LeaderProfile
 
@@ -66,6 +67,7 @@ def build_scene(
 
     Returns ``(road, disturbance_vehicle, driver)``.
     """
+    require("idm", "highway_env", needed_for="The IDM leader (highway-env's IDMVehicle)")
     from highway_env.road.road import Road, RoadNetwork
     from highway_env.vehicle.behavior import IDMVehicle
     from highway_env.vehicle.kinematics import Vehicle
