@@ -21,7 +21,7 @@ from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper, VecNormalize
 from stable_baselines3.common.vec_env.base_vec_env import VecEnvStepReturn
 
 from timegap_env.envs.sb3 import TimeGapVecEnv
-from train.train_ppo import load_hyperparams
+from timegap_env.experiments.training import load_hyperparams
 
 HYPERPARAMS = Path(__file__).resolve().parents[1] / "hyperparams" / "ppo.yml"
 

@@ -40,9 +40,9 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
-from agents.policies import FixedPolicy, PaperRulePolicy
 from train import detection_benchmark, evaluate, value_of_information
-from train.backends import Backend
+from timegap_env.experiments.backends import Backend
+from timegap_env.experiments.registry import make as make_policy
 from timegap_env import cli
 
 DEFAULT_OUT = Path("results/ray/scaling.md")
@@ -135,8 +135,8 @@ def warm_up_driver() -> None:
     import agents.learned  # noqa: F401  (torch, stable-baselines3)
 
     seeds = [evaluate.EVAL_SEED_START]
-    for policy in (FixedPolicy(1.6), PaperRulePolicy(), PaperRulePolicy({"action_mode": "per_vehicle"})):
-        evaluate.run_batch(policy, "training_mix", seeds, record_profile=True)
+    for name in ("fixed_1.6", "rule_platoon", "rule_per_vehicle"):
+        evaluate.run_batch(make_policy(name), "training_mix", seeds, record_profile=True)
 
 
 def run_script(main: Callable[[Sequence[str]], None], arguments: list[str], backend: str, out: Path) -> float:

@@ -34,11 +34,12 @@ from agents.protocol import EVAL_SEED_START
 from timegap_env import cli
 from timegap_env.config import DEGRADATION_KINDS, EnvConfig
 from timegap_env.envs.info import truth_of
-from train.value_of_information import (
-    DEFAULT_OUT, DEFAULT_TRAIN_EPISODES, SELECTION_SEED_START, TARGET_SHARE, all_oracles, constants, measure_lookup,
+from timegap_env.experiments.value import (
+    DEFAULT_TRAIN_EPISODES, SELECTION_SEED_START, TARGET_SHARE, all_oracles, constants, measure_lookup,
     run,
 )
 
+DEFAULT_OUT = Path("results/degradation")  # beside train.value_of_information's files
 WEIGHT_GRID = (1, 2, 4)  # the weights tried for each kind: every kind stays in the mix [-]
 
 DEFAULT_EPISODES = 24  # per kind

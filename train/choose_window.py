@@ -28,14 +28,11 @@ from pathlib import Path
 import numpy as np
 
 from timegap_env import cli
-from timegap_env.config import ChartConfig, EnvConfig, MonitorConfig, PlatoonConfig, SensorConfig
+from timegap_env.config import ChartConfig, MonitorConfig, PlatoonConfig, SensorConfig
+from timegap_env.experiments.window_study import FAMILIES, NOISY, SEEDS, WINDOWS
 from timegap_env.leaders import make_leader
 from timegap_env.monitoring import MonitoredPlatoon
 
-WINDOWS: list[float | None] = [0.5, 1.0, 2.0, 3.0, 5.0, 10.0, 20.0, None]  # [s]; None = all data since t = 0
-FAMILIES = list(EnvConfig().scenario_weights)  # the env's default mix
-SEEDS = range(15)
-NOISY = SensorConfig(spacing_noise_std=0.5, speed_noise_std=0.5)
 
 
 @dataclasses.dataclass(frozen=True)

@@ -30,7 +30,7 @@ people driving), each follower charted around its own median statistic, with the
 false alarms per hour of driving (skipped, saying so, without the data). Writes ``detection.md``,
 ``detection.csv`` and ``detection.png`` to ``--out``; reruns give the same files.
 
-Pieces of work for ``train.backends``: each setting's calibration, then each (setting, condition)
+Pieces of work for ``timegap_env.experiments.backends``: each setting's calibration, then each (setting, condition)
 batch of held-out episodes with its detectors, then each setting's OpenACC false alarms.
 ``--backend serial`` (the default) runs them here one after another, ``--backend ray`` as Ray
 tasks; the batches are the same, so the files are too, bit for bit. How the work was spread is
@@ -63,7 +63,7 @@ from timegap_env.monitoring.estimate import estimate_time_gap
 from timegap_env.monitoring.loop import MonitoredPlatoon
 from timegap_env.sim.degradation import parse_degradations, round_to_tick
 from timegap_env.config import TIME_GAP_MIN_SPEED
-from train.backends import Backend, add_arguments
+from timegap_env.experiments.backends import Backend, add_arguments
 
 SETTINGS = (1.0, 1.6)  # settings held [s]: the best in nominal episodes and the env's initial one
 DURATION = 250.0  # episode length [s]

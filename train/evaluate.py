@@ -35,7 +35,7 @@ setting of its true parameters at the step's start.
 Writes ``table.md``, ``table.csv`` (one row per policy and group), ``episodes.csv`` (every
 episode of every policy), ``profiles.png`` and ``metrics.png`` to ``--out``.
 
-Each (policy, group) batch is one piece of work for ``train.backends``: ``--backend serial`` (the
+Each (policy, group) batch is one piece of work for ``timegap_env.experiments.backends``: ``--backend serial`` (the
 default) runs them one after another here, ``--backend ray`` as Ray tasks, on this machine or on
 the cluster at ``--address``; the batches are the same, so the files are too, bit for bit (the
 runtime line, which says how the work was spread, aside). The oracle's lookup and choice are
@@ -73,15 +73,19 @@ import numpy as np
 import timegap_env
 from timegap_env import cli
 from agents.oracles import TruthPolicy
-from agents.policies import ChartStepPolicy, NamedPolicy, PaperRulePolicy, V2VAwarePolicy, fixed_policies, seconds
+from agents.policies import NamedPolicy
 from agents.protocol import EVAL_SEED_START, MODEL_FILE
-from agents.rllib_policy import find_checkpoint
 from timegap_env.config import EnvConfig
-from timegap_env.envs.info import summary_of, truth_of
-from timegap_env.envs.observation import observation_space
+from timegap_env.envs.info import truth_of
 from timegap_env.leaders import default_ngsim_path, default_openacc_dir, openacc_paths
-from train.backends import Backend, add_arguments
-from train.value_of_information import DEFAULT_TRAIN_EPISODES, all_oracles, choose_oracle, measure_lookup
+from timegap_env.experiments.backends import Backend, add_arguments
+from timegap_env.experiments.rollout import rollout
+from timegap_env.experiments.stats import BOOTSTRAP_RESAMPLES, bootstrap_mean, oracle_share, wilson_interval
+from timegap_env.experiments.registry import (
+    FIXED_PREFIX, ORACLE, PPO, LearnedPolicyError, fixed_names, learned_exists, load_learned, make_oracle,
+)
+from timegap_env.experiments.registry import make as make_policy
+from timegap_env.experiments.value import DEFAULT_TRAIN_EPISODES
 
 
 @dataclasses.dataclass(frozen=True)
@@ -119,13 +123,8 @@ DEFAULT_EPISODES = 112  # per policy, split across the groups
 DEFAULT_MODEL = Path("results/ppo", MODEL_FILE)
 DEFAULT_OUT = Path("results/eval")
 DEFAULT_REFERENCE = "rule_platoon"
-ORACLE = "oracle"  # the policy key of the oracle
-FIXED_PREFIX = "fixed_"  # the policy keys of the fixed settings
+DEFAULT_POLICIES = ("rule_platoon", "rule_per_vehicle", "chart_step", "v2v_aware")  # the fixed settings after the third
 ALL_EPISODES = "all"  # the group name of the rows over every episode
-BOOTSTRAP_RESAMPLES = 10_000
-BOOTSTRAP_SEED = 0
-CONFIDENCE = 0.95
-WILSON_Z = 1.959963984540054  # standard normal quantile of 0.975
 TTC_CAP = 30.0  # min TTCs above this are all safe; averaged as this [s]
 PROFILE_FOLLOWER = 0  # the follower drawn bold in profiles.png (vehicle 1)
 
@@ -190,70 +189,47 @@ def plan_episodes(episodes: int, groups: Sequence[str]) -> list[Episode]:
     return plan
 
 
-class PolicyChoiceError(ValueError):
-    """A policy name or a model that ``--policies`` / ``--model`` cannot use."""
-
-
-def model_exists(model: Path) -> bool:
-    """Whether ``model`` is an SB3 model zip, a run directory holding one, or an RLlib run."""
-    return model.is_file() or (model / MODEL_FILE).is_file() or find_checkpoint(model) is not None
+PolicyChoiceError = LearnedPolicyError  # a policy name or a model that --policies / --model cannot use
+model_exists = learned_exists
 
 
 def load_ppo(model: Path) -> Any:
     """The learned policy of ``model`` (an SB3 zip or run directory, or a train.train_rllib run), loaded as it was
-    trained (``env.json``, its statistics: ``LearnedPolicy.load``; torch on one thread), checked to take the
-    evaluation env's observations; ``PolicyChoiceError`` naming what does not fit."""
-    from agents.learned import LearnedPolicy, RunFileError  # torch is slow to import; only when needed
-
-    rllib = find_checkpoint(model)  # a train.train_rllib run rather than an SB3 model
-    try:
-        if rllib is not None:
-            from agents.rllib_policy import RLlibPolicy  # loading needs the ray extra
-
-            policy = RLlibPolicy.load(rllib)
-        else:
-            policy = LearnedPolicy.load(model)
-    except (RunFileError, FileNotFoundError) as error:
-        raise PolicyChoiceError(str(error)) from error
-    expected = observation_space(EnvConfig()).shape
-    if policy.observation_shape != expected:
-        raise PolicyChoiceError(f"--model {model}: takes observations of shape {policy.observation_shape}, the env "
-                                f"gives {expected}")
-    return policy
+    trained, checked to take the evaluation env's observations (the registry's ``load_learned``)."""
+    return load_learned(model, EnvConfig())
 
 
 def build_policies(
     names: Sequence[str] | None, model: Path, backend: Backend | None = None, ppo: Any = None
 ) -> dict[str, NamedPolicy | TruthPolicy]:
-    """Policies by CLI name; ``names=None`` is the default set (PPO only if ``model``, a zip or a run directory,
-    exists). The learned policy is ``ppo`` if given, else loaded from ``model`` (before the oracle, which takes a
-    while). The oracle's lookup is measured on training seeds and the oracle chosen on selection seeds
-    (``train.value_of_information``), their episodes spread by ``backend`` (default: serial)."""
+    """Policies by registry name (``timegap_env.experiments.registry``); ``names=None`` is the default set
+    (``DEFAULT_POLICIES``, the fixed settings of the ladder, the oracle, and PPO only if ``model``, a zip or a run
+    directory, exists). The learned policy is ``ppo`` if given, else loaded from ``model`` (before the oracle, which
+    takes a while). The oracle's lookup is measured on training seeds and the oracle chosen on selection seeds
+    (``registry.make_oracle``), their episodes spread by ``backend`` (default: serial)."""
     config = EnvConfig()  # the default, whose action mode is one setting for the platoon
-    policies: dict[str, Any] = {
-        "rule_platoon": PaperRulePolicy(config),
-        "rule_per_vehicle": PaperRulePolicy(config.with_overrides({"action_mode": "per_vehicle"})),
-        "chart_step": ChartStepPolicy(config),
-        **{f"{FIXED_PREFIX}{seconds(policy.setting)}": policy for policy in fixed_policies(config)},
-        "v2v_aware": V2VAwarePolicy(config),
-    }
-    wanted = list(policies) + [ORACLE, "ppo"] if names is None else list(names)
-    unknown = sorted(set(wanted) - set(policies) - {ORACLE, "ppo"})
-    if unknown:
-        raise PolicyChoiceError(f"--policies {unknown}: unknown; known: {sorted(policies) + [ORACLE, 'ppo']}")
-    if "ppo" in wanted:
+    defaults = [*DEFAULT_POLICIES[:3], *fixed_names(config), *DEFAULT_POLICIES[3:]]
+    wanted = defaults + [ORACLE, PPO] if names is None else list(names)
+    policies: dict[str, Any] = {}
+    for name in wanted:
+        if name in (ORACLE, PPO):
+            continue
+        try:
+            policies[name] = make_policy(name, config)
+        except ValueError as error:
+            raise PolicyChoiceError(f"--policies {name}: {error}") from error
+    if PPO in wanted:
         if ppo is not None:
-            policies["ppo"] = ppo
+            policies[PPO] = ppo
         elif model_exists(model):
-            policies["ppo"] = load_ppo(model)
+            policies[PPO] = load_ppo(model)
         elif names is None:
             print(f"note: no trained model at {model}; PPO skipped")
-            wanted.remove("ppo")
+            wanted.remove(PPO)
         else:
             raise FileNotFoundError(f"--policies ppo: no trained model at {model} (see --model)")
     if ORACLE in wanted:
-        table, _ = measure_lookup(config, DEFAULT_TRAIN_EPISODES, backend)
-        policies[ORACLE] = choose_oracle(config, all_oracles(config, table), backend)
+        policies[ORACLE] = make_oracle(config, DEFAULT_TRAIN_EPISODES, backend)
     return {name: policies[name] for name in wanted}
 
 
@@ -282,46 +258,20 @@ def run_batch(
 
     Returns a record and a scenario fingerprint per episode, and env 0's profile if ``record_profile``.
     """
-    n = len(seeds)
-    venv = gym.make_vec(timegap_env.ENV_ID, num_envs=n, vectorization_mode="vector_entry_point",
-                        config={**GROUPS[group].config, "action_mode": policy.action_mode}, autoreset_mode="same_step")
-    obs, infos = venv.reset(seed=seeds, options=GROUPS[group].options)
-    task, config = venv.unwrapped.task, venv.unwrapped.config
-    prints = [task.fingerprint(env) for env in range(n)]
-    scenarios = list(venv.unwrapped.scenario)
-    truth0 = {name: value[0] for name, value in truth_of(infos).items()}  # env 0's schedule, for the profile
-    trace = task.start_trace(keep=None) if record_profile else None  # env 0 at every tick of the whole run
-    returns, steps, below = np.zeros(n), np.zeros(n, dtype=np.int64), np.zeros(n)
-    active = np.ones(n, dtype=bool)
-    summaries: list[dict[str, float]] = [{} for _ in range(n)]
-    state = None  # a policy's memory (a learned policy's frame stack), carried from step to step
-    while active.any():
-        truth = truth_of(infos)
-        if isinstance(policy, TruthPolicy):
-            action = policy.act(truth)
-        else:
-            action, state = policy.predict(obs, state=state, deterministic=True)
-        obs, reward, terminated, truncated, infos = venv.step(action)
-        returns += np.where(active, reward, 0.0)
-        steps += active
-        done = terminated | truncated  # those envs were reset: the step's own setting is in final_info
-        setting = np.where(done[:, None], infos["final_info"]["setting"], infos["setting"]) if done.any() \
-            else infos["setting"]
-        unstable = setting < truth["smallest_stable_setting"] - 1e-9  # (n, N), the step's end vs its start
-        below += np.where(active, unstable.mean(axis=1) * config.decision_interval, 0.0)
-        ended = (terminated | truncated) & active
-        for env in np.flatnonzero(ended):
-            summaries[env] = {name: float(value[env]) for name, value in summary_of(infos["final_info"]).items()}
-        active &= ~ended
-    venv.close()
+    batch = rollout(policy, GROUPS[group].config, seeds, GROUPS[group].options, trace=record_profile)
+    config, trace, episodes = batch.config, batch.trace, batch.records
+    prints = [episode.fingerprint for episode in episodes]
     records = [
-        {"group": group, "seed": seed, "scenario": scenarios[env], "steps": int(steps[env]),
-         "return": float(returns[env]), "time_below_stable": float(below[env]), **summaries[env]}
-        for env, seed in enumerate(seeds)
+        {"group": group, "seed": seed, "scenario": episode.scenario, "steps": episode.steps,
+         "return": episode.episode_return, "time_below_stable": episode.time_below_stable,
+         **{name: float(value) for name, value in episode.summary.items()}}
+        for episode, seed in zip(episodes, seeds)
     ]
+    truth0 = episodes[0].truth  # env 0's schedule, for the profile
+    steps0 = episodes[0].steps
     profile = None
     if trace is not None:
-        episode = slice(int(steps[0]) * config.ticks_per_decision)  # env 0's episode, not its autoreset successor
+        episode = slice(steps0 * config.ticks_per_decision)  # env 0's episode, not its autoreset successor
         arrays = trace.arrays()
         hit = truth0["kind"] != "none"
         onset = float(truth0["onset"][hit].min()) if hit.any() else math.inf
@@ -331,7 +281,7 @@ def run_batch(
             estimate=arrays.estimate[episode],
             center=arrays.center[episode],
             half_width=config.chart.half_width,
-            scenario=f"{group} seed {seeds[0]} ({scenarios[0]})",
+            scenario=f"{group} seed {seeds[0]} ({episodes[0].scenario})",
             degradation=(f"{next(k for k in truth0['kind'] if k != 'none')} on followers "
                          f"{[int(f) + 1 for f in np.flatnonzero(hit)]}" if hit.any() else "no degradation"),
             onset=onset, end=end,
@@ -402,44 +352,10 @@ def profile_first(group: str, seeds: list[int]) -> list[int]:
 
 
 # ---------------------------------------------------------------- statistics
-def bootstrap_mean(values: np.ndarray) -> tuple[float, float, float]:
-    """Mean and its 95 % percentile bootstrap interval (BOOTSTRAP_RESAMPLES resamples, fixed seed)."""
-    values = np.asarray(values, dtype=float)
-    rng = np.random.default_rng(BOOTSTRAP_SEED)
-    means = values[rng.integers(0, values.size, size=(BOOTSTRAP_RESAMPLES, values.size))].mean(axis=1)
-    low, high = np.quantile(means, [(1 - CONFIDENCE) / 2, (1 + CONFIDENCE) / 2])
-    return float(values.mean()), float(low), float(high)
-
-
-def wilson_interval(successes: int, trials: int) -> tuple[float, float, float]:
-    """Rate and its 95 % Wilson score interval."""
-    rate, z2 = successes / trials, WILSON_Z**2
-    centre = (rate + z2 / (2 * trials)) / (1 + z2 / trials)
-    half = WILSON_Z * math.sqrt(rate * (1 - rate) / trials + z2 / (4 * trials**2)) / (1 + z2 / trials)
-    return rate, max(0.0, centre - half), min(1.0, centre + half)
-
-
 def metric_values(records: list[dict[str, Any]], metric: str) -> np.ndarray:
     """One value per episode; min TTC capped at TTC_CAP."""
     values = np.array([float(record[metric]) for record in records])
     return np.minimum(values, TTC_CAP) if metric == "min_ttc" else values
-
-
-def oracle_share(policy: np.ndarray, blind: np.ndarray, oracle: np.ndarray) -> tuple[float, float, float]:
-    """The share of the oracle gap captured, mean(policy - blind) / mean(oracle - blind), with its 95 % paired
-    bootstrap interval (the episodes resampled together); NaN where the oracle does not beat the blind constant."""
-    gained, gap = np.asarray(policy) - np.asarray(blind), np.asarray(oracle) - np.asarray(blind)
-    if gap.mean() <= 0:
-        return math.nan, math.nan, math.nan
-    rng = np.random.default_rng(BOOTSTRAP_SEED)
-    index = rng.integers(0, gap.size, size=(BOOTSTRAP_RESAMPLES, gap.size))
-    resampled_gap = gap[index].mean(axis=1)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        shares = np.where(resampled_gap > 0, gained[index].mean(axis=1) / resampled_gap, np.nan)
-    if np.isnan(shares).any():  # a resample where the oracle gains nothing: no interval
-        return float(gained.mean() / gap.mean()), math.nan, math.nan
-    low, high = np.quantile(shares, [(1 - CONFIDENCE) / 2, (1 + CONFIDENCE) / 2])
-    return float(gained.mean() / gap.mean()), float(low), float(high)
 
 
 def best_fixed(records: dict[str, list[dict[str, Any]]], group: str) -> str | None:

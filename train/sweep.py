@@ -9,7 +9,8 @@ The grid is a YAML file (``train/sweeps/example.yml`` is one):
   product of the axes, the first axis outermost. Or ``cells``: an explicit list of such ``{field: value}`` maps.
 - ``base`` (optional): overrides every cell shares, as ``gym.make``'s ``config`` (nested configs as dicts); a
   cell's dotted fields go into them.
-- ``policies``: by name, from :data:`POLICIES` (the paper's rule, the chart-step rule, the V2V-aware heuristic),
+- ``policies``: by name, from the policy registry (``timegap_env.experiments.registry``: the paper's rule, the
+  chart-step rule, the V2V-aware heuristic),
   ``fixed_<setting>`` for any ladder level, and ``ppo``, the trained model at ``model`` (default ``results/ppo``).
 - ``seeds``: ``{start, count, batch}``: episodes reset with seeds start .. start + count - 1, run ``batch`` at a
   time. Held out from training (start >= ``EVAL_SEED_START``) unless the grid states ``held_out: false`` (then
@@ -21,7 +22,7 @@ for each cell's config): an unknown field or policy, or a bad value, is a ``Valu
 
 A piece of work is (cell, policy, seed batch): one native vector env, ``batch`` episodes, the policy built for
 the cell's config in its own action mode (as ``train.evaluate`` runs it). Pieces go through
-:class:`train.backends.Backend` (serial, or Ray tasks) ``--chunk`` at a time; an episode depends on its seed,
+:class:`timegap_env.experiments.backends.Backend` (serial, or Ray tasks) ``--chunk`` at a time; an episode depends on its seed,
 cell and policy alone, so both backends write the same bits. The trained model travels with the pieces as
 bytes, so cluster workers need no copy of ``results/``.
 
@@ -52,45 +53,33 @@ import math
 import os
 import tempfile
 import time
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-import gymnasium as gym
 import numpy as np
 import yaml
 
-import timegap_env
-from agents.oracles import NOMINAL
-from agents.policies import ChartStepPolicy, FixedPolicy, NamedPolicy, PaperRulePolicy, V2VAwarePolicy, seconds
+from agents.policies import NamedPolicy, seconds
 from agents.protocol import ENV_FILE, EVAL_SEED_START, MODEL_FILE, VECNORMALIZE_FILE
 from timegap_env import cli
 from timegap_env.config import NESTED_CONFIGS, EnvConfig
-from timegap_env.envs.info import summary_of, truth_of
 from timegap_env.envs.observation import observation_space
 from timegap_env.leaders import SCENARIOS
-from train.backends import Backend, add_arguments
-from train.evaluate import BOOTSTRAP_RESAMPLES, BOOTSTRAP_SEED, bootstrap_mean
+from timegap_env.experiments.backends import Backend, add_arguments
+from timegap_env.experiments.registry import FIXED_PREFIX, POLICIES, PPO
+from timegap_env.experiments.registry import make as make_policy
+from timegap_env.experiments.rollout import rollout
+from timegap_env.experiments.stats import BOOTSTRAP_RESAMPLES, BOOTSTRAP_SEED, bootstrap_mean
 
 DEFAULT_OUT = Path("results/sweep")  # a grid's results go to DEFAULT_OUT / its file's stem
 DEFAULT_MODEL = Path("results/ppo")
 DEFAULT_BATCH = 16  # episodes per piece, one vector env [-]
 DEFAULT_CHUNK = 16  # pieces per Backend.map call, after each of which episodes.csv is written [-]
 EPISODES_FILE, SUMMARY_FILE = "episodes.csv", "summary.md"
-FIXED_PREFIX = "fixed_"
-PPO = "ppo"
 GRID_KEYS = ("description", "axes", "cells", "base", "policies", "seeds", "model")
 SEED_KEYS = ("start", "count", "batch", "held_out")
 HASH_CHARS = 12  # hex digits of a piece's or cell's hash [-]
-PolicyMaker = Callable[[EnvConfig], NamedPolicy]
-POLICIES: dict[str, tuple[str, PolicyMaker]] = {  # name -> (action mode, maker for a config in that mode)
-    "rule_platoon": ("platoon", PaperRulePolicy),
-    "rule_per_vehicle": ("per_vehicle", PaperRulePolicy),
-    "chart_step": ("platoon", ChartStepPolicy),
-    "chart_step_per_vehicle": ("per_vehicle", ChartStepPolicy),
-    "v2v_aware": ("platoon", V2VAwarePolicy),
-    "v2v_aware_per_vehicle": ("per_vehicle", V2VAwarePolicy),
-}
 LEADING_COLUMNS = ("piece", "cell")  # then one column per axis, then EPISODE_COLUMNS, then the episode summary
 EPISODE_COLUMNS = ("policy", "seed", "scenario", "degradation", "return", "collision")
 
@@ -269,19 +258,6 @@ def load_grid(path: Path) -> Grid:
 
 
 # ---------------------------------------------------------------- policies and pieces
-def make_policy(name: str, overrides: Mapping[str, Any]) -> NamedPolicy:
-    """Policy ``name`` (not ``ppo``) built for the env with ``overrides`` in the policy's own action mode."""
-    if name.startswith(FIXED_PREFIX):
-        text = name[len(FIXED_PREFIX):]
-        try:
-            setting = float(text)
-        except ValueError:
-            raise ValueError(f"{FIXED_PREFIX}<setting>: {text!r} is not a number of seconds") from None
-        return FixedPolicy(setting, EnvConfig.from_dict({**overrides, "action_mode": "platoon"}))
-    mode, maker = POLICIES[name]
-    return maker(EnvConfig.from_dict({**overrides, "action_mode": mode}))
-
-
 def model_files(run: Path) -> dict[str, bytes]:
     """The files of a trained run that :meth:`agents.learned.LearnedPolicy.load` reads, as bytes (they travel
     with the pieces); ``FileNotFoundError`` if the model is missing."""
@@ -340,30 +316,12 @@ def run_piece(overrides: dict[str, Any], policy_name: str, seeds: tuple[int, ...
 
 def play(policy: NamedPolicy, overrides: dict[str, Any], seeds: tuple[int, ...]) -> list[dict[str, Any]]:
     """The episodes of :func:`run_piece` under ``policy``."""
-    n = len(seeds)
-    venv = gym.make_vec(timegap_env.ENV_ID, num_envs=n, vectorization_mode="vector_entry_point",
-                        config={**overrides, "action_mode": policy.action_mode}, autoreset_mode="same_step")
-    obs, infos = venv.reset(seed=list(seeds))
-    scenarios = [str(name) for name in venv.unwrapped.scenario]
-    kinds = [next((str(k) for k in row if k != NOMINAL), NOMINAL) for row in truth_of(infos)["kind"]]
-    returns, active = np.zeros(n), np.ones(n, dtype=bool)
-    summaries: list[dict[str, Any]] = [{} for _ in range(n)]
-    state = None  # a learned policy's frame stack, carried from step to step
-    while active.any():
-        action, state = policy.predict(obs, state=state, deterministic=True)
-        obs, reward, terminated, truncated, infos = venv.step(action)
-        returns += np.where(active, reward, 0.0)
-        ended = (terminated | truncated) & active
-        for env in np.flatnonzero(ended):
-            summaries[env] = {name: value[env].item() for name, value in summary_of(infos["final_info"]).items()}
-        active &= ~ended
-    venv.close()
     rows = []
-    for env, seed in enumerate(seeds):
-        summary = dict(summaries[env])
+    for episode in rollout(policy, overrides, seeds).records:
+        summary = dict(episode.summary)
         collision = int(summary.pop("collision"))
-        rows.append({"seed": seed, "scenario": scenarios[env], "degradation": kinds[env],
-                     "return": float(returns[env]), "collision": collision, **summary})
+        rows.append({"seed": episode.seed, "scenario": episode.scenario, "degradation": episode.degradation,
+                     "return": episode.episode_return, "collision": collision, **summary})
     return rows
 
 

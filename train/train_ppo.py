@@ -53,7 +53,6 @@ from __future__ import annotations
 import argparse
 import csv
 import dataclasses
-import inspect
 import json
 import math
 import os
@@ -84,18 +83,17 @@ from timegap_env.envs.action import action_space
 from timegap_env.envs.info import summary_of, truth_of
 from timegap_env.envs.observation import observation_space
 from timegap_env.envs.sb3 import TimeGapVecEnv
-from train.value_of_information import DEFAULT_TRAIN_EPISODES, all_oracles, choose_oracle, constants, measure_lookup, run
+from timegap_env.experiments.training import (
+    EVAL_EPISODES, EVAL_SEED, load_hyperparams, with_env_config,
+)
+from timegap_env.experiments.value import DEFAULT_TRAIN_EPISODES, all_oracles, choose_oracle, constants, measure_lookup, run
 
 REPORT_FILE = "training.md"
 CURVE_FILE, CURVE_FIGURE = "curve.csv", "curve.png"
 TENSORBOARD_DIR = "tensorboard"  # TensorBoard's logs in the run directory, unless --tensorboard-log
 RUN_CONTENTS = {MODEL_FILE, VECNORMALIZE_FILE, ENV_FILE, REPORT_FILE, CURVE_FILE, CURVE_FIGURE, TENSORBOARD_DIR}
-EVAL_SEED = 9_000  # first seed of the end-of-training check, below EVAL_SEED_START [-]
-EVAL_EPISODES = 32  # episodes of the end-of-training check [-]
-RUN_KEYS = {"n_envs", "n_timesteps", "policy", "normalize", "frame_stack", "env_kwargs"}  # rl-zoo3's; the rest: PPO's
 WARMUP_KEYS = {"n_timesteps", "env_kwargs"}  # of the warm-up file's env section
 SUMMARY_KEYS = {"collision", "mean_setting", "switches", "time_out_of_control"}  # logged per episode
-STRING_KWARGS = ("policy_kwargs", "normalize")  # may be Python expressions as in rl-zoo3: "dict(net_arch=[64])"
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
@@ -133,31 +131,6 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     return parser.parse_args(argv)
 
 
-def load_hyperparams(path: Path) -> dict[str, Any]:
-    """The ``ENV_ID`` section of an rl-zoo3-style yml, expressions in ``STRING_KWARGS`` evaluated."""
-    with open(path) as file:
-        document = yaml.safe_load(file)
-    if not isinstance(document, dict) or ENV_ID not in document:
-        raise ValueError(f"hyperparams = {str(path)!r}: needs a top-level key {ENV_ID!r}")
-    hyperparams = dict(document[ENV_ID])
-    allowed = RUN_KEYS | (set(inspect.signature(PPO).parameters) - {"env", "seed", "tensorboard_log", "device"})
-    for key, value in hyperparams.items():
-        if key == "warmup":
-            raise ValueError(f"hyperparams {ENV_ID}.warmup in {path}: the warm-up moved to its own file (rl-zoo3 "
-                             "refuses the key): put it in hyperparams/ppo_warmup.yml's layout and pass --warmup FILE")
-        if key not in allowed:
-            raise ValueError(f"hyperparams {ENV_ID}.{key} = {value!r}: unknown; allowed: {sorted(allowed)}")
-        if key in STRING_KWARGS and isinstance(value, str):
-            try:
-                hyperparams[key] = eval(value, {"__builtins__": {}}, {"dict": dict, "nn": torch.nn})
-            except Exception as error:
-                raise ValueError(f"hyperparams {ENV_ID}.{key} = {value!r}: not an expression ({error})") from error
-    for key in ("n_envs", "n_timesteps", "policy"):
-        if key not in hyperparams:
-            raise ValueError(f"hyperparams {ENV_ID}.{key}: missing")
-    return hyperparams
-
-
 def load_warmup(path: Path) -> tuple[int, dict[str, Any]]:
     """The warm-up in ``path``'s ``ENV_ID`` section: its steps and its env's gym.make keyword arguments."""
     with open(path) as file:
@@ -174,11 +147,6 @@ def load_warmup(path: Path) -> tuple[int, dict[str, Any]]:
     if not isinstance(env_kwargs, dict):
         raise ValueError(f"warmup {ENV_ID}.env_kwargs = {env_kwargs!r} in {path}: must be a mapping")
     return int(steps), env_kwargs
-
-
-def with_env_config(env_kwargs: dict[str, Any], overrides: dict[str, Any]) -> dict[str, Any]:
-    """``env_kwargs`` (gym.make's) with ``overrides`` merged into its ``config``."""
-    return {**env_kwargs, "config": {**(env_kwargs.get("config") or {}), **overrides}} if overrides else env_kwargs
 
 
 def save_run(model: PPO, out: Path) -> None:

@@ -66,7 +66,7 @@ from agents.protocol import ENV_FILE, EVAL_SEED_START
 from agents.rllib_policy import CHECKPOINT_DIR, RLlibPolicy
 from timegap_env import cli
 from timegap_env import ENV_ID
-from train.backends import runtime_env
+from timegap_env.experiments.backends import runtime_env
 
 QUALIFIED_ID = f"timegap_env:{ENV_ID}"  # gymnasium imports timegap_env, which registers the id, in any process
 RLLIB_ENV = "timegap_rllib"  # RLlib's name of make_env
@@ -227,7 +227,7 @@ class Checked:
 
     def mean_interval(self) -> str:
         """Mean return [95 % bootstrap interval], as the reports print it."""
-        from train.evaluate import bootstrap_mean
+        from timegap_env.experiments.stats import bootstrap_mean
 
         mean, low, high = bootstrap_mean(self.returns)
         return f"{mean:.1f} [{low:.1f}, {high:.1f}]"
@@ -238,8 +238,8 @@ def check_returns(policy: Any, env_kwargs: dict[str, Any]) -> Checked:
     the held-out seeds) in the env of ``env_kwargs`` (gym.make's), through value_of_information.run as its
     learning curve does."""
     from timegap_env.config import EnvConfig
-    from train.train_ppo import EVAL_EPISODES, EVAL_SEED
-    from train.value_of_information import run
+    from timegap_env.experiments.training import EVAL_EPISODES, EVAL_SEED
+    from timegap_env.experiments.value import run
 
     seeds = list(range(EVAL_SEED, EVAL_SEED + EVAL_EPISODES))
     result = run(EnvConfig.from_dict(env_kwargs.get("config")), seeds,
@@ -277,7 +277,7 @@ class Settings:
         """The settings of ``args``; a yml key with no counterpart, sizes below 1 or seeds reaching the evaluation's
         raise ValueError naming them."""
         # SB3's parser of the yml and its env_kwargs; the first seed of its check episodes
-        from train.train_ppo import EVAL_SEED, load_hyperparams, with_env_config
+        from timegap_env.experiments.training import EVAL_SEED, load_hyperparams, with_env_config
 
         hyperparams = load_hyperparams(args.hyperparams)
         unknown = set(hyperparams) - set(MAPPED) - UNMAPPED
@@ -516,7 +516,7 @@ def best_candidate(candidates: list[Candidate]) -> Candidate:
 def selection_report(command: str, settings: Settings, seed: int, ray: str, candidates: list[Candidate],
                      wall_seconds: float) -> str:
     """selection.md: how the candidates were trained and scored, their returns and the scale chosen."""
-    from train.evaluate import bootstrap_mean
+    from timegap_env.experiments.stats import bootstrap_mean
 
     chosen = best_candidate(candidates)
     platoons = settings.runners * settings.envs

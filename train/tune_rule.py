@@ -21,17 +21,16 @@ import time
 from collections.abc import Sequence
 from pathlib import Path
 
-import gymnasium as gym
 import numpy as np
 
-import timegap_env
-from agents.oracles import NOMINAL
-from agents.policies import ChartStepPolicy, FixedPolicy, NamedPolicy, PaperRulePolicy, seconds
+from agents.policies import ChartStepPolicy, FixedPolicy, NamedPolicy, seconds
 from agents.protocol import EVAL_SEED_START
 from timegap_env import cli
 from timegap_env.config import EnvConfig
-from timegap_env.envs.info import summary_of
-from train.value_of_information import SELECTION_SEED_START, kind_groups
+from timegap_env.experiments.registry import fixed_name
+from timegap_env.experiments.registry import make as make_policy
+from timegap_env.experiments.rollout import rollout_side_by_side
+from timegap_env.experiments.value import SELECTION_SEED_START, kind_groups
 
 DEFAULT_EPISODES = 256
 DEFAULT_OUT = Path("results/rule")
@@ -44,28 +43,14 @@ SUMMARY = ("collision", "mean_setting", "switches", "min_ttc")  # episode summar
 
 
 def run(seeds: Sequence[int], policies: Sequence[NamedPolicy]) -> dict[str, np.ndarray]:
-    """Every policy on every seed in one native vector env of the default config: return, ``SUMMARY``, arrays
+    """Every policy on every seed in one native vector env of the default config (the rollout harness, policies side
+    by side): return, ``SUMMARY``, arrays
     (n_policies, n_seeds), and the kind of degradation of each seed's episode (n_seeds,)."""
-    n, m = len(seeds), len(policies)
-    venv = gym.make_vec(timegap_env.ENV_ID, num_envs=n * m, vectorization_mode="vector_entry_point",
-                        step_diagnostics=False, autoreset_mode="same_step")
-    obs, _ = venv.reset(seed=list(seeds) * m)
-    kinds = np.array([next((k for k in row if k != NOMINAL), NOMINAL) for row in venv.ground_truth()["kind"][:n]],
-                     dtype=object)
-    returns, active = np.zeros(n * m), np.ones(n * m, dtype=bool)
-    summary = {name: np.zeros(n * m) for name in SUMMARY}
-    while active.any():
-        actions = np.concatenate([policy.predict(obs[i * n:(i + 1) * n])[0] for i, policy in enumerate(policies)])
-        obs, reward, terminated, truncated, infos = venv.step(actions)
-        returns += np.where(active, reward, 0.0)
-        ended = (terminated | truncated) & active
-        if ended.any():
-            for name in SUMMARY:
-                summary[name][ended] = summary_of(infos["final_info"])[name][ended]
-        active &= ~ended
-    venv.close()
-    return {"return": returns.reshape(m, n), **{name: value.reshape(m, n) for name, value in summary.items()},
-            "kind": kinds}
+    batches = rollout_side_by_side(policies, None, seeds, step_diagnostics=False)
+    table = {name: np.array([[record.summary[name] for record in batch.records] for batch in batches], dtype=float)
+             for name in SUMMARY}
+    return {"return": np.array([[record.episode_return for record in batch.records] for batch in batches]), **table,
+            "kind": np.array([record.degradation for record in batches[0].records], dtype=object)}
 
 
 def main(argv: Sequence[str] | None = None) -> None:
@@ -88,8 +73,10 @@ def main(argv: Sequence[str] | None = None) -> None:
     seeds = list(range(TUNING_SEED_START, TUNING_SEED_START + args.episodes))
     assert seeds[-1] < min(SELECTION_SEED_START, EVAL_SEED_START)
     grid = list(itertools.product(args.k_up, args.quiet_time, args.min_setting))
-    cells = [ChartStepPolicy(config, k_up=k_up, quiet_time=quiet, min_setting=floor) for k_up, quiet, floor in grid]
-    references = [PaperRulePolicy(config), *(FixedPolicy(setting, config) for setting in REFERENCE_SETTINGS)]
+    cells = [make_policy("chart_step", config, k_up=k_up, quiet_time=quiet, min_setting=floor)
+             for k_up, quiet, floor in grid]
+    references = [make_policy("rule_platoon", config), *(make_policy(fixed_name(setting), config)
+                                                         for setting in REFERENCE_SETTINGS)]
     results = run(seeds, [*cells, *references])
     best = int(np.argmax(results["return"][:len(cells)].mean(axis=1)))
 

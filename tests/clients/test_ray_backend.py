@@ -14,8 +14,9 @@ from pathlib import Path
 
 import pytest
 
+from timegap_env.experiments import value
 from train import detection_benchmark, evaluate, value_of_information
-from train.backends import Backend
+from timegap_env.experiments.backends import Backend
 
 pytestmark = pytest.mark.slow
 ray = pytest.importorskip("ray", reason="needs the ray extra: pip install -e '.[ray]' (or run bash .ci/clients)")
@@ -45,7 +46,7 @@ def test_ray_map_keeps_the_order_says_how_it_ran_and_raises_a_piece_error() -> N
 def test_evaluate_on_ray_equals_serial(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
                                        capsys: pytest.CaptureFixture[str]) -> None:
     monkeypatch.setattr(evaluate, "DEFAULT_TRAIN_EPISODES", 1)  # a quick oracle: both read it in this process
-    monkeypatch.setattr(value_of_information, "SELECTION_EPISODES", 2)
+    monkeypatch.setattr(value, "SELECTION_EPISODES", 2)
     runs = {}
     for backend in ("serial", "ray"):
         evaluate.main(["--episodes", "14", "--policies", "rule_platoon", "fixed_1.6", "oracle", "ppo",

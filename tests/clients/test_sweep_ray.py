@@ -9,7 +9,7 @@ import pytest
 import yaml
 
 from train import sweep
-from train.backends import Backend
+from timegap_env.experiments.backends import Backend
 
 pytestmark = pytest.mark.slow
 

@@ -23,7 +23,7 @@ from agents.rllib_policy import CHECKPOINT_DIR, RLlibPolicy, find_checkpoint
 from timegap_env import ENV_ID
 from timegap_env.config import EnvConfig
 from timegap_env.envs.observation import observation_space
-from train.train_ppo import EVAL_EPISODES, EVAL_SEED
+from timegap_env.experiments.training import EVAL_EPISODES, EVAL_SEED
 from train.train_rllib import (
     REPORT_FILE,
     REWARD_SCALE,

@@ -9,8 +9,9 @@ import pytest
 
 from agents.policies import FixedPolicy, PaperRulePolicy
 from timegap_env.config import EnvConfig
+from timegap_env.experiments import value
 from train import detection_benchmark, evaluate, value_of_information
-from train.backends import Backend, add_arguments
+from timegap_env.experiments.backends import Backend, add_arguments
 
 
 def power(base: int, exponent: int) -> int:
@@ -86,13 +87,13 @@ def test_evaluate_runs_one_picklable_piece_per_policy_and_group():
 
 def test_value_of_information_pieces_are_picklable_and_give_the_serial_results():
     config = EnvConfig()
-    pieces = value_of_information.constant_pieces(config, [0, 1], flag_aware=True)
+    pieces = value.constant_pieces(config, [0, 1], flag_aware=True)
     assert len(pieces) == 1 and len(pieces[0][1]) == 2 * len(config.setting_levels) ** 2
-    oracle = value_of_information.all_oracles(config, {"none": 1.6})[0]
-    for piece in [*pieces, value_of_information.oracle_piece(config, [5], oracle)]:
+    oracle = value.all_oracles(config, {"none": 1.6})[0]
+    for piece in [*pieces, value.oracle_piece(config, [5], oracle)]:
         pickle.loads(pickle.dumps(piece))
     backend = Recording()
-    pairs = value_of_information.constants(config, [0, 1], backend=backend)
+    pairs = value.constants(config, [0, 1], backend=backend)
     assert len(backend.pieces) == 1 and pairs["return"].shape == (2, len(config.setting_levels))
 
 

@@ -13,7 +13,8 @@ import timegap_env
 from timegap_env.envs.info import truth_of
 from timegap_env.leaders.scenarios import HELD_OUT_FAMILIES
 from agents.policies import FixedPolicy, PaperRulePolicy
-from train import evaluate, value_of_information
+from timegap_env.experiments import value
+from train import evaluate
 
 
 def test_plan_uses_held_out_seeds_split_across_groups():
@@ -94,7 +95,7 @@ def test_policy_selection():
 
 def test_two_episodes_write_tables_and_figures(tmp_path, monkeypatch):
     monkeypatch.setattr(evaluate, "DEFAULT_TRAIN_EPISODES", 1)  # a quick oracle
-    monkeypatch.setattr(value_of_information, "SELECTION_EPISODES", 2)
+    monkeypatch.setattr(value, "SELECTION_EPISODES", 2)
     model = PPO("MlpPolicy", gym.make(timegap_env.ENV_ID), n_steps=64, batch_size=32, n_epochs=1, seed=0, device="cpu")
     model.learn(64).save(tmp_path / "model.zip")
     (tmp_path / "env.json").write_text(json.dumps({"env_kwargs": {}, "frame_stack": 1, "normalize": False}))

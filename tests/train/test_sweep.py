@@ -11,7 +11,7 @@ import pytest
 import yaml
 
 from train import sweep
-from train.backends import Backend
+from timegap_env.experiments.backends import Backend
 
 TINY = {  # 2 cells x 2 policies x 2 seed batches = 8 pieces of 2 episodes of 20 s
     "axes": {"monitor.window": [1.0, 2.0]},

@@ -23,6 +23,7 @@ from agents.learned import LearnedPolicy, RunFileError
 from agents.protocol import EVAL_SEED_START
 from timegap_env import ENV_ID
 from timegap_env.envs.sb3 import TimeGapVecEnv
+from timegap_env.experiments import training
 from train import train_ppo
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -57,7 +58,7 @@ def test_rl_zoo3_understands_every_key_of_the_hyperparams() -> None:
     assert not unknown, f"keys rl-zoo3 would pass to PPO.__init__, which does not take them: {sorted(unknown)}"
     # rl-zoo3 evaluates a string policy_kwargs in a module that imported torch's nn
     assert isinstance(eval(hyperparams["policy_kwargs"], {"nn": torch.nn}), dict)
-    assert train_ppo.RUN_KEYS <= RL_ZOO3_RUN_KEYS
+    assert training.RUN_KEYS <= RL_ZOO3_RUN_KEYS
 
 
 def test_the_shipped_warmup_is_the_one_the_committed_model_was_trained_with() -> None:

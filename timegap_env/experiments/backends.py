@@ -21,7 +21,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]  # the repository (a clone): what Ray ships to a cluster
 BACKENDS = ("serial", "ray")
 NOT_SHIPPED = [".git", ".venv", ".venv-clients", "results", "runs", "*.egg-info", "__pycache__"]  # of working_dir
 

@@ -1,0 +1,58 @@
+"""What training (``train.train_ppo``), its learning curve and RLlib's runs (``train.train_rllib``) agree on: the
+check episodes, and reading an rl-zoo3-style hyperparameter file.
+
+``load_hyperparams`` imports torch and stable-baselines3 (the ``train`` extra) when called; importing this module does
+not.
+"""
+
+from __future__ import annotations
+
+import inspect
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from timegap_env import ENV_ID
+
+EVAL_SEED = 9_000  # first seed of the end-of-training check, below EVAL_SEED_START [-]
+EVAL_EPISODES = 32  # episodes of the end-of-training check [-]
+RUN_KEYS = {"n_envs", "n_timesteps", "policy", "normalize", "frame_stack", "env_kwargs"}  # rl-zoo3's; the rest: PPO's
+STRING_KWARGS = ("policy_kwargs", "normalize")  # may be Python expressions as in rl-zoo3: "dict(net_arch=[64])"
+
+
+def load_hyperparams(path: Path) -> dict[str, Any]:
+    """The ``ENV_ID`` section of an rl-zoo3-style yml, expressions in ``STRING_KWARGS`` evaluated."""
+    import torch  # only here: the library steps the env without torch
+    from stable_baselines3 import PPO
+
+    with open(path) as file:
+        document = yaml.safe_load(file)
+    if not isinstance(document, dict) or ENV_ID not in document:
+        raise ValueError(f"hyperparams = {str(path)!r}: needs a top-level key {ENV_ID!r}")
+    hyperparams = dict(document[ENV_ID])
+    allowed = RUN_KEYS | (set(inspect.signature(PPO).parameters) - {"env", "seed", "tensorboard_log", "device"})
+    for key, value in hyperparams.items():
+        if key == "warmup":
+            raise ValueError(f"hyperparams {ENV_ID}.warmup in {path}: the warm-up moved to its own file (rl-zoo3 "
+                             "refuses the key): put it in hyperparams/ppo_warmup.yml's layout and pass --warmup FILE")
+        if key not in allowed:
+            raise ValueError(f"hyperparams {ENV_ID}.{key} = {value!r}: unknown; allowed: {sorted(allowed)}")
+        if key in STRING_KWARGS and isinstance(value, str):
+            try:
+                hyperparams[key] = eval(value, {"__builtins__": {}}, {"dict": dict, "nn": torch.nn})
+            except Exception as error:
+                raise ValueError(f"hyperparams {ENV_ID}.{key} = {value!r}: not an expression ({error})") from error
+    for key in ("n_envs", "n_timesteps", "policy"):
+        if key not in hyperparams:
+            raise ValueError(f"hyperparams {ENV_ID}.{key}: missing")
+    return hyperparams
+
+
+
+def with_env_config(env_kwargs: dict[str, Any], overrides: dict[str, Any]) -> dict[str, Any]:
+    """``env_kwargs`` (gym.make's) with ``overrides`` merged into its ``config``."""
+    return {**env_kwargs, "config": {**(env_kwargs.get("config") or {}), **overrides}} if overrides else env_kwargs
+
+
+__all__ = ["EVAL_EPISODES", "EVAL_SEED", "RUN_KEYS", "STRING_KWARGS", "load_hyperparams", "with_env_config"]
