@@ -40,7 +40,9 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
-from train import detection_benchmark, evaluate, value_of_information
+from train import detection_benchmark, value_of_information  # the scripts it times, as they run
+from agents.protocol import EVAL_SEED_START
+from timegap_env.experiments import heldout
 from timegap_env.experiments.backends import Backend
 from timegap_env.experiments.registry import make as make_policy
 from timegap_env import cli
@@ -65,7 +67,7 @@ class Size:
     detection: list[str]
 
 
-FULL = Size(evaluate.DEFAULT_EPISODES, None, NOOP_TASKS, SPIN_ITERATIONS, [], [])
+FULL = Size(heldout.DEFAULT_EPISODES, None, NOOP_TASKS, SPIN_ITERATIONS, [], [])
 QUICK = Size(14, ["rule_platoon", "fixed_1.6", "ppo"], 20, SPIN_ITERATIONS // 10,
              ["--episodes", "4", "--train-episodes", "1"], ["--episodes", "2", "--nominal-episodes", "3"])
 
@@ -111,19 +113,19 @@ class Evaluation:
 
 def run_evaluation(backend: Counting, size: Size) -> Evaluation:
     """``train.evaluate``'s workload with ``backend``: policies (the oracle's pieces), then the episode batches."""
-    groups, _ = evaluate.available_groups()
-    plan = evaluate.plan_episodes(size.episodes, groups)
+    groups, _ = heldout.available_groups()
+    plan = heldout.plan_episodes(size.episodes, groups)
     profile_group = "training_mix" if "training_mix" in groups else groups[0]  # evaluate's default
     counted = backend.pieces
     start = time.perf_counter()
     with contextlib.redirect_stdout(io.StringIO()):  # the per-policy lines
-        policies = evaluate.build_policies(size.policies, evaluate.DEFAULT_MODEL, backend)
+        policies = heldout.build_policies(size.policies, heldout.DEFAULT_MODEL, backend)
         built = time.perf_counter()
-        records, _, timings = evaluate.run_all(policies, plan, profile_group, backend)
+        records, _, timings = heldout.run_all(policies, plan, profile_group, backend)
     seconds = time.perf_counter() - start
     summarised = time.perf_counter()
-    reference = evaluate.DEFAULT_REFERENCE if evaluate.DEFAULT_REFERENCE in policies else None
-    evaluate.summarise(policies, records, reference)
+    reference = heldout.DEFAULT_REFERENCE if heldout.DEFAULT_REFERENCE in policies else None
+    heldout.summarise(policies, records, reference)
     return Evaluation(seconds, built - start, time.perf_counter() - summarised, backend.pieces - counted,
                       len(policies) * len(groups), len(plan), len(groups), records, timings,
                       {key: policy.name for key, policy in policies.items()})
@@ -134,9 +136,9 @@ def warm_up_driver() -> None:
     import torch and SB3 for PPO."""
     import agents.learned  # noqa: F401  (torch, stable-baselines3)
 
-    seeds = [evaluate.EVAL_SEED_START]
+    seeds = [EVAL_SEED_START]
     for name in ("fixed_1.6", "rule_platoon", "rule_per_vehicle"):
-        evaluate.run_batch(make_policy(name), "training_mix", seeds, record_profile=True)
+        heldout.run_batch(make_policy(name), "training_mix", seeds, record_profile=True)
 
 
 def run_script(main: Callable[[Sequence[str]], None], arguments: list[str], backend: str, out: Path) -> float:

@@ -205,15 +205,15 @@ class HeldOut:
 def held_out_returns(policy: Any, episodes: int | None) -> HeldOut:
     """``policy`` and EVAL_POLICIES on ``episodes`` (None: train.evaluate's default) of train.evaluate's held-out
     episodes: its groups, plan, runs and statistics."""
-    from train import evaluate
+    from timegap_env.experiments import heldout, registry
 
     start = time.perf_counter()
-    groups, _ = evaluate.available_groups()
-    plan = evaluate.plan_episodes(episodes or evaluate.DEFAULT_EPISODES, groups)
-    policies = {"rllib_ppo": policy, **evaluate.build_policies(list(EVAL_POLICIES), evaluate.DEFAULT_MODEL)}
-    records, _, _ = evaluate.run_all(policies, plan, None)
-    rows = evaluate.summarise(policies, records, evaluate.DEFAULT_REFERENCE)
-    return HeldOut(len(plan), [row for row in rows if row["group"] == evaluate.ALL_EPISODES],
+    groups, _ = heldout.available_groups()
+    plan = heldout.plan_episodes(episodes or heldout.DEFAULT_EPISODES, groups)
+    policies = {"rllib_ppo": policy, **{name: registry.make(name) for name in EVAL_POLICIES}}
+    records, _, _ = heldout.run_all(policies, plan, None)
+    rows = heldout.summarise(policies, records, heldout.DEFAULT_REFERENCE)
+    return HeldOut(len(plan), [row for row in rows if row["group"] == heldout.ALL_EPISODES],
                    time.perf_counter() - start)
 
 

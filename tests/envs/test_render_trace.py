@@ -14,7 +14,8 @@ import timegap_env
 from agents.policies import PaperRulePolicy
 from timegap_env.envs.rendering import DEFAULT_TIME_WINDOW
 from timegap_env.envs.task import Trace, TraceArrays
-from train import evaluate
+from agents.protocol import EVAL_SEED_START
+from timegap_env.experiments import heldout
 
 LONG = {"episode_duration": 5000.0, "degradation": {"kind_weights": {"none": 1.0}}}  # [s]
 DT = 0.1  # [s], the default tick
@@ -124,7 +125,7 @@ def test_a_frame_cannot_ask_for_more_history_than_the_trace_keeps():
 
 def test_the_evaluation_profile_keeps_the_whole_episode():
     """``train.evaluate`` traces env 0's whole episode (250 s), not the last rendered window."""
-    _, _, profile = evaluate.run_batch(PaperRulePolicy(), "training_mix", [evaluate.EVAL_SEED_START], True)
+    _, _, profile = heldout.run_batch(PaperRulePolicy(), "training_mix", [EVAL_SEED_START], True)
     episode = timegap_env.EnvConfig().episode_duration
     assert profile.t.size == round(episode / DT) and profile.t[0] == pytest.approx(DT)
     assert profile.t[-1] == pytest.approx(episode)

@@ -9,7 +9,7 @@ import pytest
 
 from agents.policies import FixedPolicy, PaperRulePolicy
 from timegap_env.config import EnvConfig
-from timegap_env.experiments import value
+from timegap_env.experiments import heldout, value
 from train import detection_benchmark, evaluate, value_of_information
 from timegap_env.experiments.backends import Backend, add_arguments
 
@@ -76,11 +76,11 @@ def test_evaluate_runs_one_picklable_piece_per_policy_and_group():
     backend = Recording()
     records, _, timings = evaluate.run_all(policies, plan, None, backend)
     assert [(piece[0], piece[2], piece[3]) for piece in backend.pieces] == [
-        (evaluate.timed_batch, group, seeds) for _ in policies for group, seeds in
+        (heldout.timed_batch, group, seeds) for _ in policies for group, seeds in
         (("training_mix", [plan[0].seed, plan[1].seed]), ("idm", [plan[2].seed]))]
     for piece in backend.pieces:
         pickle.loads(pickle.dumps(piece))  # plain pickle: no lambda, no local function
-    direct = evaluate.run_batch(policies["fixed_1.6"], "idm", [plan[2].seed], False)[0]
+    direct = heldout.run_batch(policies["fixed_1.6"], "idm", [plan[2].seed], False)[0]
     assert records["fixed_1.6"][-1] == direct[0]
     assert set(timings) == set(policies) and all(spent > 0 for spent in timings.values())
 

@@ -13,14 +13,16 @@ import timegap_env
 from timegap_env.envs.info import truth_of
 from timegap_env.leaders.scenarios import HELD_OUT_FAMILIES
 from agents.policies import FixedPolicy, PaperRulePolicy
-from timegap_env.experiments import value
+from agents.protocol import EVAL_SEED_START
+from timegap_env.config import EnvConfig
+from timegap_env.experiments import heldout, stats, value
 from train import evaluate
 
 
 def test_plan_uses_held_out_seeds_split_across_groups():
     plan = evaluate.plan_episodes(7, ["ngsim_in_band", "idm", "training_mix"])
     assert [e.group for e in plan] == ["ngsim_in_band"] * 3 + ["idm"] * 2 + ["training_mix"] * 2
-    assert [e.seed for e in plan] == list(range(evaluate.EVAL_SEED_START, evaluate.EVAL_SEED_START + 7))
+    assert [e.seed for e in plan] == list(range(EVAL_SEED_START, EVAL_SEED_START + 7))
     with pytest.raises(ValueError, match="episodes = 0"):
         evaluate.plan_episodes(0, ["idm"])
 
@@ -36,12 +38,12 @@ def test_without_data_the_groups_are_synthetic_and_the_header_says_so(monkeypatc
 def test_every_held_out_family_is_a_group_and_none_is_trained_on():
     for family in HELD_OUT_FAMILIES:
         assert evaluate.GROUPS[family].options == {"scenario": family}
-        assert family not in evaluate.EnvConfig().scenario_weights
+        assert family not in EnvConfig().scenario_weights
 
 
 def test_the_larger_degradations_lie_beyond_the_training_ranges():
-    default = evaluate.EnvConfig().degradation
-    larger = evaluate.EnvConfig.from_dict(evaluate.GROUPS["larger_degradations"].config).degradation
+    default = EnvConfig().degradation
+    larger = EnvConfig.from_dict(evaluate.GROUPS["larger_degradations"].config).degradation
     assert larger.kind_weights.get("none", 0.0) == 0.0
     assert larger.lag_factor_range[0] >= default.lag_factor_range[1] and larger.gain_range[1] <= default.gain_range[0]
     for field in ("v2v_latency_range", "packet_loss_range", "radar_bias_range", "radar_noise_range"):
@@ -49,8 +51,8 @@ def test_the_larger_degradations_lie_beyond_the_training_ranges():
 
 
 def test_the_profile_episode_is_one_degraded_midway():
-    seeds = list(range(evaluate.EVAL_SEED_START, evaluate.EVAL_SEED_START + 12))
-    ordered = evaluate.profile_first("training_mix", seeds)
+    seeds = list(range(EVAL_SEED_START, EVAL_SEED_START + 12))
+    ordered = heldout.profile_first("training_mix", seeds)
     assert sorted(ordered) == seeds
     venv = gym.make_vec(timegap_env.ENV_ID, num_envs=1, vectorization_mode="vector_entry_point")
     _, infos = venv.reset(seed=ordered[:1])
@@ -60,26 +62,26 @@ def test_the_profile_episode_is_one_degraded_midway():
 
 def test_the_share_of_the_oracle_gap():
     blind, oracle = np.zeros(4), np.array([2.0, 4.0, 2.0, 4.0])
-    share, low, high = evaluate.oracle_share(np.array([1.0, 2.0, 1.0, 2.0]), blind, oracle)
+    share, low, high = stats.oracle_share(np.array([1.0, 2.0, 1.0, 2.0]), blind, oracle)
     assert share == 0.5 and low == high == 0.5  # every resample captures half
-    assert np.isnan(evaluate.oracle_share(blind, blind, -oracle)).all()  # an oracle below the constant: no gap
+    assert np.isnan(stats.oracle_share(blind, blind, -oracle)).all()  # an oracle below the constant: no gap
 
 
 def test_platoon_and_per_vehicle_envs_draw_identical_scenarios():
-    seeds = [evaluate.EVAL_SEED_START, evaluate.EVAL_SEED_START + 1]
-    platoon = evaluate.run_batch(PaperRulePolicy(), "training_mix", seeds, record_profile=False)
-    per_vehicle = evaluate.run_batch(PaperRulePolicy({"action_mode": "per_vehicle"}), "training_mix", seeds, False)
+    seeds = [EVAL_SEED_START, EVAL_SEED_START + 1]
+    platoon = heldout.run_batch(PaperRulePolicy(), "training_mix", seeds, record_profile=False)
+    per_vehicle = heldout.run_batch(PaperRulePolicy({"action_mode": "per_vehicle"}), "training_mix", seeds, False)
     assert platoon[1] == per_vehicle[1]
     assert platoon[1][0] != platoon[1][1], "the fingerprint tells episodes apart"
     assert [r["scenario"] for r in platoon[0]] == [r["scenario"] for r in per_vehicle[0]]
 
 
 def test_statistics():
-    mean, low, high = evaluate.bootstrap_mean(np.full(5, 2.5))
+    mean, low, high = stats.bootstrap_mean(np.full(5, 2.5))
     assert mean == low == high == 2.5
-    mean, low, high = evaluate.bootstrap_mean(np.arange(20.0))
+    mean, low, high = stats.bootstrap_mean(np.arange(20.0))
     assert low < mean == 9.5 < high
-    rate, low, high = evaluate.wilson_interval(0, 20)
+    rate, low, high = stats.wilson_interval(0, 20)
     assert rate == 0 and low == pytest.approx(0, abs=1e-12) and high == pytest.approx(0.1611, abs=1e-4)
 
 
@@ -131,7 +133,7 @@ def test_a_frame_stacked_run_directory_is_evaluated(tmp_path):
     (tmp_path / "env.json").write_text(json.dumps({"env_kwargs": {}, "frame_stack": 3}))
     policies = evaluate.build_policies(["ppo"], tmp_path)  # a directory, as LearnedPolicy.load takes
     assert policies["ppo"].frame_stack == 3  # it used to be refused: "takes observations of shape (135,)"
-    obs, _ = gym.make(timegap_env.ENV_ID).reset(seed=evaluate.EVAL_SEED_START)
+    obs, _ = gym.make(timegap_env.ENV_ID).reset(seed=EVAL_SEED_START)
     action, stack = policies["ppo"].predict(obs)
     assert gym.make(timegap_env.ENV_ID).action_space.contains(action) and stack.shape == (3 * obs.size,)
 
