@@ -229,3 +229,20 @@ def test_mixed_action_modes_cannot_share_an_env():
     with pytest.raises(ValueError, match="action modes"):
         harness.rollout_side_by_side([PaperRulePolicy(config),
                                       PaperRulePolicy(config.with_overrides({"action_mode": "per_vehicle"}))], None, SEEDS)
+
+
+class PicklingBackend(Backend):
+    """What Ray does to a piece, without Ray: the function and every piece pickled out, the results pickled back."""
+
+    def map(self, function, pieces):
+        function = pickle.loads(pickle.dumps(function))
+        return [pickle.loads(pickle.dumps(function(*pickle.loads(pickle.dumps(piece))))) for piece in pieces]
+
+
+def test_jobs_shipped_as_ray_ships_them_give_the_same_bits():
+    config = EnvConfig()
+    jobs = harness.grid([StabilityOracle(config, 0.1), V2VAwarePolicy(config)], [{}], SEEDS, batch=2)
+    serial = harness.run_jobs(jobs, Backend("serial"))
+    shipped = harness.run_jobs(jobs, PicklingBackend("serial"))
+    assert [repr([r.row() for r in b.records]) for b in shipped] == [repr([r.row() for r in b.records]) for b in serial]
+    assert [[r.fingerprint for r in b.records] for b in shipped] == [[r.fingerprint for r in b.records] for b in serial]
