@@ -3,6 +3,7 @@
 import os
 import subprocess
 import sys
+from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
@@ -47,11 +48,14 @@ def test_what_users_call_is_importable_from_the_top_level():
     assert mean.shape == (2,) and cov.shape == (2, 2)
 
 
-def test_agents_are_installed_with_the_package():
-    """pyproject.toml installs ``agents`` beside ``timegap_env``: importable outside the repository."""
-    code = "import agents.policies, agents.protocol; print(agents.policies.__file__)"
+def test_the_policies_are_installed_inside_the_package():
+    """The policies live in ``timegap_env.agents`` (no generically named top-level ``agents`` is installed): importable
+    outside the repository, without torch (the learned policies import it only when loaded)."""
+    code = ("import importlib.util, sys, timegap_env.agents.policies, timegap_env.agents.protocol; "
+            "print(timegap_env.agents.policies.__file__, importlib.util.find_spec('agents'), 'torch' in sys.modules)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd="/").stdout
-    assert "agents" in out
+    path, spec, torch_loaded = out.split()
+    assert Path(path).parts[-3:] == ("timegap_env", "agents", "policies.py") and spec == "None" and torch_loaded == "False"
 
 
 def test_the_first_import_says_the_kernels_will_compile_once(tmp_path):

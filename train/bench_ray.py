@@ -41,7 +41,7 @@ from pathlib import Path
 from typing import Any
 
 from train import detection_benchmark, value_of_information  # the scripts it times, as they run
-from agents.protocol import EVAL_SEED_START
+from timegap_env.agents.protocol import EVAL_SEED_START
 from timegap_env.experiments import heldout
 from timegap_env.experiments.backends import Backend
 from timegap_env.experiments.registry import make as make_policy
@@ -134,7 +134,7 @@ def run_evaluation(backend: Counting, size: Size) -> Evaluation:
 def warm_up_driver() -> None:
     """Load the env's, the monitor's and the rule's compiled kernels in this process (one short batch each) and
     import torch and SB3 for PPO."""
-    import agents.learned  # noqa: F401  (torch, stable-baselines3)
+    import timegap_env.agents.learned  # noqa: F401  (torch, stable-baselines3)
 
     seeds = [EVAL_SEED_START]
     for name in ("fixed_1.6", "rule_platoon", "rule_per_vehicle"):

@@ -28,9 +28,9 @@ from typing import NamedTuple
 
 import numpy as np
 
-from agents.oracles import NOMINAL
-from agents.policies import seconds
-from agents.protocol import EVAL_SEED_START
+from timegap_env.agents.oracles import NOMINAL
+from timegap_env.agents.policies import seconds
+from timegap_env.agents.protocol import EVAL_SEED_START
 from timegap_env import cli
 from timegap_env.config import DEGRADATION_KINDS, EnvConfig
 from timegap_env.envs.info import truth_of

@@ -52,7 +52,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
-from agents.protocol import EVAL_SEED_START
+from timegap_env.agents.protocol import EVAL_SEED_START
 from timegap_env import cli
 from timegap_env.config import DEGRADATION_KINDS, SIZE_RANGE_FIELDS, ChartConfig, DegradationConfig, LeaderConfig, PlatoonConfig
 from timegap_env.leaders.openacc import default_openacc_dir, openacc_paths, read_openacc, repeated_runs

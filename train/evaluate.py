@@ -43,7 +43,7 @@ the cluster at ``--address``; the batches are the same, so the files are too, bi
 runtime line, which says how the work was spread, aside). The oracle's lookup and choice are
 spread the same way.
 
-The learned policy is loaded as it was trained (``agents.learned.LearnedPolicy.load``: ``env.json``
+The learned policy is loaded as it was trained (``timegap_env.agents.learned.LearnedPolicy.load``: ``env.json``
 gives the meaning of its actions, and ``vecnormalize.pkl`` must be there if the run normalised), with
 torch on one thread, and checked before any other work, as are ``--out`` (not a file) and the NGSIM and
 OpenACC data of the planned groups (a file that cannot be read is named before the other groups run).
@@ -70,9 +70,9 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from timegap_env import cli
-from agents.oracles import TruthPolicy
-from agents.policies import NamedPolicy
-from agents.protocol import EVAL_SEED_START
+from timegap_env.agents.oracles import TruthPolicy
+from timegap_env.agents.policies import NamedPolicy
+from timegap_env.agents.protocol import EVAL_SEED_START
 from timegap_env.experiments.backends import Backend, add_arguments
 from timegap_env.experiments.heldout import (  # the held-out protocol, in the library
     ALL_EPISODES, DEFAULT_EPISODES, DEFAULT_MODEL, DEFAULT_REFERENCE, GROUPS, METRICS, TTC_CAP, PolicyChoiceError, Profile,

@@ -60,8 +60,8 @@ from typing import Any
 import numpy as np
 import yaml
 
-from agents.policies import NamedPolicy, seconds
-from agents.protocol import ENV_FILE, EVAL_SEED_START, MODEL_FILE, VECNORMALIZE_FILE
+from timegap_env.agents.policies import NamedPolicy, seconds
+from timegap_env.agents.protocol import ENV_FILE, EVAL_SEED_START, MODEL_FILE, VECNORMALIZE_FILE
 from timegap_env import cli
 from timegap_env.config import NESTED_CONFIGS, EnvConfig
 from timegap_env.envs.observation import observation_space
@@ -259,7 +259,7 @@ def load_grid(path: Path) -> Grid:
 
 # ---------------------------------------------------------------- policies and pieces
 def model_files(run: Path) -> dict[str, bytes]:
-    """The files of a trained run that :meth:`agents.learned.LearnedPolicy.load` reads, as bytes (they travel
+    """The files of a trained run that :meth:`timegap_env.agents.learned.LearnedPolicy.load` reads, as bytes (they travel
     with the pieces); ``FileNotFoundError`` if the model is missing."""
     if not (run / MODEL_FILE).is_file():
         raise FileNotFoundError(f"model = {str(run)!r}: no {MODEL_FILE} there (policy {PPO} needs a trained run)")
@@ -282,7 +282,7 @@ def load_learned(files: Mapping[str, bytes]) -> NamedPolicy:
     """The learned policy of a run's ``files`` (see :func:`model_files`), loaded once per process."""
     key = digest(files)
     if key not in _LOADED:
-        from agents.learned import LearnedPolicy  # torch is slow to import; only when needed
+        from timegap_env.agents.learned import LearnedPolicy  # torch is slow to import; only when needed
 
         with tempfile.TemporaryDirectory() as folder:
             for name, data in files.items():

@@ -28,7 +28,7 @@ directory), as is ``--out`` naming a file. The run directory holds exactly:
   steps and at the end; it stores the timestep count, so ``--resume`` continues from it);
 - ``vecnormalize.pkl``: ``VecNormalize``'s running statistics, when ``normalize`` is on;
 - ``env.json``: the ``gym.make`` keyword arguments of the env as evaluated (its action mode among them), the
-  frame stack and ``normalize`` (whether ``vecnormalize.pkl`` belongs to the run; ``agents.protocol``);
+  frame stack and ``normalize`` (whether ``vecnormalize.pkl`` belongs to the run; ``timegap_env.agents.protocol``);
 - ``curve.csv`` and ``curve.png``: the learning curve, every ``--curve-freq`` steps (0: only at the
   end) and at the end: the deterministic policy's mean return on the check episodes, and the share
   of the oracle gap it captures there, (policy - best blind constant) / (oracle - best blind
@@ -39,7 +39,7 @@ directory), as is ``--out`` naming a file. The run directory holds exactly:
 - ``tensorboard/``: TensorBoard's logs (``--tensorboard-log`` puts them elsewhere).
 
 Sub-env i of phase k's env is seeded ``--seed + k * n_envs + i``; all training seeds stay below
-``agents.protocol.EVAL_SEED_START`` (10 000), where the evaluation's seeds begin. The check episodes of
+``timegap_env.agents.protocol.EVAL_SEED_START`` (10 000), where the evaluation's seeds begin. The check episodes of
 the learning curve are ``EVAL_EPISODES`` episodes seeded ``EVAL_SEED + i``, also below 10 000.
 A ``--resume`` from a checkpoint or statistics that cannot be read, or that take observations of
 another shape or actions of another meaning than the env's, stops with a message naming the file; so do
@@ -74,9 +74,9 @@ from stable_baselines3 import PPO
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.vec_env import VecEnv, VecFrameStack, VecNormalize
 
-from agents.learned import LearnedPolicy, ObservationNormalizer, RunFileError, load_model, load_vecnormalize
-from agents.policies import seconds
-from agents.protocol import ENV_FILE, EVAL_SEED_START, MODEL_FILE, VECNORMALIZE_FILE
+from timegap_env.agents.learned import LearnedPolicy, ObservationNormalizer, RunFileError, load_model, load_vecnormalize
+from timegap_env.agents.policies import seconds
+from timegap_env.agents.protocol import ENV_FILE, EVAL_SEED_START, MODEL_FILE, VECNORMALIZE_FILE
 from timegap_env import ENV_ID, cli
 from timegap_env.config import EnvConfig
 from timegap_env.envs.action import action_space

@@ -25,7 +25,7 @@ The SB3 run's warm-up (hyperparams/ppo_warmup.yml) is not repeated. ``--timestep
 
 Runner w (1, 2, ...) steps platoons seeded (seed + w) x envs-per-runner + i, i < envs-per-runner (RLlib
 seeds runner w's vector env with seed + w; ``ForRLlib`` spreads that over its platoons), so runners never
-share a platoon's stream; all below ``agents.protocol.EVAL_SEED_START``, where the evaluation's seeds begin.
+share a platoon's stream; all below ``timegap_env.agents.protocol.EVAL_SEED_START``, where the evaluation's seeds begin.
 
 ``--select-scale`` chooses the reward scale: it trains one run per candidate (the same seed, steps and
 settings), scores each run's deterministic policy on ``train.train_ppo``'s check episodes (``EVAL_EPISODES``
@@ -35,7 +35,7 @@ episodes seeded ``EVAL_SEED`` on: 9000-9031, below the held-out seeds, in the en
 seeded below the check episodes'.
 
 ``--out`` (default ``results/rllib``) receives ``checkpoint/`` (RLlib's ``algo.save``, the env's
-``env.json`` added), which ``agents.rllib_policy.RLlibPolicy.load`` reads, and ``training.md``: the
+``env.json`` added), which ``timegap_env.agents.rllib_policy.RLlibPolicy.load`` reads, and ``training.md``: the
 command, every iteration (env steps, episodes ended and their mean return, time, throughput), the wall time,
 the policy's mean return on the check episodes and, unless ``--eval-episodes 0``, on ``train.evaluate``'s
 held-out episodes beside the paper's rule and the fixed 1.6 s setting. The run writes into
@@ -62,8 +62,8 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from agents.protocol import ENV_FILE, EVAL_SEED_START
-from agents.rllib_policy import CHECKPOINT_DIR, RLlibPolicy
+from timegap_env.agents.protocol import ENV_FILE, EVAL_SEED_START
+from timegap_env.agents.rllib_policy import CHECKPOINT_DIR, RLlibPolicy
 from timegap_env import cli
 from timegap_env import ENV_ID
 from timegap_env.experiments.backends import runtime_env
@@ -623,7 +623,7 @@ def main(argv: list[str] | None = None) -> None:
     except BaseException:  # the trained checkpoint is kept: the checks and the report can be run again on it
         if work.exists():
             print(f"train_rllib: stopped after training; --out {args.out} is unchanged. The trained checkpoint is in "
-                  f"{work / CHECKPOINT_DIR} (agents.rllib_policy.RLlibPolicy.load reads it); delete {work} if not "
+                  f"{work / CHECKPOINT_DIR} (timegap_env.agents.rllib_policy.RLlibPolicy.load reads it); delete {work} if not "
                   "wanted", file=sys.stderr)
         raise
     print(report)

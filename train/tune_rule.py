@@ -1,4 +1,4 @@
-"""Tune the chart step rule (``agents.policies.ChartStepPolicy``) on training seeds: a small grid, mean return per cell.
+"""Tune the chart step rule (``timegap_env.agents.policies.ChartStepPolicy``) on training seeds: a small grid, mean return per cell.
 
     python -m train.tune_rule [--episodes 256] [--out results/rule]
                               [--k-up 1 2 3 4 6] [--quiet-time 10 20 35] [--min-setting 1.0 1.2 1.4 1.6]
@@ -23,8 +23,8 @@ from pathlib import Path
 
 import numpy as np
 
-from agents.policies import ChartStepPolicy, FixedPolicy, NamedPolicy, seconds
-from agents.protocol import EVAL_SEED_START
+from timegap_env.agents.policies import ChartStepPolicy, FixedPolicy, NamedPolicy, seconds
+from timegap_env.agents.protocol import EVAL_SEED_START
 from timegap_env import cli
 from timegap_env.config import EnvConfig
 from timegap_env.experiments.registry import fixed_name
@@ -149,7 +149,7 @@ def write_report(path: Path, config: EnvConfig, seeds: Sequence[int], cells: Seq
         f"{EVAL_SEED_START} and apart from the value-of-information lookup and selection seeds; the default leader "
         "families and degradation mix), platoon-wide action, every policy on the same episodes. Returns are "
         "undiscounted sums of the reward; differences are paired per episode, with a 95 % normal interval.", "",
-        "The rule (`agents.policies.ChartStepPolicy`), per follower at each decision: at least `k_up` exceedances "
+        "The rule (`timegap_env.agents.policies.ChartStepPolicy`), per follower at each decision: at least `k_up` exceedances "
         f"within the chart's {seconds(config.chart.exceedance_window)} s window -> one ladder level up; otherwise no "
         "alarm for `quiet time` s -> one level down, never below the floor; the platoon takes the largest level any "
         f"follower asks for. It starts at the env's {seconds(config.platoon.initial_setting)} s.", "",

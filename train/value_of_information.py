@@ -9,7 +9,7 @@ leader and degradation mix), every ladder setting is held for whole episodes:
 - **best blind constant**: the one setting with the best mean return over all episodes, what a
   policy that knows nothing of the episode can do with a constant;
 - **hindsight-best constant**: per episode, the best of the constants, knowing the episode in advance;
-- **oracles** (``agents.oracles``), reading the ground truth step by step: the stability oracle
+- **oracles** (``timegap_env.agents.oracles``), reading the ground truth step by step: the stability oracle
   (smallest level ``margin`` above the smallest string-stable setting of the true parameters, for
   each margin of ``MARGINS``) and the lookup oracle (per true condition, the constant that scored
   best on training seeds < ``EVAL_SEED_START``, measured here: each condition pinned from the start
@@ -46,9 +46,9 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
-from agents.oracles import NOMINAL
-from agents.policies import seconds
-from agents.protocol import EVAL_SEED_START
+from timegap_env.agents.oracles import NOMINAL
+from timegap_env.agents.policies import seconds
+from timegap_env.agents.protocol import EVAL_SEED_START
 from timegap_env import cli
 from timegap_env.config import EnvConfig
 from timegap_env.experiments.backends import Backend, add_arguments

@@ -10,7 +10,7 @@ from stable_baselines3 import PPO
 from stable_baselines3.common.vec_env import DummyVecEnv, VecFrameStack, VecNormalize
 
 import timegap_env
-from agents.learned import LearnedPolicy, RunFileError
+from timegap_env.agents.learned import LearnedPolicy, RunFileError
 from timegap_env.envs.observation import FEATURES
 
 

@@ -4,7 +4,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
-from agents.oracles import LookupOracle, StabilityOracle, condition_keys, size_bin
+from timegap_env.agents.oracles import LookupOracle, StabilityOracle, condition_keys, size_bin
 from timegap_env.config import EnvConfig
 from timegap_env.envs.info import truth_of
 

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 import timegap_env
-from agents.policies import (
+from timegap_env.agents.policies import (
     ChartStepPolicy,
     NamedPolicy,
     PaperRulePolicy,

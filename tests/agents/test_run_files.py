@@ -15,9 +15,9 @@ import pytest
 import torch
 from gymnasium import spaces
 
-from agents.learned import LearnedPolicy, RunFileError, load_vecnormalize
-from agents.protocol import ENV_FILE, MODEL_FILE, VECNORMALIZE_FILE, read_env_file
-from agents.rllib_policy import CHECKPOINT_MARKER, MODULE_PATH, RLlibPolicy
+from timegap_env.agents.learned import LearnedPolicy, RunFileError, load_vecnormalize
+from timegap_env.agents.protocol import ENV_FILE, MODEL_FILE, VECNORMALIZE_FILE, read_env_file
+from timegap_env.agents.rllib_policy import CHECKPOINT_MARKER, MODULE_PATH, RLlibPolicy
 
 COMMITTED = Path(__file__).resolve().parents[2] / "results" / "ppo"  # relative mode: Discrete(3), normalised
 

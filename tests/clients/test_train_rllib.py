@@ -1,4 +1,4 @@
-"""``python -m train.train_rllib`` and ``agents.rllib_policy`` (issue 15).
+"""``python -m train.train_rllib`` and ``timegap_env.agents.rllib_policy`` (issue 15).
 
 The settings, the runners' env, the reward scale's selection and its report are checked without Ray (fast, any
 venv); the end-to-end runs need the ``ray`` extra (``.venv-clients``, ``bash .ci/clients``) and are slow: a tiny run
@@ -18,8 +18,8 @@ import numpy as np
 import pytest
 import yaml
 
-from agents.learned import RunFileError
-from agents.rllib_policy import CHECKPOINT_DIR, RLlibPolicy, find_checkpoint
+from timegap_env.agents.learned import RunFileError
+from timegap_env.agents.rllib_policy import CHECKPOINT_DIR, RLlibPolicy, find_checkpoint
 from timegap_env import ENV_ID
 from timegap_env.config import EnvConfig
 from timegap_env.envs.observation import observation_space

@@ -34,6 +34,6 @@ def test_the_library_imports_no_script():
 
 def test_one_rollout_loop():
     """Only the harness steps a vector env until its episodes end (``while active.any()``)."""
-    loops = [path.relative_to(ROOT).as_posix() for folder in ("train", "timegap_env", "agents")
+    loops = [path.relative_to(ROOT).as_posix() for folder in ("train", "timegap_env")
              for path in sorted((ROOT / folder).rglob("*.py")) if "while active.any()" in path.read_text()]
     assert loops == ["timegap_env/experiments/rollout.py"]

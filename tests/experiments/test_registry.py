@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from agents.policies import ChartStepPolicy, FixedPolicy, PaperRulePolicy, V2VAwarePolicy, fixed_policies, seconds
+from timegap_env.agents.policies import ChartStepPolicy, FixedPolicy, PaperRulePolicy, V2VAwarePolicy, fixed_policies, seconds
 from timegap_env.config import EnvConfig
 from timegap_env.experiments import registry
 

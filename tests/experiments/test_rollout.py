@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 
 import timegap_env
-from agents.oracles import NOMINAL, StabilityOracle, TruthPolicy
-from agents.policies import ChartStepPolicy, FixedPolicy, PaperRulePolicy, V2VAwarePolicy
+from timegap_env.agents.oracles import NOMINAL, StabilityOracle, TruthPolicy
+from timegap_env.agents.policies import ChartStepPolicy, FixedPolicy, PaperRulePolicy, V2VAwarePolicy
 from timegap_env.config import EnvConfig
 from timegap_env.envs.info import summary_of, truth_of
 from timegap_env.envs.reward import weights_of

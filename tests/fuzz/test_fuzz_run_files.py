@@ -1,7 +1,7 @@
 """Fuzz of a trained run's files (issue 22, items 1-2): the committed run (``results/ppo``: ``model.zip``,
 ``vecnormalize.pkl``, ``env.json``) copied to a temporary directory and corrupted.
 
-``agents.learned.LearnedPolicy.load`` must raise ``agents.learned.RunFileError`` (or ``FileNotFoundError`` for a
+``timegap_env.agents.learned.LearnedPolicy.load`` must raise ``timegap_env.agents.learned.RunFileError`` (or ``FileNotFoundError`` for a
 missing file) whose message names the file at fault, never load silently: a missing or inconsistent ``env.json``
 (another action mode, another platoon, another frame stack, not JSON, not the run's format), a missing, corrupt or
 non-finite ``vecnormalize.pkl`` (NaN mean, inf or negative variance, statistics of another shape), a truncated,
@@ -31,7 +31,7 @@ import timegap_env  # noqa: F401 - registers the env
 from tests.fuzz.fuzzing import ENV_ID, Defects, call, fuzz_settings, short
 
 torch = pytest.importorskip("torch")
-learned = pytest.importorskip("agents.learned")
+learned = pytest.importorskip("timegap_env.agents.learned")
 LearnedPolicy, RunFileError = learned.LearnedPolicy, learned.RunFileError
 
 RUN = Path(__file__).resolve().parents[2] / "results" / "ppo"

@@ -7,7 +7,7 @@ import pickle
 
 import pytest
 
-from agents.policies import FixedPolicy, PaperRulePolicy
+from timegap_env.agents.policies import FixedPolicy, PaperRulePolicy
 from timegap_env.config import EnvConfig
 from timegap_env.experiments import heldout, value
 from train import detection_benchmark, evaluate, value_of_information

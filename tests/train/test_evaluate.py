@@ -12,8 +12,8 @@ from stable_baselines3.common.vec_env import DummyVecEnv, VecFrameStack, VecNorm
 import timegap_env
 from timegap_env.envs.info import truth_of
 from timegap_env.leaders.scenarios import HELD_OUT_FAMILIES
-from agents.policies import FixedPolicy, PaperRulePolicy
-from agents.protocol import EVAL_SEED_START
+from timegap_env.agents.policies import FixedPolicy, PaperRulePolicy
+from timegap_env.agents.protocol import EVAL_SEED_START
 from timegap_env.config import EnvConfig
 from timegap_env.experiments import heldout, stats, value
 from train import evaluate

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from agents.protocol import ENV_FILE, MODEL_FILE, VECNORMALIZE_FILE
+from timegap_env.agents.protocol import ENV_FILE, MODEL_FILE, VECNORMALIZE_FILE
 from timegap_env.leaders import default_ngsim_path, default_openacc_dir
 from train import evaluate
 

@@ -15,7 +15,7 @@ import pytest
 import yaml
 from stable_baselines3 import PPO
 
-from agents.learned import LearnedPolicy
+from timegap_env.agents.learned import LearnedPolicy
 from timegap_env import ENV_ID
 from train import train_ppo
 

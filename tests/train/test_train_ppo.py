@@ -19,8 +19,8 @@ from stable_baselines3 import PPO
 from stable_baselines3.common.logger import configure
 from stable_baselines3.common.vec_env import VecNormalize
 
-from agents.learned import LearnedPolicy, RunFileError
-from agents.protocol import EVAL_SEED_START
+from timegap_env.agents.learned import LearnedPolicy, RunFileError
+from timegap_env.agents.protocol import EVAL_SEED_START
 from timegap_env import ENV_ID
 from timegap_env.envs.sb3 import TimeGapVecEnv
 from timegap_env.experiments import training

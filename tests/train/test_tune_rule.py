@@ -3,7 +3,7 @@
 import csv
 from pathlib import Path
 
-from agents.policies import ChartStepPolicy
+from timegap_env.agents.policies import ChartStepPolicy
 from train import tune_rule
 
 COMMITTED = Path(__file__).resolve().parents[2] / "results" / "rule" / "tuning.csv"

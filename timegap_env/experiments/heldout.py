@@ -22,9 +22,9 @@ import gymnasium as gym
 import numpy as np
 
 import timegap_env
-from agents.oracles import TruthPolicy
-from agents.policies import NamedPolicy
-from agents.protocol import EVAL_SEED_START, MODEL_FILE
+from timegap_env.agents.oracles import TruthPolicy
+from timegap_env.agents.policies import NamedPolicy
+from timegap_env.agents.protocol import EVAL_SEED_START, MODEL_FILE
 from timegap_env.config import EnvConfig
 from timegap_env import cli
 from timegap_env.envs.info import truth_of

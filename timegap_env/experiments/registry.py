@@ -19,8 +19,8 @@ from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
-from agents.policies import ChartStepPolicy, FixedPolicy, PaperRulePolicy, V2VAwarePolicy, seconds
-from agents.protocol import MODEL_FILE
+from timegap_env.agents.policies import ChartStepPolicy, FixedPolicy, PaperRulePolicy, V2VAwarePolicy, seconds
+from timegap_env.agents.protocol import MODEL_FILE
 from timegap_env.config import EnvConfig
 
 FIXED_PREFIX = "fixed_"  # fixed_<setting [s]>: one ladder level held for the whole episode
@@ -125,7 +125,7 @@ class LearnedPolicyError(ValueError):
 
 def find_run(model: Path) -> Path | None:
     """The RLlib checkpoint of ``model`` if it is an RLlib run (None otherwise)."""
-    from agents.rllib_policy import find_checkpoint
+    from timegap_env.agents.rllib_policy import find_checkpoint
 
     return find_checkpoint(model)
 
@@ -139,13 +139,13 @@ def load_learned(model: Path, config: EnvConfig | None = None) -> Any:
     """The learned policy of ``model`` (an SB3 zip or run directory, or an RLlib run), loaded as it was trained
     (``LearnedPolicy.load``: ``env.json``, its statistics; torch on one thread), checked to take the observations of
     ``config``'s env (default: the default env); ``LearnedPolicyError`` naming what does not fit."""
-    from agents.learned import LearnedPolicy, RunFileError  # torch is slow to import; only when needed
+    from timegap_env.agents.learned import LearnedPolicy, RunFileError  # torch is slow to import; only when needed
     from timegap_env.envs.observation import observation_space
 
     rllib = find_run(model)
     try:
         if rllib is not None:
-            from agents.rllib_policy import RLlibPolicy  # loading needs the ray extra
+            from timegap_env.agents.rllib_policy import RLlibPolicy  # loading needs the ray extra
 
             policy = RLlibPolicy.load(rllib)
         else:

@@ -7,9 +7,9 @@ each run until its first episode ends (what the autoreset starts after it is not
 A policy is any of
 
 - an object with stable-baselines3's ``predict(obs, state=None, episode_start=None, deterministic=True)``
-  (``agents.policies``, ``agents.learned.LearnedPolicy``, ``agents.rllib_policy.RLlibPolicy``): called with the
+  (``timegap_env.agents.policies``, ``timegap_env.agents.learned.LearnedPolicy``, ``timegap_env.agents.rllib_policy.RLlibPolicy``): called with the
   batch of observations, deterministic, its ``state`` carried from step to step;
-- an oracle with ``act(truth)`` (``agents.oracles``): called with the ground truth the infos hold;
+- an oracle with ``act(truth)`` (``timegap_env.agents.oracles``): called with the ground truth the infos hold;
 - a chooser, a callable ``(observations, infos) -> actions``.
 
 A policy with an ``action_mode`` attribute runs in an env of that action mode.

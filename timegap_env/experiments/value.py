@@ -7,7 +7,7 @@ learning curve's yardsticks), ``train.choose_degradation_mix`` and ``train.detec
   while every V2V flag is up and one while any is down), in vector-env batches of at most ``BATCH`` episodes;
 - :func:`measure_lookup`: the lookup oracle's table, per true condition the constant that scored best on training
   seeds (each condition pinned from the start);
-- :func:`all_oracles`, :func:`choose_oracle`: the oracles of ``agents.oracles`` and *the* oracle, the best on
+- :func:`all_oracles`, :func:`choose_oracle`: the oracles of ``timegap_env.agents.oracles`` and *the* oracle, the best on
   ``SELECTION_EPISODES`` selection episodes (seeds from ``SELECTION_SEED_START``, below the held-out seeds).
 
 Every batch is one piece of work for a :class:`~timegap_env.experiments.backends.Backend` and runs through the
@@ -22,9 +22,9 @@ from typing import Any
 
 import numpy as np
 
-from agents.oracles import NOMINAL, LookupOracle, StabilityOracle, TruthPolicy, bin_centres
-from agents.policies import seconds
-from agents.protocol import EVAL_SEED_START
+from timegap_env.agents.oracles import NOMINAL, LookupOracle, StabilityOracle, TruthPolicy, bin_centres
+from timegap_env.agents.policies import seconds
+from timegap_env.agents.protocol import EVAL_SEED_START
 from timegap_env.config import DEGRADATION_KINDS, SIZE_RANGE_FIELDS, EnvConfig
 from timegap_env.envs.info import truth_of
 from timegap_env.experiments.backends import Backend

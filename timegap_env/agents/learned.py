@@ -3,7 +3,7 @@
     policy = LearnedPolicy.load("results/ppo")          # results/ppo/model.zip, env.json (+ vecnormalize.pkl)
     action, _ = policy.predict(obs, deterministic=True)
 
-A run is read as it was trained, or not at all: ``env.json`` (``agents.protocol``) says what the
+A run is read as it was trained, or not at all: ``env.json`` (``timegap_env.agents.protocol``) says what the
 model's actions mean, how many observations it reads at once and whether they were normalised;
 a missing ``env.json``, one whose env does not fit the model (another action space: a relative-mode
 Discrete(3) read as platoon mode's Discrete(9)), or statistics missing where the run normalised,
@@ -32,7 +32,7 @@ from stable_baselines3 import PPO
 from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.vec_env import VecNormalize
 
-from agents.protocol import ENV_FILE, MODEL_FILE, VECNORMALIZE_FILE, RunFileError, check_spaces, read_env_file
+from timegap_env.agents.protocol import ENV_FILE, MODEL_FILE, VECNORMALIZE_FILE, RunFileError, check_spaces, read_env_file
 
 __all__ = ["LearnedPolicy", "ObservationNormalizer", "RunFileError", "load_model", "load_vecnormalize"]
 

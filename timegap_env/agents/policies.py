@@ -3,7 +3,7 @@ V2V-aware heuristic.
 
 Every policy here has stable-baselines3's interface,
 ``predict(obs, state=None, episode_start=None, deterministic=True) -> (action, state)``,
-so one evaluation loop runs them and trained SB3 models alike (see ``agents.learned``).
+so one evaluation loop runs them and trained SB3 models alike (see ``timegap_env.agents.learned``).
 ``obs`` is one observation (obs_dim,) or a batch (n_envs, obs_dim); the action is
 shaped like SB3's: ``()`` or ``(n_envs,)`` for ``action_mode="platoon"``,
 ``(N,)`` or ``(n_envs, N)`` for ``"per_vehicle"``, ladder indices (int64).

@@ -1,5 +1,5 @@
 """A PPO policy trained by Ray RLlib (``train/train_rllib.py``) behind the same interface as
-:class:`agents.learned.LearnedPolicy`, for ``train.evaluate``.
+:class:`timegap_env.agents.learned.LearnedPolicy`, for ``train.evaluate``.
 
     policy = RLlibPolicy.load("results/rllib")       # the run directory, or its checkpoint/ (algo.save's)
     action, _ = policy.predict(obs, deterministic=True)
@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 
-from agents.protocol import ENV_FILE, RunFileError, check_spaces, read_env_file
+from timegap_env.agents.protocol import ENV_FILE, RunFileError, check_spaces, read_env_file
 
 CHECKPOINT_DIR = "checkpoint"  # train.train_rllib's algo.save directory in a run directory
 CHECKPOINT_MARKER = "rllib_checkpoint.json"  # RLlib writes it at the top of every checkpoint
@@ -59,7 +59,7 @@ class RLlibPolicy:
         FileNotFoundError; a module or env.json that cannot be used or do not fit each other (another action space,
         as relative mode's Discrete(3) read as platoon mode's Discrete(9), or observations of another shape),
         RunFileError naming it. ``threads``: torch's threads from now on (None: leave them; one by default, as
-        :meth:`agents.learned.LearnedPolicy.load`: the module is small and the simulator's threads need the cores)."""
+        :meth:`timegap_env.agents.learned.LearnedPolicy.load`: the module is small and the simulator's threads need the cores)."""
         checkpoint = find_checkpoint(path)
         if checkpoint is None:
             raise FileNotFoundError(f"path = {str(path)!r}: no RLlib checkpoint (no {CHECKPOINT_MARKER} in it or in "

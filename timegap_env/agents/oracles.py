@@ -23,7 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from agents.policies import as_config
+from timegap_env.agents.policies import as_config
 from timegap_env.config import SIZE_RANGE_FIELDS, DegradationConfig, EnvConfig
 
 NOMINAL = "none"  # the condition of a follower no degradation acts on

@@ -4,7 +4,7 @@ Training (``train/train_ppo.py``) seeds its envs below ``EVAL_SEED_START``; the 
 evaluation (``train/evaluate.py``) seeds its episodes from ``EVAL_SEED_START`` on, so no
 evaluation episode was seen in training. A trained run is a directory holding ``MODEL_FILE``,
 ``ENV_FILE`` and, when observations were normalised, ``VECNORMALIZE_FILE`` (all three read by
-``agents.learned``). ``ENV_FILE`` is a JSON object:
+``timegap_env.agents.learned``). ``ENV_FILE`` is a JSON object:
 
 - ``env_kwargs``: the ``gym.make`` keyword arguments of the env the run was trained in (its
   ``config``, the action mode among it: the meaning of the model's actions);
