@@ -34,18 +34,19 @@ import io
 import math
 import os
 import platform
+import runpy
+import sys
 import tempfile
 import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
-from train import detection_benchmark, value_of_information  # the scripts it times, as they run
+from timegap_env import cli
 from timegap_env.agents.protocol import EVAL_SEED_START
 from timegap_env.experiments import heldout
 from timegap_env.experiments.backends import Backend
 from timegap_env.experiments.registry import make as make_policy
-from timegap_env import cli
 
 DEFAULT_OUT = Path("results/ray/scaling.md")
 NOOP_TASKS = 200  # empty tasks mapped at once to measure Ray's cost per task [-]
@@ -141,11 +142,17 @@ def warm_up_driver() -> None:
         heldout.run_batch(make_policy(name), "training_mix", seeds, record_profile=True)
 
 
-def run_script(main: Callable[[Sequence[str]], None], arguments: list[str], backend: str, out: Path) -> float:
-    """Wall seconds of ``main`` (a script's) writing to ``out`` with ``--backend backend``; its printout dropped."""
-    start = time.perf_counter()
-    with contextlib.redirect_stdout(io.StringIO()):
-        main([*arguments, "--out", str(out), "--backend", backend])
+def run_script(module: str, arguments: list[str], backend: str, out: Path) -> float:
+    """Wall seconds of ``python -m module`` (a script) run in this process, as the command line runs it, writing to
+    ``out`` with ``--backend backend``; its printout dropped. (In this process: it joins the Ray session started
+    here, which is what is timed.)"""
+    argv, start = sys.argv, time.perf_counter()
+    sys.argv = [module, *arguments, "--out", str(out), "--backend", backend]
+    try:
+        with contextlib.redirect_stdout(io.StringIO()):
+            runpy.run_module(module, run_name="__main__", alter_sys=True)
+    finally:
+        sys.argv = argv
     return time.perf_counter() - start
 
 
@@ -239,10 +246,9 @@ def main(argv: Sequence[str] | None = None) -> None:
 
     scripts = {}
     with tempfile.TemporaryDirectory() as scratch:
-        for name, script, arguments in (("train.value_of_information", value_of_information.main,
-                                         size.value_of_information),
-                                        ("train.detection_benchmark", detection_benchmark.main, size.detection)):
-            times = {backend: run_script(script, arguments, backend, Path(scratch, name, backend))
+        for name, arguments in (("train.value_of_information", size.value_of_information),
+                                ("train.detection_benchmark", size.detection)):
+            times = {backend: run_script(name, arguments, backend, Path(scratch, name, backend))
                      for backend in ("serial", "ray")}
             scripts[name] = (times, same_files(Path(scratch, name, "serial"), Path(scratch, name, "ray")), arguments)
     capacities.append(capacity(ray_backend, cpus, size.spin))

@@ -5,7 +5,8 @@ import math
 import re
 import sys
 
-from train import bench, bench_vector
+from timegap_env.benchmarks import vector as bench_vector
+from train import bench
 
 NUMBER = re.compile(r"[-+]?\d[\d,]*(?:\.\d+)?(?:e[-+]?\d+)?|nan|inf", re.IGNORECASE)
 

@@ -18,7 +18,7 @@ import tempfile
 import time
 from pathlib import Path
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]  # the repository: timegap_env/benchmarks/cold.py -> .
 CHILD = """\
 import sys, time
 import gymnasium as gym

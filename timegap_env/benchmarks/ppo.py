@@ -23,7 +23,7 @@ from stable_baselines3.common.vec_env.base_vec_env import VecEnvStepReturn
 from timegap_env.envs.sb3 import TimeGapVecEnv
 from timegap_env.experiments.training import load_hyperparams
 
-HYPERPARAMS = Path(__file__).resolve().parents[1] / "hyperparams" / "ppo.yml"
+HYPERPARAMS = Path(__file__).resolve().parents[2] / "hyperparams" / "ppo.yml"  # in a clone of the repository
 
 
 class Stopwatch(VecEnvWrapper):
