@@ -21,7 +21,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Mapping
-from typing import Any, Self
+from typing import Any, NoReturn, Self, cast
 
 import numpy as np
 
@@ -112,7 +112,7 @@ class ConfigMixin:
             raise ValueError(f"unknown {name} field(s) {unknown}; known fields: {sorted(known)}")
         return dataclasses.replace(self, **overrides)  # type: ignore[type-var]
 
-    def _fail(self, field: str, value: Any, rule: str) -> None:
+    def _fail(self, field: str, value: Any, rule: str) -> NoReturn:
         raise ValueError(f"{type(self).__name__}.{field} = {shown(value)}: {rule}")
 
     def _number(self, field: str, low: float, high: float, *, open_low: bool = False, open_high: bool = False,
@@ -166,6 +166,7 @@ class ConfigMixin:
                        + (f", {what}s {known}" if known else ""))
         unknown = sorted(set(value) - set(known)) if known else []
         if unknown:
+            assert known is not None  # unknown is empty unless known is given
             self._fail(field, value, f"unknown {what}s {unknown}; known: {list(known)}")
         weights = list(value.values())
         if not all(_is_real(w) and _is_finite(w) and 0 <= w <= MAX_WEIGHT for w in weights) or sum(weights) <= 0:
@@ -229,7 +230,8 @@ class PlatoonConfig(ConfigMixin):
         for field in ("actuation_lag", "actuation_gain"):
             self.per_follower(field)
             raw = getattr(self, field)
-            object.__setattr__(self, field, float(raw) if _is_real(raw) else tuple(float(v) for v in _items(raw)))
+            object.__setattr__(self, field, float(raw) if _is_real(raw)
+                               else tuple(float(v) for v in cast(tuple[Any, ...], _items(raw))))  # checked above
 
     @property
     def v2v_delay_ticks(self) -> int:
@@ -412,8 +414,9 @@ class MonitorConfig(ConfigMixin):
         rows = _items(self.prior_cov)
         matrix = None if rows is None or len(rows) != 2 else tuple(_items(row) for row in rows)
         if (matrix is None or any(row is None or len(row) != 2 for row in matrix)
-                or not all(_is_real(x) for row in matrix for x in row)):
+                or not all(_is_real(x) for row in cast(tuple[tuple[Any, ...], ...], matrix) for x in row)):
             self._fail("prior_cov", self.prior_cov, "must be a 2x2 matrix of numbers")
+        matrix = cast(tuple[tuple[Any, ...], ...], matrix)  # no row is None: checked just above
         if not all(_is_finite(x) and abs(x) <= 1e6 for row in matrix for x in row):
             self._fail("prior_cov", self.prior_cov, "entries must be finite and within [-1e6, 1e6]")
         cov = np.asarray(matrix, dtype=float)

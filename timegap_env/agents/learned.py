@@ -79,7 +79,8 @@ def check_statistics(saved: VecNormalize, where: str) -> None:
         for key, part in parts:
             if part is not None:
                 prefix = f"{name}[{key!r}]" if key else name
-                mean, var = getattr(part, "mean", None), getattr(part, "var", None)
+                mean: Any = getattr(part, "mean", None)  # np.shape(None) is (), as for any scalar
+                var: Any = getattr(part, "var", None)
                 fields[f"{prefix}.mean"], fields[f"{prefix}.var"] = ("mean", mean), ("var", var)
                 if np.shape(mean) != np.shape(var):
                     raise RunFileError(f"vecnormalize = {where!r}: {prefix}.mean has shape {np.shape(mean)}, its var "
@@ -100,6 +101,13 @@ def check_statistics(saved: VecNormalize, where: str) -> None:
             raise RunFileError(f"vecnormalize = {where!r}: {name} = {shown}{entries}: must be finite"
                                f"{'' if rule == 'finite' else ' and ' + rule}; these statistics would turn the "
                                "observations into NaN or inf")
+
+
+def _shape(space: spaces.Space) -> tuple[int, ...]:
+    """``space.shape``: a model's observation space is a Box, which has one."""
+    shape = space.shape
+    assert shape is not None
+    return shape
 
 
 @dataclasses.dataclass(frozen=True)
@@ -155,9 +163,9 @@ class LearnedPolicy:
             raise ValueError(f"action_mode = {action_mode!r}: does not fit model.action_space = {model.action_space}")
         if isinstance(frame_stack, bool) or not isinstance(frame_stack, int) or frame_stack < 1:
             raise ValueError(f"frame_stack = {frame_stack!r}: must be an integer >= 1")
-        if model.observation_space.shape[-1] % frame_stack:
+        if _shape(model.observation_space)[-1] % frame_stack:
             raise ValueError(f"frame_stack = {frame_stack}: does not divide the model's observation width "
-                             f"{model.observation_space.shape[-1]}")
+                             f"{_shape(model.observation_space)[-1]}")
         self.action_mode = action_mode
         self.frame_stack = frame_stack
         self.model = model
@@ -213,7 +221,7 @@ class LearnedPolicy:
             policy = cls(model, normalizer, name, run.action_mode, run.frame_stack)
         except ValueError as error:  # the action mode or frame stack of env.json does not fit the model
             raise RunFileError(f"{run.path} does not fit the model {model_path}: {error}") from error
-        check_spaces(run, model.action_space, model.observation_space.shape, model_path)
+        check_spaces(run, model.action_space, _shape(model.observation_space), model_path)
         if normalizer is not None and normalizer.mean.shape != policy.observation_shape:
             raise RunFileError(f"vecnormalize = {str(stats_path)!r}: normalises observations of shape "
                                f"{normalizer.mean.shape}, the model {model_path} takes {policy.observation_shape}")
@@ -222,7 +230,7 @@ class LearnedPolicy:
     @property
     def observation_shape(self) -> tuple[int, ...]:
         """Shape of one observation the policy takes (with frame stacking, the model reads frame_stack of them)."""
-        *batch, width = self.model.observation_space.shape
+        *batch, width = _shape(self.model.observation_space)
         return (*batch, width // self.frame_stack)
 
     def predict(

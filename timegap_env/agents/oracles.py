@@ -19,7 +19,7 @@ any follower needs), (n_envs, N) or (N,) for ``"per_vehicle"``.
 from __future__ import annotations
 
 from collections.abc import Mapping
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -38,7 +38,7 @@ def condition_keys(truth: Mapping[str, np.ndarray], config: DegradationConfig, w
     kinds, sizes, active = np.asarray(truth["kind"]), np.asarray(truth["size"]), np.asarray(truth["active"])
     keys = np.full(kinds.shape, NOMINAL, dtype=object)
     for index in np.ndindex(kinds.shape):
-        kind = kinds[index]
+        kind = cast(str, kinds[index])  # one element (a full index): the kind's name
         if not (whole_episode or active[index]) or kind == NOMINAL:
             continue
         if kind in SIZE_RANGE_FIELDS:

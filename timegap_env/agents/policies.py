@@ -132,10 +132,10 @@ class ObservationPolicy:
         """What the actions are chosen from, for observations (n_envs, obs_dim)."""
         return decode_observation(observation, self.config)
 
-    def _platoon_action(self, view: FollowerView) -> np.ndarray:
+    def _platoon_action(self, view: Any) -> np.ndarray:  # view: what _view returns
         raise NotImplementedError
 
-    def _per_vehicle_action(self, view: FollowerView) -> np.ndarray:
+    def _per_vehicle_action(self, view: Any) -> np.ndarray:
         raise NotImplementedError
 
     def __repr__(self) -> str:

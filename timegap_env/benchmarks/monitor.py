@@ -20,7 +20,7 @@ from timegap_env.monitoring.monitor import N_SUMS, TimeGapMonitor
 from timegap_env.monitoring.posterior import Prior, WindowSums, posterior_moments
 
 
-def seconds_per_call(step: Callable[[int], None], n_calls: int) -> tuple[float, float]:
+def seconds_per_call(step: Callable[[int], object], n_calls: int) -> tuple[float, float]:
     """Mean and worst wall-clock time of ``step(tick)`` over n_calls ticks [s]."""
     worst, start = 0.0, time.perf_counter()
     for tick in range(n_calls):

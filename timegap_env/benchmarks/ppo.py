@@ -18,7 +18,7 @@ import numpy as np
 import torch
 from stable_baselines3 import PPO
 from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper, VecNormalize
-from stable_baselines3.common.vec_env.base_vec_env import VecEnvStepReturn
+from stable_baselines3.common.vec_env.base_vec_env import VecEnvObs, VecEnvStepReturn
 
 from timegap_env.envs.sb3 import TimeGapVecEnv
 from timegap_env.experiments.training import load_hyperparams
@@ -34,7 +34,7 @@ class Stopwatch(VecEnvWrapper):
         super().__init__(venv)
         self.seconds = 0.0
 
-    def reset(self) -> np.ndarray:
+    def reset(self) -> VecEnvObs:
         start = time.perf_counter()
         obs = self.venv.reset()
         self.seconds += time.perf_counter() - start
@@ -106,7 +106,7 @@ def measure(rollouts: int, shrink: dict[str, int] | None = None, hyperparams: Pa
             raise ValueError(f"shrink[{key!r}] = {value}: only n_envs, n_steps, batch_size and n_epochs")
     torch.set_num_threads(1)  # as train_ppo does
     env = Stopwatch(TimeGapVecEnv(n_envs, **env_kwargs))
-    outer: VecEnv = env
+    outer: Stopwatch = env
     if normalize:
         outer = Stopwatch(VecNormalize(env, gamma=arguments.get("gamma", 0.99),
                                        **({} if normalize is True else normalize)))

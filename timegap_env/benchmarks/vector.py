@@ -19,11 +19,15 @@ import sys
 import time
 import tracemalloc
 from pathlib import Path
+from typing import TYPE_CHECKING, cast
 
 import gymnasium as gym
 import numpy as np
 
 from timegap_env import ENV_ID
+
+if TYPE_CHECKING:
+    from timegap_env.envs.vector_env import TimeGapMonitorVectorEnv
 
 TRACED_STEPS = 3  # steps taken under tracemalloc after the reset, so that the peak covers stepping too
 ACTION_POOL = 16  # distinct random action batches cycled while timing (sampled beforehand, not timed)
@@ -66,17 +70,18 @@ def restart_peak_rss() -> int | None:
     return resident_kib("VmRSS")
 
 
-def make_native(n_envs: int, step_diagnostics: bool) -> gym.vector.VectorEnv:
+def make_native(n_envs: int, step_diagnostics: bool) -> TimeGapMonitorVectorEnv:
     """The native vector env of n_envs platoons."""
-    return gym.make_vec(ENV_ID, num_envs=n_envs, vectorization_mode="vector_entry_point",
-                        step_diagnostics=step_diagnostics, autoreset_mode="same_step")
+    return cast("TimeGapMonitorVectorEnv", gym.make_vec(  # the entry point's class, unwrapped
+        ENV_ID, num_envs=n_envs, vectorization_mode="vector_entry_point", step_diagnostics=step_diagnostics,
+        autoreset_mode="same_step"))
 
 
 class Stepper:
     """Times steps of one vector env under random actions, turn by turn, within episodes: before a step would
     reach the episode limit, the env is reset (untimed) with the next seed."""
 
-    def __init__(self, envs: gym.vector.VectorEnv, since_reset: int) -> None:
+    def __init__(self, envs: TimeGapMonitorVectorEnv, since_reset: int) -> None:
         self.envs = envs
         envs.action_space.seed(0)
         self.actions = [envs.action_space.sample() for _ in range(ACTION_POOL)]
@@ -126,7 +131,11 @@ def set_up(n_envs: int, step_diagnostics: bool, trace: bool, time_reset: bool) -
         if trace:
             tracemalloc.stop()
     set_up_seconds = time.perf_counter() - start
-    rss = None if rss_before is None else (resident_kib("VmHWM") - rss_before) / 1024
+    rss = None
+    if rss_before is not None:
+        peak = resident_kib("VmHWM")
+        assert peak is not None  # /proc/self/status gave rss_before
+        rss = (peak - rss_before) / 1024
     since_reset, reset_seconds = TRACED_STEPS, None
     if time_reset:
         start = time.perf_counter()
@@ -143,7 +152,8 @@ def measure_sizes(sizes: tuple[int, ...], reset_sizes: tuple[int, ...], step_dia
     slow spell of a shared machine hits all of them), min_seconds [s] and min_steps in all per size."""
     if rounds < 1:
         raise ValueError(f"rounds = {rounds}: must be >= 1")
-    steppers, runs = [], []
+    steppers: list[Stepper] = []
+    runs: list[VectorRun] = []
     for n in sizes:
         trace = not runs or (runs[-1].traced_mib is not None
                              and runs[-1].set_up_seconds * n / runs[-1].n_envs <= TRACE_BUDGET)

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Mapping
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import gymnasium as gym
 from gymnasium.error import ResetNeeded
@@ -15,6 +15,9 @@ from timegap_env.envs.info import EPISODE_PREFIX, REWARD_PREFIX, no_rewards, of_
 from timegap_env.envs.observation import observation_space
 from timegap_env.envs.rendering import DEFAULT_TIME_WINDOW
 from timegap_env.envs.task import PlatoonTask
+
+if TYPE_CHECKING:
+    from timegap_env.envs.rendering import PlatoonRenderer
 
 
 class TimeGapMonitorEnv(gym.Env):
@@ -132,7 +135,7 @@ class TimeGapMonitorEnv(gym.Env):
             self.task.start_trace()
         self.observation_space = observation_space(self.config)
         self.action_space = action_space(self.config)
-        self._renderer = None
+        self._renderer: PlatoonRenderer | None = None
         self._needs_reset = True  # step() before reset() or after the episode ended raises gymnasium's ResetNeeded
         self.step_diagnostics = step_diagnostics_flag(step_diagnostics)
         self._action = np.zeros((1, 1), dtype=np.int64)  # a Discrete action, as the task takes it

@@ -46,14 +46,24 @@ from __future__ import annotations
 import collections
 import dataclasses
 import math
-from typing import NamedTuple
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numba
 import numpy as np
 
 from timegap_env.config import TIME_GAP_MIN_SPEED, EnvConfig, RewardWeights
 
-RewardTerms = collections.namedtuple("RewardTerms", [field.name for field in dataclasses.fields(RewardWeights)])
+if TYPE_CHECKING:  # mypy cannot see fields computed at import: a tuple of one term per field, read by name
+
+    class RewardTerms(tuple[Any, ...]):
+        _fields: tuple[str, ...]
+
+        def __new__(cls, *terms: Any) -> RewardTerms: ...
+
+        def __getattr__(self, name: str) -> Any: ...
+
+else:
+    RewardTerms = collections.namedtuple("RewardTerms", [field.name for field in dataclasses.fields(RewardWeights)])
 RewardTerms.__doc__ = """The reward terms, one field per field of RewardWeights: (n_envs,) arrays, or the weights themselves."""
 REWARD_TERMS: tuple[str, ...] = RewardTerms._fields
 
@@ -92,7 +102,7 @@ class StepReadouts(NamedTuple):
     def empty(cls, n_envs: int, n_followers: int) -> StepReadouts:
         """Uninitialised read-outs of ``n_envs`` envs of ``n_followers`` followers."""
         per_follower, per_env = np.empty((3, n_envs, n_followers)), np.empty((6, n_envs))  # in field order
-        return cls(*per_follower, *per_env, np.empty(n_envs, dtype=bool))  # collided last
+        return cls(*(*per_follower, *per_env, np.empty(n_envs, dtype=bool)))  # collided last
 
 
 class RewardConstants(NamedTuple):

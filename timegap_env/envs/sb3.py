@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Mapping
-from typing import Any
+from typing import TYPE_CHECKING, Any, cast
 
 import gymnasium as gym
 import numpy as np
@@ -32,6 +32,9 @@ from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices,
 
 from timegap_env import ENV_ID
 from timegap_env.envs.info import of_env
+
+if TYPE_CHECKING:
+    from timegap_env.envs.vector_env import TimeGapMonitorVectorEnv
 
 
 class TimeGapVecEnv(VecEnv):
@@ -50,9 +53,10 @@ class TimeGapVecEnv(VecEnv):
     def __init__(
         self, n_envs: int = 1, config: Mapping[str, Any] | None = None, max_episode_steps: int | None = None
     ) -> None:
-        limit = {} if max_episode_steps is None else {"max_episode_steps": max_episode_steps}
-        self.venv = gym.make_vec(ENV_ID, num_envs=n_envs, vectorization_mode="vector_entry_point", config=config,
-                                 step_diagnostics=False, autoreset_mode="same_step", **limit)
+        limit: dict[str, Any] = {} if max_episode_steps is None else {"max_episode_steps": max_episode_steps}
+        self.venv = cast("TimeGapMonitorVectorEnv", gym.make_vec(
+            ENV_ID, num_envs=n_envs, vectorization_mode="vector_entry_point", config=config,
+            step_diagnostics=False, autoreset_mode="same_step", **limit))  # the entry point's class, unwrapped
         super().__init__(n_envs, self.venv.single_observation_space, self.venv.single_action_space)
         self.config = self.venv.config
         self._actions: np.ndarray | None = None
@@ -91,7 +95,7 @@ class TimeGapVecEnv(VecEnv):
                     "terminal_observation": np.asarray(info["final_obs"][i], dtype=np.float32),
                     "TimeLimit.truncated": bool(truncated[i] and not terminated[i]),
                     "episode": {"r": round(float(self._returns[i]), 6), "l": int(self._lengths[i]), "t": elapsed},
-                    **{key: value.item() for key, value in of_env(info["final_info"], i).items()},
+                    **{key: value.item() for key, value in of_env(info["final_info"], int(i)).items()},
                 }
             self._returns[dones] = 0.0
             self._lengths[dones] = 0

@@ -252,7 +252,7 @@ def _chart_sides(rules, estimates, centers, statistic, sides, e):  # noqa: ANN00
             sides[k, 0, f] = 1 if value > high else (-1 if value < low else 0)
 
 
-def _cache_follows(dispatcher: numba.core.registry.CPUDispatcher, modules: tuple[str, ...]) -> None:
+def _cache_follows(dispatcher: object, modules: tuple[str, ...]) -> None:
     """Make ``dispatcher``'s numba cache go stale when one of ``modules`` (imported, by name) changes, as when its
     own file does.
 
@@ -267,7 +267,9 @@ def _cache_follows(dispatcher: numba.core.registry.CPUDispatcher, modules: tuple
         return
     digest = hashlib.sha256()
     for module in modules:
-        digest.update(Path(sys.modules[module].__file__).read_bytes())
+        source = sys.modules[module].__file__
+        assert source is not None  # the package's modules are files
+        digest.update(Path(source).read_bytes())
     cache_file._source_stamp = (cache_file._source_stamp, digest.hexdigest())
 
 

@@ -9,7 +9,7 @@ step by step, and the whole equals ``SyncVectorEnv`` over single envs with the s
 from __future__ import annotations
 
 import os
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -127,7 +127,7 @@ class TimeGapMonitorVectorEnv(VectorEnv):
         return self.task.scenario.copy()
 
     def reset(
-        self, *, seed: int | list[int | None] | None = None, options: dict[str, Any] | None = None
+        self, *, seed: int | Sequence[int | None] | None = None, options: dict[str, Any] | None = None
     ) -> tuple[np.ndarray, dict[str, Any]]:
         """Reset every sub-env, or those of ``options["reset_mask"]`` ((num_envs,) bool); sub-env i is seeded
         with ``seed + i`` (an int) or ``seed[i]`` (a list); other options as the single env's."""
@@ -160,7 +160,7 @@ class TimeGapMonitorVectorEnv(VectorEnv):
         evaluation, never in the observation."""
         return truth_of(prefixed(TRUTH_PREFIX, self.task.ground_truth()))
 
-    def _seeds(self, seed: int | list[int | None] | None) -> list[int | None]:
+    def _seeds(self, seed: int | Sequence[int | None] | None) -> list[int | None]:
         """Each sub-env's seed: None, ``seed + i`` for an int, ``seed[i]`` for a list."""
         if seed is None:
             return [None] * self.num_envs

@@ -16,7 +16,7 @@ import os
 import time
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any, cast
 
 import gymnasium as gym
 import numpy as np
@@ -37,6 +37,9 @@ from timegap_env.experiments.rollout import rollout
 from timegap_env.experiments.stats import bootstrap_mean, oracle_share, wilson_interval
 from timegap_env.experiments.value import DEFAULT_TRAIN_EPISODES
 from timegap_env.leaders import default_ngsim_path, default_openacc_dir, openacc_paths
+
+if TYPE_CHECKING:
+    from timegap_env.envs.vector_env import TimeGapMonitorVectorEnv
 
 REPO = Path(__file__).resolve().parents[2]  # data paths in the table are written relative to it
 DEFAULT_EPISODES = 112  # per policy, split across the groups
@@ -191,8 +194,9 @@ def check_data(plan: list[Episode]) -> None:
         if GROUPS[group].data is None:
             continue
         seed = next(episode.seed for episode in plan if episode.group == group)
-        venv = gym.make_vec(timegap_env.ENV_ID, num_envs=1, vectorization_mode="vector_entry_point",
-                            config=GROUPS[group].config, autoreset_mode="same_step")
+        venv = cast("TimeGapMonitorVectorEnv", gym.make_vec(  # the entry point's class, unwrapped
+            timegap_env.ENV_ID, num_envs=1, vectorization_mode="vector_entry_point", config=GROUPS[group].config,
+            autoreset_mode="same_step"))
         try:
             venv.reset(seed=[seed], options=GROUPS[group].options)
         except cli.INPUT_ERRORS as error:
@@ -288,8 +292,9 @@ def run_all(
 def profile_first(group: str, seeds: list[int]) -> list[int]:
     """``seeds`` with the first one whose episode degrades a follower midway (a hidden kind) moved to the front, so
     that profiles.png shows an onset; unchanged if there is none."""
-    venv = gym.make_vec(timegap_env.ENV_ID, num_envs=len(seeds), vectorization_mode="vector_entry_point",
-                        config=GROUPS[group].config, autoreset_mode="same_step")
+    venv = cast("TimeGapMonitorVectorEnv", gym.make_vec(  # the entry point's class, unwrapped
+        timegap_env.ENV_ID, num_envs=len(seeds), vectorization_mode="vector_entry_point", config=GROUPS[group].config,
+        autoreset_mode="same_step"))
     _, infos = venv.reset(seed=seeds, options=GROUPS[group].options)
     venv.close()
     truth = truth_of(infos)
@@ -311,7 +316,7 @@ def best_fixed(records: dict[str, list[dict[str, Any]]], group: str) -> str | No
     """The fixed setting with the best mean return over ``group``'s episodes (``all``: every episode)."""
     fixed = {key: metric_values([r for r in rows if group in (ALL_EPISODES, r["group"])], "return").mean()
              for key, rows in records.items() if key.startswith(FIXED_PREFIX)}
-    return max(fixed, key=fixed.get) if fixed else None
+    return max(fixed, key=fixed.__getitem__) if fixed else None
 
 
 def summarise(

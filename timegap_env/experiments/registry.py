@@ -143,6 +143,7 @@ def load_learned(model: Path, config: EnvConfig | None = None) -> Any:
     from timegap_env.envs.observation import observation_space
 
     rllib = find_run(model)
+    policy: RLlibPolicy | LearnedPolicy
     try:
         if rllib is not None:
             from timegap_env.agents.rllib_policy import RLlibPolicy  # loading needs the ray extra

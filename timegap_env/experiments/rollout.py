@@ -27,7 +27,7 @@ from __future__ import annotations
 import dataclasses
 import time
 from collections.abc import Callable, Mapping, Sequence
-from typing import Any
+from typing import TYPE_CHECKING, Any, cast
 
 import gymnasium as gym
 import numpy as np
@@ -36,6 +36,9 @@ import timegap_env
 from timegap_env.config import EnvConfig
 from timegap_env.envs.info import rewards_of, summary_of, truth_of
 from timegap_env.experiments.backends import Backend
+
+if TYPE_CHECKING:
+    from timegap_env.envs.vector_env import TimeGapMonitorVectorEnv
 
 NOMINAL = "none"  # the ground truth's kind of a follower no degradation hits
 STABLE_TOLERANCE = 1e-9  # a setting this close to the smallest string-stable one counts as stable [s]
@@ -125,9 +128,9 @@ def rollout_side_by_side(policies: Sequence[Any], config: Config, seeds: Sequenc
     if len(modes) > 1:
         raise ValueError(f"policies act in different action modes {sorted(map(str, modes))}: run them apart")
     mode = modes.pop()
-    venv = gym.make_vec(timegap_env.ENV_ID, num_envs=n * m, vectorization_mode="vector_entry_point",
-                        config=env_config(config, mode), autoreset_mode="same_step",
-                        step_diagnostics=step_diagnostics)
+    venv = cast("TimeGapMonitorVectorEnv", gym.make_vec(  # the entry point's class, unwrapped
+        timegap_env.ENV_ID, num_envs=n * m, vectorization_mode="vector_entry_point",
+        config=env_config(config, mode), autoreset_mode="same_step", step_diagnostics=step_diagnostics))
     try:
         obs, infos = venv.reset(seed=list(seeds) * m, options=options)
         task, env_config_ = venv.unwrapped.task, venv.unwrapped.config
@@ -158,6 +161,7 @@ def rollout_side_by_side(policies: Sequence[Any], config: Config, seeds: Sequenc
             steps += active
             done = terminated | truncated  # those envs were reset: the step's own values are in final_info
             if step_diagnostics:
+                assert truth is not None  # read above whenever step_diagnostics
                 setting = np.where(done[:, None], infos["final_info"]["setting"], infos["setting"]) if done.any() \
                     else infos["setting"]
                 unstable = setting < truth["smallest_stable_setting"] - STABLE_TOLERANCE  # the step's end vs start

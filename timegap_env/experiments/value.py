@@ -114,7 +114,7 @@ def diagonal(pairs: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
 def training_conditions(config: EnvConfig) -> dict[str, tuple[EnvConfig, dict[str, Any]]]:
     """Each condition of the lookup oracle and how to run it: (config, reset options). A sized kind is pinned at
     its bin's centre from the start on every follower; a commercial ACC platoon draws its cars as the mix does."""
-    conditions = {NOMINAL: (config, {"degradation": None})}
+    conditions: dict[str, tuple[EnvConfig, dict[str, Any]]] = {NOMINAL: (config, {"degradation": None})}
     for kind in DEGRADATION_KINDS:
         if kind in SIZE_RANGE_FIELDS:
             conditions |= {f"{kind}:{b}": (config, {"degradation": {"kind": kind, "size": sized(kind, size, config)}})

@@ -31,7 +31,8 @@ from timegap_env.leaders.profile import LeaderProfile, csv_errors, open_csv
 FOOT = 0.3048  # [m per ft]
 FRAME_DT = 0.1  # time between two NGSIM frames [s]
 REQUIRED_COLUMNS = ("Vehicle_ID", "Frame_ID", "v_Vel", "v_Acc")
-COLUMN_TYPES = (np.int64, np.int64, np.float64, np.float64)  # of REQUIRED_COLUMNS
+COLUMN_TYPES: tuple[type[np.int64] | type[np.float64], ...] = (  # of REQUIRED_COLUMNS
+    np.int64, np.int64, np.float64, np.float64)
 CHUNK_ROWS = 16_384  # rows parsed at a time, so the text of the whole file is never held
 PATH_VARIABLE = "TIMEGAP_NGSIM_PATH"
 SHARED_SUBSET = Path("shared", "data", "ngsim", "i80_0400_0415_pairs.csv.gz")

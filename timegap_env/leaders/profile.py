@@ -29,6 +29,7 @@ import io
 import math
 import zlib
 from collections.abc import Iterator
+from typing import Any, cast
 from pathlib import Path
 
 import numba
@@ -58,7 +59,7 @@ def open_csv(path: Path) -> Iterator[Iterator[str]]:
         if not start.startswith(GZIP_MAGIC):
             what = "an empty file" if not start else f"its first bytes are {start!r}"
             raise ValueError(f"{path}: not gzip-compressed although named .gz ({what})")
-        binary = gzip.open(path, "rb")
+        binary: gzip.GzipFile | io.BufferedReader = gzip.open(path, "rb")
     else:
         binary = path.open("rb")
     with io.TextIOWrapper(binary, encoding="utf-8-sig", errors="strict", newline="") as text:
@@ -85,7 +86,7 @@ def _checked_lines(path: Path, text: io.TextIOWrapper) -> Iterator[str]:
         raise ValueError(f"{path}: truncated or corrupt gzip data ({err})") from err
     except UnicodeDecodeError as err:
         # err.object holds the bytes decoded last, which end where the binary stream stands.
-        offset = text.buffer.tell() - len(err.object) + err.start
+        offset = cast(io.BufferedIOBase, text.buffer).tell() - len(err.object) + err.start  # what open_csv wraps
         where = "of the decompressed data " if path.suffix == ".gz" else ""
         raise ValueError(
             f"{path}: not UTF-8 text (byte {offset} {where}is {err.object[err.start]:#04x}): "
@@ -104,7 +105,8 @@ def csv_errors(path: Path, reader: csv.DictReader | Iterator[list[str]], first_l
         yield
     except csv.Error as err:
         # A DictReader's own line_num lags behind its csv reader's until a row is read whole.
-        row = first_line - 1 + max(getattr(reader, "reader", reader).line_num, 1)
+        source: Any = getattr(reader, "reader", reader)  # a csv reader: has line_num
+        row = first_line - 1 + max(source.line_num, 1)
         raise ValueError(f"{path}: row {row} is not readable as CSV ({err})") from err
 
 
@@ -205,7 +207,9 @@ class LeaderProfile:
         with open_csv(path) as lines:
             reader = csv.DictReader(lines)
             with csv_errors(path, reader):
-                columns = [column.strip() for column in reader.fieldnames]
+                fieldnames = reader.fieldnames
+                assert fieldnames is not None  # open_csv's lines include a header: the file has text
+                columns = [column.strip() for column in fieldnames]
                 if "speed" not in columns:
                     raise ValueError(f"{path}: missing column 'speed' (found columns {columns})")
                 reader.fieldnames = columns

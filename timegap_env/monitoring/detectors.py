@@ -145,8 +145,8 @@ class RecursiveLeastSquares:
 
 def _number(name: str, value: object, positive: bool = False) -> float:
     """``value`` as a float; ValueError naming ``name`` and the value unless it is finite (and > 0 if ``positive``)."""
-    number = isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool)
-    if not number or not math.isfinite(value):
+    if (not isinstance(value, (int, float, np.integer, np.floating)) or isinstance(value, bool)
+            or not math.isfinite(value)):
         raise ValueError(f"{name} = {value!r}: must be a finite number")
     if positive and value <= 0:
         raise ValueError(f"{name} = {value!r}: must be > 0")

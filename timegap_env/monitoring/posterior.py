@@ -26,7 +26,7 @@ computed as a correction of the prior mean, mu* = mu_b + Sigma* Z^T (S - Z mu_b)
 from __future__ import annotations
 
 import math
-from typing import NamedTuple
+from typing import NamedTuple, cast
 
 import numba
 import numpy as np
@@ -120,7 +120,7 @@ def posterior(
         ztz = Z.T @ (w[:, None] * Z)
         zts = Z.T @ (w * S)
     sums = WindowSums(ztz[0, 0], ztz[0, 1], ztz[1, 1], zts[0], zts[1])
-    if not np.all(np.isfinite(sums)):
+    if not np.all(np.isfinite(cast(tuple[float, ...], sums))):  # five scalars here
         raise ValueError(
             f"V, S: Z^T Z or Z^T S overflows float64 (max |V| = {np.max(np.abs(V))}, max |S| = {np.max(np.abs(S))})"
         )

@@ -15,7 +15,7 @@ bias [m] to the spacing reading and more spacing noise [m].
 
 from __future__ import annotations
 
-from typing import NamedTuple
+from typing import NamedTuple, cast
 
 import numba
 import numpy as np
@@ -99,7 +99,8 @@ class Sensors:
             if np.any(self._faults.start < self._faults.end):
                 raise ValueError(f"readings of shape {true.spacing.shape}: the sensors' faults are set for "
                                  f"{self._faults.start.shape} (n_envs, n_followers)")
-            faults = tuple(SensorFaults.none(*true.spacing.shape[1:], self.config.spacing_noise_std))
+            n_envs_followers = cast(tuple[int, int], true.spacing.shape[1:])  # (n_envs, n_followers)
+            faults = tuple(SensorFaults.none(*n_envs_followers, self.config.spacing_noise_std))
         measured = Readings(np.empty_like(true.spacing), np.empty_like(true.speed))
         _measure(tuple(true), ticks_before, self._noise_args, faults, tuple(measured))
         return measured

@@ -34,7 +34,7 @@ from typing import NamedTuple
 
 import numba
 import numpy as np
-from scipy.optimize import least_squares
+from scipy.optimize import OptimizeResult, least_squares
 
 from timegap_env.config import PlatoonConfig
 from timegap_env.leaders.openacc import valid_stretches
@@ -246,7 +246,7 @@ def static_fit(segments: Sequence[Segment], index: Sequence[int], n_settings: in
 
 def _best_fit(
     residuals: Callable[[np.ndarray], np.ndarray], starts: Sequence[Sequence[float]], lower: list[float], upper: list[float]
-) -> object:
+) -> OptimizeResult:
     """The ``least_squares`` result of least cost over the starts (each clipped into the bounds)."""
     results = [least_squares(residuals, np.clip(start, lower, upper), bounds=(lower, upper), x_scale="jac",
                              max_nfev=MAX_EVALUATIONS) for start in starts]

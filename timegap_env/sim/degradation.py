@@ -29,7 +29,7 @@ import dataclasses
 import functools
 import math
 from collections.abc import Mapping, Sequence
-from typing import Any
+from typing import Any, NoReturn
 
 import numpy as np
 
@@ -88,8 +88,10 @@ class Degradation:
             meaning, (low, high, open_low, open_high) = SIZED[self.kind]
             interval = f"{'(' if open_low else '['}{low:g}, {high:g}{')' if open_high else ']'}"
             self._time_or_size("size", f"a {self.kind} degradation needs a finite size: {meaning}")
-            if not ((low < self.size if open_low else low <= self.size)
-                    and (self.size < high if open_high else self.size <= high)):
+            size = self.size
+            assert size is not None  # _time_or_size stored a float
+            if not ((low < size if open_low else low <= size)
+                    and (size < high if open_high else size <= high)):
                 self._fail("size", self.size, f"out of range for {self.kind}: {meaning} in {interval}")
         elif self.size is not None:
             self._fail("size", self.size, f"a {self.kind} degradation has no size")
@@ -115,7 +117,7 @@ class Degradation:
             self._fail(field, value, rule)
         object.__setattr__(self, field, number)
 
-    def _fail(self, field: str, value: Any, rule: str) -> None:
+    def _fail(self, field: str, value: Any, rule: str) -> NoReturn:
         raise ValueError(f"degradation {field} = {shown(value)}: {rule}")
 
     @classmethod
@@ -164,8 +166,8 @@ class Categorical:
     """
 
     def __init__(self, weights: Sequence[float]) -> None:
-        weights = np.array(weights, dtype=float)
-        cumulative = (weights / weights.sum()).cumsum()
+        array = np.array(weights, dtype=float)
+        cumulative = (array / array.sum()).cumsum()
         cumulative /= cumulative[-1]
         self._cumulative = cumulative.tolist()
 
@@ -317,11 +319,11 @@ class DegradationTable:
         self._reported["onset"][envs] = np.where(hit, start * cfg.dt, np.inf)
         self._reported["end"][envs] = np.where(hit & (end < NEVER), end * cfg.dt, np.inf)
         noise = np.where(np.isnan(radar_noise), self.spacing_noise_std, radar_noise)
-        while_active = (self.lag[envs], self.gain[envs], self.k_s[envs], self.k_v[envs],
-                        cfg.v2v_delay + self.extra_delay[envs] * cfg.dt, self.packet_loss[envs], self.radar_bias[envs],
-                        noise)
-        otherwise = (self._nominal_lag, self._nominal_gain, cfg.k_s, cfg.k_v, cfg.v2v_delay, 0.0, 0.0,
-                     self.spacing_noise_std)
+        while_active: tuple[np.ndarray | float, ...] = (
+            self.lag[envs], self.gain[envs], self.k_s[envs], self.k_v[envs],
+            cfg.v2v_delay + self.extra_delay[envs] * cfg.dt, self.packet_loss[envs], self.radar_bias[envs], noise)
+        otherwise: tuple[np.ndarray | float, ...] = (
+            self._nominal_lag, self._nominal_gain, cfg.k_s, cfg.k_v, cfg.v2v_delay, 0.0, 0.0, self.spacing_noise_std)
         for i, (active_value, other_value) in enumerate(zip(while_active, otherwise)):  # in TRUE_PARAMETERS order
             self._while_active[i, envs], self._otherwise[i, envs] = active_value, other_value
 
@@ -339,7 +341,7 @@ class DegradationTable:
                                                         cfg.k_f if up else 0.0, round(float(delay), 9), loss, cfg.dt)
         self._stale[env] = False
 
-    def write_faults(self, platoon: Platoon, env: int, key: int) -> None:
+    def write_faults(self, platoon: Platoon, env: int, key: int | np.unsignedinteger) -> None:
         """Write env ``env``'s degradations into ``platoon.faults``; ``key`` (uint64) seeds its packet losses."""
         self.write_faults_many(platoon, np.array([env]), np.array([key], dtype=np.uint64))
 
@@ -377,7 +379,7 @@ class DegradationTable:
         TRUE_PARAMETERS.
         """
         for env in np.flatnonzero(self._stale):
-            self._find_stable_settings(env)
+            self._find_stable_settings(int(env))
         active = self.active(ticks)
         parameters = np.where(active, self._while_active, self._otherwise)
         stable = np.where(active, np.where(v2v, self.stable[True, True], self.stable[True, False]),
@@ -404,9 +406,11 @@ class _Hits:
         """Env ``env``'s followers that ``degradation`` hits; ``ValueError`` for a V2V latency the table cannot hold or
         an unknown car."""
         cfg, kind, size = table.config, degradation.kind, degradation.size
-        if kind == "v2v_latency" and (size > cfg.max_v2v_latency + 1e-9 or abs(size / cfg.dt - round(size / cfg.dt)) > 1e-9):
-            raise ValueError(f"degradation size = {size!r}: a v2v_latency must be a multiple of dt = {cfg.dt} s "
-                             f"up to max_v2v_latency = {cfg.max_v2v_latency} s")
+        if kind == "v2v_latency":
+            assert size is not None  # a v2v_latency has a size
+            if size > cfg.max_v2v_latency + 1e-9 or abs(size / cfg.dt - round(size / cfg.dt)) > 1e-9:
+                raise ValueError(f"degradation size = {size!r}: a v2v_latency must be a multiple of dt = {cfg.dt} s "
+                                 f"up to max_v2v_latency = {cfg.max_v2v_latency} s")
         if kind == "commercial_acc":
             from timegap_env.sim.presets import COMMERCIAL_ACC, acc_presets  # scipy-backed: imported when used
 

@@ -196,7 +196,7 @@ class FollowerFaults(NamedTuple):
         shape = (n_envs, config.n_followers)
         return cls(
             start=np.zeros(shape, dtype=np.int64), end=np.zeros(shape, dtype=np.int64),
-            dynamics=ZOHCoefficients(*(np.broadcast_to(c, shape).copy() for c in nominal[:-1]), nominal.dt),
+            dynamics=ZOHCoefficients._make((*(np.broadcast_to(c, shape).copy() for c in nominal[:-1]), nominal.dt)),
             k_s=np.full(shape, float(config.k_s)), k_v=np.full(shape, float(config.k_v)),
             accel_max=np.full(shape, float(config.accel_max)), extra_delay=np.zeros(shape, dtype=np.int64),
             packet_loss=np.zeros(shape), spacing_bias=np.zeros(shape), keys=np.zeros(n_envs, dtype=np.uint64),
@@ -227,7 +227,7 @@ class PlatoonTicks(NamedTuple):
     @classmethod
     def empty(cls, shape: tuple[int, int, int]) -> PlatoonTicks:
         """Uninitialised arrays of ``shape`` (n_ticks, n_envs, n_followers)."""
-        return cls(*np.empty((len(cls._fields) - 1, *shape)), np.empty(shape, dtype=bool))  # collisions last
+        return cls(*(*np.empty((len(cls._fields) - 1, *shape)), np.empty(shape, dtype=bool)))  # collisions last
 
 
 class Platoon:

@@ -59,7 +59,7 @@ class Trajectory:
 
 def _schedule(name: str, value: object, n_ticks: int, n_followers: int, dtype: type) -> np.ndarray:
     """``value`` (scalar, per follower, or per tick and follower) as an (n_ticks, n_followers) array."""
-    array = np.asarray(value, dtype=dtype)
+    array: np.ndarray = np.asarray(value, dtype=dtype)
     if array.ndim == 0 or array.shape == (n_followers,):
         return np.broadcast_to(array, (n_ticks, n_followers))
     if array.shape == (n_ticks, n_followers):
