@@ -89,6 +89,8 @@ def bad_values(cls: type, field: str) -> list[typing.Any]:
         key = next(iter(default))
         return [1.0, "abc", None, [(key, 1.0)], {}, {1: 1.0}, {key: True}, {key: NAN}, {key: INF}, {key: -1.0},
                 {key: HUGE}, {key: "1"}, {name: 0.0 for name in default}]
+    if kind == dict[str, dict[str, typing.Any]]:  # leader family -> its parameters (the env checks their names)
+        return [1.0, "abc", None, [("sinusoid", {})], {1: {}}, {"sinusoid": 3}, {"sinusoid": "x"}, {"sinusoid": [1]}]
     if isinstance(kind, type) and issubclass(kind, ConfigMixin):  # a nested config, given as a dict of its fields
         return ["abc", 1.0, True, None, [("n_followers", 3)], [1, 2], kind.__name__]
     raise AssertionError(f"{cls.__name__}.{field}: no bad values for a field of type {kind}; add them here")

@@ -612,6 +612,9 @@ class EnvConfig(ConfigMixin):
     scenario_weights: dict[str, float] = dataclasses.field(default_factory=_default_scenario_weights)  # family ->
     # weight in [0, MAX_WEIGHT], not all 0; the families are checked against SCENARIOS when the env is built
     degradation: DegradationConfig = DegradationConfig()  # what can go wrong with the followers, drawn per episode
+    leader_params: dict[str, dict[str, Any]] = dataclasses.field(default_factory=dict)  # synthetic leader family ->
+    # overrides of its parameter dataclass (timegap_env.leaders.scenarios.FAMILY_PARAMS), e.g. {"sinusoid":
+    # {"amplitude_range": (4.0, 8.0)}}; the families and fields are checked when the env is built
     dropout_probability_range: tuple[float, float] = (0.0, 0.05)  # per-episode sensor dropout rate drawn from [-],
     # 0 <= low <= high < 1
     ttc_threshold: float = 4.0  # time-to-collision below which safety is penalised [s], (0, 60]
@@ -661,6 +664,11 @@ class EnvConfig(ConfigMixin):
             self._fail("platoon.initial_setting", self.platoon.initial_setting, f"must be one of {self.setting_levels}")
         self._number("preferred_setting", levels[0], levels[-1])
         self._weights("scenario_weights", "family")
+        params = self.leader_params
+        if not isinstance(params, Mapping) or not all(isinstance(family, str) and isinstance(fields, Mapping)
+                                                       for family, fields in params.items()):
+            self._fail("leader_params", params, "must be a dict family (a string) -> dict of its parameters")
+        object.__setattr__(self, "leader_params", {family: dict(fields) for family, fields in params.items()})
         if self.degradation.v2v_latency_range[1] > self.platoon.max_v2v_latency + 1e-9:
             self._fail("degradation.v2v_latency_range", self.degradation.v2v_latency_range,
                        f"must stay within platoon.max_v2v_latency = {self.platoon.max_v2v_latency} s")

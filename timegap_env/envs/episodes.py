@@ -19,7 +19,7 @@ import numpy as np
 
 from timegap_env.config import EnvConfig, shown
 from timegap_env.leaders.profile import LeaderProfile, LeaderProfiles
-from timegap_env.leaders.scenarios import SCENARIOS, make_leaders
+from timegap_env.leaders.scenarios import SCENARIOS, family_params, make_leaders
 from timegap_env.sim.degradation import Categorical, Degradation, draw_degradation, parse_degradations
 
 RESET_OPTIONS = ("leader_speed", "scenario", "degradation")  # the keys reset(options=...) takes
@@ -84,6 +84,7 @@ class Episodes:
         self.initial_setting = np.full(n_envs, config.platoon.initial_setting)  # [s]
         self.noise_keys = np.zeros(n_envs, dtype=np.uint64)
         self.scenario = np.full(n_envs, "", dtype=object)
+        self._params = family_params(config.leader_params)  # leader family -> its parameter dataclass
         self._families = list(config.scenario_weights)
         self._family_draw = Categorical([config.scenario_weights[f] for f in self._families])
 
@@ -128,7 +129,8 @@ class Episodes:
                 for first in range(0, len(seeds), LEADER_BATCH):  # a batch's arrays stay small enough to reuse
                     loaded = first
                     try:
-                        batches = list(make_leaders(family, seeds[first : first + LEADER_BATCH], cfg.leader))
+                        batches = list(make_leaders(family, seeds[first : first + LEADER_BATCH], cfg.leader,
+                                                    self._params.get(SCENARIOS[family].leader_family)))
                     except ValueError as error:  # e.g. a recorded family at another tick than platoon.dt
                         raise ValueError(f"scenario {family!r} with platoon.dt = {dt} s: {error}") from error
                     for batch in batches:

@@ -14,17 +14,20 @@ from __future__ import annotations
 
 import dataclasses
 import functools
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
-from timegap_env.config import LeaderConfig
+from timegap_env.config import (
+    AggressiveCyclesConfig, HardBrakingConfig, LeaderConfig, SinusoidConfig, StochasticHumanConfig,
+)
 from timegap_env.leaders import idm, ngsim, openacc, synthetic
 from timegap_env.leaders.profile import LeaderProfile, LeaderProfiles
 
-LeaderFamily = Callable[[int | None, LeaderConfig], LeaderProfile]
-LeaderBatchFamily = Callable[[Sequence[int | None], LeaderConfig], LeaderProfiles]
+LeaderFamily = Callable[..., LeaderProfile]  # (seed, leader config, params=None) -> profile
+LeaderBatchFamily = Callable[..., LeaderProfiles]  # (seeds, leader config, params=None) -> a profile per seed
 
 
 @functools.lru_cache(maxsize=2)
@@ -52,29 +55,36 @@ def ngsim_leader(seed: int | None, leader: LeaderConfig, *, within_band: bool) -
     return ngsim.vehicle_profile(table, int(vehicle), within_band=leader if within_band else None)
 
 
+# The synthetic families' parameters: family -> its parameter dataclass, the defaults of which the functions below
+# use unless given one (``EnvConfig.leader_params`` reaches them from gym.make).
+FAMILY_PARAMS: dict[str, type] = {
+    "aggressive_cycles": AggressiveCyclesConfig, "sinusoid": SinusoidConfig, "hard_braking": HardBrakingConfig,
+    "stochastic_human": StochasticHumanConfig, "stop_and_go": synthetic.StopAndGoConfig,
+    "emergency_braking": synthetic.EmergencyBrakingConfig,
+}
+
+
+def _params(family: str, params: Any) -> Any:
+    """``params`` for ``family``, or its parameter dataclass's defaults when None."""
+    return FAMILY_PARAMS[family]() if params is None else params
+
+
 LEADER_FAMILIES: dict[str, LeaderFamily] = {
-    "aggressive_cycles": lambda seed, leader: synthetic.aggressive_cycles(seed, leader=leader),
-    "sinusoid": lambda seed, leader: synthetic.sinusoid(seed, leader=leader),
-    "hard_braking": lambda seed, leader: synthetic.hard_braking(seed, leader=leader),
-    "stochastic_human": lambda seed, leader: synthetic.stochastic_human(seed, leader=leader),
-    "stop_and_go": lambda seed, leader: synthetic.stop_and_go(seed, leader=leader),
-    "emergency_braking": lambda seed, leader: synthetic.emergency_braking(seed, leader=leader),
-    "ngsim": lambda seed, leader: ngsim_leader(seed, leader, within_band=False),
-    "ngsim_in_band": lambda seed, leader: ngsim_leader(seed, leader, within_band=True),
-    "openacc": openacc.openacc_leader,  # the human-driven lead car of a real ACC platoon (OpenACC AstaZero)
+    **{family: (lambda seed, leader, params=None, family=family:
+                getattr(synthetic, family)(seed, _params(family, params), leader)) for family in FAMILY_PARAMS},
+    "ngsim": lambda seed, leader, params=None: ngsim_leader(seed, leader, within_band=False),
+    "ngsim_in_band": lambda seed, leader, params=None: ngsim_leader(seed, leader, within_band=True),
+    # the human-driven lead car of a real ACC platoon (OpenACC AstaZero)
+    "openacc": lambda seed, leader, params=None: openacc.openacc_leader(seed, leader),
     # highway-env's IDM driver reacting to scripted hard braking ahead of it
-    "idm": lambda seed, leader: idm.idm_leader(synthetic.hard_braking(seed, leader=leader), seed=seed),
+    "idm": lambda seed, leader, params=None: idm.idm_leader(synthetic.hard_braking(seed, leader=leader), seed=seed),
 }
 
 # The families that build many seeds' profiles at once (all of one length), each the batch its single-seed
 # function above builds from one seed.
 LEADER_BATCHES: dict[str, LeaderBatchFamily] = {
-    "aggressive_cycles": lambda seeds, leader: synthetic.aggressive_cycles_batch(seeds, leader=leader),
-    "sinusoid": lambda seeds, leader: synthetic.sinusoid_batch(seeds, leader=leader),
-    "hard_braking": lambda seeds, leader: synthetic.hard_braking_batch(seeds, leader=leader),
-    "stochastic_human": lambda seeds, leader: synthetic.stochastic_human_batch(seeds, leader=leader),
-    "stop_and_go": lambda seeds, leader: synthetic.stop_and_go_batch(seeds, leader=leader),
-    "emergency_braking": lambda seeds, leader: synthetic.emergency_braking_batch(seeds, leader=leader),
+    family: (lambda seeds, leader, params=None, family=family:
+             getattr(synthetic, f"{family}_batch")(seeds, _params(family, params), leader)) for family in FAMILY_PARAMS
 }
 
 # Harsh leaders the default training mix (EnvConfig.scenario_weights) never draws: for held-out evaluation.
@@ -111,17 +121,36 @@ def get_scenario(name: str) -> Scenario:
     return SCENARIOS[name]
 
 
-def make_leader(name: str, seed: int | None = 0, leader: LeaderConfig = LeaderConfig()) -> LeaderProfile:
+def make_leader(name: str, seed: int | None = 0, leader: LeaderConfig = LeaderConfig(),
+                params: Any = None) -> LeaderProfile:
     """The leader profile of scenario ``name`` for ``seed`` (same seed, identical profile) with ``leader``'s
-    tick, length and speed band."""
-    return LEADER_FAMILIES[get_scenario(name).leader_family](seed, leader)
+    tick, length and speed band, and ``params`` (its family's parameter dataclass of FAMILY_PARAMS; None: the
+    defaults)."""
+    family = LEADER_FAMILIES[get_scenario(name).leader_family]
+    return family(seed, leader) if params is None else family(seed, leader, params)  # (a family may take no params)
 
 
-def make_leaders(name: str, seeds: Sequence[int | None], leader: LeaderConfig = LeaderConfig()) -> list[LeaderProfiles]:
+def make_leaders(name: str, seeds: Sequence[int | None], leader: LeaderConfig = LeaderConfig(),
+                 params: Any = None) -> list[LeaderProfiles]:
     """The leader profiles of scenario ``name`` for each of ``seeds``, as :func:`make_leader` builds them, in
     batches whose rows, batch after batch, are the seeds' profiles in order: one batch for a family of
     LEADER_BATCHES, one per seed for the others (recorded leaders differ in length)."""
     family = get_scenario(name).leader_family
     if family in LEADER_BATCHES:
-        return [LEADER_BATCHES[family](list(seeds), leader)] if len(seeds) else []
-    return [LeaderProfiles.of(LEADER_FAMILIES[family](seed, leader)) for seed in seeds]
+        return [LEADER_BATCHES[family](list(seeds), leader, params)] if len(seeds) else []
+    return [LeaderProfiles.of(make_leader(name, seed, leader, params)) for seed in seeds]
+
+
+def family_params(overrides: Mapping[str, Any]) -> dict[str, Any]:
+    """``EnvConfig.leader_params`` (family -> a dict of its parameter dataclass's fields) as family -> the dataclass;
+    ``ValueError`` naming an unknown family (or one without parameters) or a bad field."""
+    params = {}
+    for family, fields in overrides.items():
+        if family not in FAMILY_PARAMS:
+            raise ValueError(f"EnvConfig.leader_params has family {family!r}: the families with parameters are "
+                             f"{sorted(FAMILY_PARAMS)}")
+        try:
+            params[family] = FAMILY_PARAMS[family]().with_overrides(fields)
+        except ValueError as error:
+            raise ValueError(f"EnvConfig.leader_params[{family!r}]: {error}") from error
+    return params
