@@ -170,17 +170,15 @@ class TimeGapMonitorEnv(gym.Env):
         return self.task.observation()[0].ravel(), float(result.reward[0]), terminated, truncated, info
 
     def _checked(self, action: Any) -> np.ndarray:
-        """``action`` as the task takes it, int64 (1, 1) or (1, N); ``ValueError`` if it is outside the action space."""
+        """``action`` as the task takes it, int64 (1, 1) or (1, N); ``ValueError`` unless the action space's ``contains``
+        takes it (gymnasium's rule: Python bools are 0 and 1, NumPy bools and floats are not actions of a Discrete)."""
         if isinstance(self.action_space, gym.spaces.Discrete) and isinstance(action, (int, np.integer)) \
-                and not isinstance(action, (bool, np.bool_)) and 0 <= action < self.action_space.n:
+                and 0 <= action < self.action_space.n:
             self._action[0, 0] = action  # the common case, without NumPy's checks
             return self._action
-        indices = np.asarray(action)  # bools count as 0 and 1 where gymnasium's space takes them (not np.bool_ in Discrete)
-        discrete = isinstance(self.action_space, gym.spaces.Discrete)
-        if (indices.dtype.kind not in "iub" or (discrete and indices.dtype.kind == "b" and not isinstance(action, bool))
-                or not self.action_space.contains(indices.astype(np.int64))):
+        if not self.action_space.contains(action):
             raise ValueError(f"action = {shown(action)} is outside the action space {self.action_space}")
-        return self.task.ladder.check(indices.astype(np.int64)[None])
+        return self.task.ladder.check(np.asarray(action, dtype=np.int64)[None])
 
     @property
     def scenario(self) -> str:
