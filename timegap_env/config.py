@@ -54,7 +54,7 @@ MAX_WIDTH = 1e6  # largest chart limit, allowance or decision interval, in basel
 # searches up to 1e5 of its statistic's small in-control sigma) [-]
 
 
-def _is_real(value: Any) -> bool:
+def is_real(value: Any) -> bool:
     """A real number (Python's or NumPy's int or float), never a bool."""
     return isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, (bool, np.bool_))
 
@@ -64,7 +64,7 @@ def _is_integer(value: Any) -> bool:
     return isinstance(value, (int, np.integer)) and not isinstance(value, (bool, np.bool_))
 
 
-def _is_finite(value: Any) -> bool:
+def is_finite(value: Any) -> bool:
     """A real number that is not NaN or infinite and fits a float (an integer beyond 1.8e308 does not)."""
     try:
         return math.isfinite(float(value))
@@ -119,9 +119,9 @@ class ConfigMixin:
                 integer: bool = False) -> float:
         """The field's value as a float, checked: a number (an integer if ``integer``), finite, in the interval."""
         value = getattr(self, field)
-        if not (_is_integer(value) if integer else _is_real(value)):
+        if not (_is_integer(value) if integer else is_real(value)):
             self._fail(field, value, "must be an integer" if integer else "must be a number")
-        if not _is_finite(value):
+        if not is_finite(value):
             self._fail(field, value, "must be finite")
         if not _within(value, low, high, open_low, open_high):
             self._fail(field, value, f"must be in {_interval(low, high, open_low, open_high)}")
@@ -144,10 +144,10 @@ class ConfigMixin:
         interval, low < high (low <= high unless ``strict``)."""
         value = getattr(self, field)
         pair = _items(value)
-        is_number = _is_integer if integer else _is_real
+        is_number = _is_integer if integer else is_real
         if pair is None or len(pair) != 2 or not all(is_number(end) for end in pair):
             self._fail(field, value, f"must be a pair (low, high) of {'integers' if integer else 'numbers'}")
-        if not all(_is_finite(end) for end in pair):
+        if not all(is_finite(end) for end in pair):
             self._fail(field, value, "must be finite")
         if not all(_within(end, low, high, open_low, open_high) for end in pair):
             self._fail(field, value, f"both ends must lie in {_interval(low, high, open_low, open_high)}")
@@ -169,7 +169,7 @@ class ConfigMixin:
             assert known is not None  # unknown is empty unless known is given
             self._fail(field, value, f"unknown {what}s {unknown}; known: {list(known)}")
         weights = list(value.values())
-        if not all(_is_real(w) and _is_finite(w) and 0 <= w <= MAX_WEIGHT for w in weights) or sum(weights) <= 0:
+        if not all(is_real(w) and is_finite(w) and 0 <= w <= MAX_WEIGHT for w in weights) or sum(weights) <= 0:
             self._fail(field, value, f"weights must be finite numbers in [0, {MAX_WEIGHT:g}], not all 0")
         object.__setattr__(self, field, {key: float(weight) for key, weight in value.items()})
 
@@ -230,7 +230,7 @@ class PlatoonConfig(ConfigMixin):
         for field in ("actuation_lag", "actuation_gain"):
             self.per_follower(field)
             raw = getattr(self, field)
-            object.__setattr__(self, field, float(raw) if _is_real(raw)
+            object.__setattr__(self, field, float(raw) if is_real(raw)
                                else tuple(float(v) for v in cast(tuple[Any, ...], _items(raw))))  # checked above
 
     @property
@@ -246,10 +246,10 @@ class PlatoonConfig(ConfigMixin):
     def per_follower(self, field: str) -> np.ndarray:
         """``actuation_lag`` or ``actuation_gain`` as an array of shape (n_followers,), validated."""
         raw = getattr(self, field)
-        values = (raw,) if _is_real(raw) else _items(raw)
-        if values is None or len(values) not in (1, self.n_followers) or not all(_is_real(v) for v in values):
+        values = (raw,) if is_real(raw) else _items(raw)
+        if values is None or len(values) not in (1, self.n_followers) or not all(is_real(v) for v in values):
             self._fail(field, raw, f"must be one number or {self.n_followers} numbers (one per follower)")
-        if not all(_is_finite(v) and 0 < v <= 10.0 for v in values):
+        if not all(is_finite(v) and 0 < v <= 10.0 for v in values):
             self._fail(field, raw, "every value must be finite and in (0, 10]")
         array = np.asarray(values, dtype=float)
         return np.broadcast_to(array, (self.n_followers,)).copy()
@@ -414,10 +414,10 @@ class MonitorConfig(ConfigMixin):
         rows = _items(self.prior_cov)
         matrix = None if rows is None or len(rows) != 2 else tuple(_items(row) for row in rows)
         if (matrix is None or any(row is None or len(row) != 2 for row in matrix)
-                or not all(_is_real(x) for row in cast(tuple[tuple[Any, ...], ...], matrix) for x in row)):
+                or not all(is_real(x) for row in cast(tuple[tuple[Any, ...], ...], matrix) for x in row)):
             self._fail("prior_cov", self.prior_cov, "must be a 2x2 matrix of numbers")
         matrix = cast(tuple[tuple[Any, ...], ...], matrix)  # no row is None: checked just above
-        if not all(_is_finite(x) and abs(x) <= 1e6 for row in matrix for x in row):
+        if not all(is_finite(x) and abs(x) <= 1e6 for row in matrix for x in row):
             self._fail("prior_cov", self.prior_cov, "entries must be finite and within [-1e6, 1e6]")
         cov = np.asarray(matrix, dtype=float)
         if not np.allclose(cov, cov.T) or np.any(np.linalg.eigvalsh(cov) <= 0):
@@ -653,8 +653,8 @@ class EnvConfig(ConfigMixin):
         self._choice("action_mode", ACTION_MODES)
         self._flag("random_initial_setting")
         levels = _items(self.setting_levels)
-        if (levels is None or not 2 <= len(levels) <= MAX_SETTING_LEVELS or not all(_is_real(x) for x in levels)
-                or not all(_is_finite(x) and 0 < x <= MAX_TIME_GAP for x in levels)):
+        if (levels is None or not 2 <= len(levels) <= MAX_SETTING_LEVELS or not all(is_real(x) for x in levels)
+                or not all(is_finite(x) and 0 < x <= MAX_TIME_GAP for x in levels)):
             self._fail("setting_levels", self.setting_levels,
                        f"must be 2 to {MAX_SETTING_LEVELS} finite settings in (0, {MAX_TIME_GAP:g}]")
         if np.any(np.diff(np.asarray(levels, dtype=float)) <= 0):

@@ -34,7 +34,8 @@ from typing import Any, NoReturn
 import numpy as np
 
 from timegap_env.config import (
-    DEGRADATION_KINDS, MAX_DT, MAX_EPISODE_TICKS, MAX_TIME_GAP, DegradationConfig, PlatoonConfig, SensorConfig, shown,
+    DEGRADATION_KINDS, MAX_DT, MAX_EPISODE_TICKS, MAX_TIME_GAP, DegradationConfig, PlatoonConfig, SensorConfig,
+    is_finite, is_real, shown,
 )
 from timegap_env.sim.platoon import Platoon, ZOHCoefficients
 from timegap_env.sim.stability import SettingSweep
@@ -109,13 +110,9 @@ class Degradation:
     def _time_or_size(self, field: str, rule: str) -> None:
         """Check that ``field`` is a real number (not a bool) that is finite as a float, and store it as a float."""
         value = getattr(self, field)
-        try:
-            number = float(value) if not isinstance(value, (bool, np.bool_)) else math.nan
-        except (TypeError, ValueError, OverflowError):
-            number = math.nan
-        if not isinstance(value, (int, float, np.integer, np.floating)) or not math.isfinite(number):
+        if not (is_real(value) and is_finite(value)):
             self._fail(field, value, rule)
-        object.__setattr__(self, field, number)
+        object.__setattr__(self, field, float(value))
 
     def _fail(self, field: str, value: Any, rule: str) -> NoReturn:
         raise ValueError(f"degradation {field} = {shown(value)}: {rule}")
