@@ -43,13 +43,11 @@ def skip_without_data(code: str) -> None:
 
 @pytest.fixture
 def scenario_tables():
-    """A block may add a leader family to the scenario tables (docs/extending.md): put them back afterwards."""
-    tables = (scenarios.LEADER_FAMILIES, scenarios.LEADER_BATCHES, scenarios.SCENARIOS)
-    saved = [dict(table) for table in tables]
+    """A block may register a leader family (docs/extending.md): put the registry back afterwards."""
+    saved = dict(scenarios.LEADER_FAMILIES)
     yield
-    for table, content in zip(tables, saved):
-        table.clear()
-        table.update(content)
+    scenarios.LEADER_FAMILIES.clear()
+    scenarios.LEADER_FAMILIES.update(saved)
 
 
 def test_the_docs_have_their_pages_and_blocks():
@@ -66,7 +64,7 @@ def test_every_python_block_runs_alone_as_pasted(page: Path, code: str, not_run:
     for slow, fast in FAST.items():
         code = code.replace(slow, fast)
     namespace: dict = {"__name__": f"docs.{page.stem}"}
-    exec(compile(code, str(page), "exec"), namespace)
+    exec(compile(code, str(page), "exec", dont_inherit=True), namespace)  # not this file's __future__ imports
     for name in ("env", "envs", "workers", "venv"):
         if hasattr(namespace.get(name), "close"):
             namespace[name].close()

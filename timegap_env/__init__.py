@@ -56,9 +56,9 @@ from timegap_env.config import (
     LeaderConfig, MonitorConfig, PlatoonConfig, RewardWeights, SensorConfig, SinusoidConfig, StochasticHumanConfig,
 )
 from timegap_env.leaders import (
-    SCENARIOS, LeaderProfile, OpenAccRun, aggressive_cycles, default_ngsim_path, default_openacc_dir, hard_braking,
-    idm_leader, make_leader, openacc_paths, read_ngsim, read_openacc, sinusoid, stochastic_human, vehicle_ids,
-    vehicle_profile,
+    SCENARIOS, LeaderFamily, LeaderProfile, OpenAccRun, aggressive_cycles, default_ngsim_path, default_openacc_dir,
+    hard_braking, idm_leader, make_leader, openacc_paths, read_ngsim, read_openacc, register_family, sinusoid,
+    stochastic_human, vehicle_ids, vehicle_profile,
 )
 from timegap_env.monitoring import TimeGapEstimate, TimeGapMonitor, estimate_time_gap, posterior
 from timegap_env.sim import (
@@ -81,9 +81,9 @@ if ENV_ID not in registry:
 
 __all__ = [
     "__version__", "COMMERCIAL_ACC", "ENV_ID", "MONITOR_PRESETS", "SCENARIOS", "AggressiveCyclesConfig", "ChartConfig", "EnvConfig",
-    "HardBrakingConfig", "HumanLeaderConfig", "LeaderConfig", "LeaderProfile", "MonitorConfig", "OpenAccRun",
+    "HardBrakingConfig", "HumanLeaderConfig", "LeaderConfig", "LeaderFamily", "LeaderProfile", "MonitorConfig", "OpenAccRun",
     "PlatoonConfig", "RewardWeights", "SensorConfig", "SinusoidConfig", "StochasticHumanConfig", "TimeGapEstimate", "TimeGapMonitor",
     "Trajectory", "acc_platoon", "acc_presets", "aggressive_cycles", "default_ngsim_path", "default_openacc_dir", "estimate_time_gap", "hard_braking", "idm_leader",
-    "make_leader", "openacc_paths", "platoon_string_stability", "posterior", "read_ngsim", "read_openacc", "simulate",
+    "make_leader", "openacc_paths", "platoon_string_stability", "posterior", "read_ngsim", "read_openacc", "register_family", "simulate",
     "sinusoid", "stochastic_human", "string_stability", "vehicle_ids", "vehicle_profile",
 ]

@@ -7,7 +7,7 @@ import pytest
 
 import timegap_env  # noqa: F401
 from timegap_env.config import SinusoidConfig
-from timegap_env.leaders.scenarios import FAMILY_PARAMS, make_leader
+from timegap_env.leaders.scenarios import LEADER_FAMILIES, make_leader
 
 
 def leader_speed(config: dict, scenario: str, seed: int = 3) -> np.ndarray:
@@ -29,7 +29,7 @@ def test_a_familys_parameters_reach_its_leader_and_no_other():
     assert np.array_equal(leader_speed(wide, "hard_braking"), leader_speed({}, "hard_braking"))
 
 
-@pytest.mark.parametrize("family", sorted(FAMILY_PARAMS))
+@pytest.mark.parametrize("family", sorted(name for name, family in LEADER_FAMILIES.items() if family.params))
 def test_default_parameters_given_explicitly_change_nothing(family):
     defaults = {"leader_params": {family: {}}}
     assert np.array_equal(leader_speed(defaults, family), leader_speed({}, family))

@@ -11,7 +11,7 @@ import pytest
 from timegap_env.config import LeaderConfig
 from timegap_env.leaders import scenarios, synthetic
 
-BATCH_FAMILIES = list(scenarios.LEADER_BATCHES)
+BATCH_FAMILIES = [name for name, family in scenarios.LEADER_FAMILIES.items() if family.batch]
 # (dt [s], duration [s]): one tick (the shortest episode), a few ticks, odd lengths, the 2 s
 LENGTHS = [(0.1, 0.1), (0.1, 0.2), (0.1, 0.7), (0.1, 2.0), (0.1, 3.3), (0.1, 5.9), (0.1, 12.3),
            (0.01, 0.01), (0.01, 1.37), (1.0, 1.0), (1.0, 3.0), (0.5, 4.5)]
@@ -77,6 +77,6 @@ DIGESTS_250_S = {
 
 @pytest.mark.parametrize("family", BATCH_FAMILIES)
 def test_profiles_of_the_usual_length_are_unchanged(family):
-    batch = scenarios.LEADER_BATCHES[family](SEEDS, LeaderConfig())
+    [batch] = scenarios.make_leaders(family, SEEDS, LeaderConfig())
     digest = hashlib.sha256(batch.speed.tobytes() + batch.accel.tobytes()).hexdigest()[:16]
     assert digest == DIGESTS_250_S[family]
