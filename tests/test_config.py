@@ -123,7 +123,7 @@ def test_numbers_of_any_type_are_stored_as_pythons():
     "overrides, field",
     [
         ({"episode_duration": 10**400}, "EnvConfig.episode_duration"),
-        ({"ttc_threshold": 10**5000}, "EnvConfig.ttc_threshold"),
+        ({"reward_scales": {"ttc_threshold": 10**5000}}, "RewardScales.ttc_threshold"),
         ({"chart": {"exceedance_window": 10**400}}, "ChartConfig.exceedance_window"),
         ({"monitor": {"window": 10**400}}, "MonitorConfig.window"),
         ({"monitor": {"prior_cov": ((10**400, 0), (0, 1))}}, "MonitorConfig.prior_cov"),

@@ -4,12 +4,17 @@ lead to committed files; and the site builds with ``mkdocs build --strict`` wher
 A block right after a ``<!-- not run: ... -->`` line is not run (its libraries live in ``.venv-clients``: Tianshou,
 TorchRL, RLlib); the tests for those libraries are ``tests/clients``. Blocks that read the OpenACC or NGSIM data
 skip, saying where they looked, when the data are absent.
+
+A block right after ``<!-- edit: <file>, after the line ending `<text>` -->`` (or ``before the line starting
+`<text>```) is an insertion into the library's own file; the block after ``<!-- run with the edits above -->``
+runs in a fresh process on a copy of the package with its page's edits applied.
 """
 
 from __future__ import annotations
 
 import os
 import re
+import shutil
 import subprocess
 import sys
 from importlib.util import find_spec
@@ -23,12 +28,14 @@ from timegap_env.leaders import scenarios
 REPO = Path(__file__).resolve().parents[1]
 DOCS = REPO / "docs"
 PAGES = sorted(DOCS.glob("*.md"))
-BLOCK = re.compile(r"(<!-- not run: (?P<why>[^>]*?) -->\n)?```python\n(?P<code>.*?)```", flags=re.S)
+BLOCK = re.compile(r"(<!-- (?P<marker>[^>]*?) -->\n)?```python\n(?P<code>.*?)```", flags=re.S)
 BLOCKS = [
-    pytest.param(page, match["code"], match["why"], id=f"{page.stem}-{index}")
+    pytest.param(page, match["code"], match["marker"], id=f"{page.stem}-{index}")
     for page in PAGES
     for index, match in enumerate(BLOCK.finditer(page.read_text(encoding="utf-8")))
 ]
+EDIT = re.compile(r'edit: (?P<file>\S+), (?P<where>after the line ending|before the line starting) `(?P<anchor>.*)`')
+RUN_EDITED = "run with the edits above"
 FAST = {"total_timesteps=20_000": "total_timesteps=256"}  # training as the pages say it, cut short
 LINK = re.compile(r"\]\((?P<target>[^)#\s]+)(#[^)]*)?\)")
 MKDOCS_PACKAGES = ("mkdocs", "material", "mkdocstrings", "mkdocstrings_handlers.python")
@@ -56,10 +63,13 @@ def test_the_docs_have_their_pages_and_blocks():
     assert len(BLOCKS) >= 15
 
 
-@pytest.mark.parametrize(("page", "code", "not_run"), BLOCKS)
-def test_every_python_block_runs_alone_as_pasted(page: Path, code: str, not_run: str | None, scenario_tables):
-    if not_run:
-        pytest.skip(f"{page.name}: marked not run ({not_run})")
+@pytest.mark.parametrize(("page", "code", "marker"), BLOCKS)
+def test_every_python_block_runs_alone_as_pasted(page: Path, code: str, marker: str | None, scenario_tables):
+    if marker and marker.startswith("not run:"):
+        pytest.skip(f"{page.name}: marked {marker}")
+    if marker and (EDIT.fullmatch(marker) or marker == RUN_EDITED):
+        pytest.skip(f"{page.name}: an edit of the library or its example: test_edits_of_the_library_work runs them")
+    assert marker is None, f"{page.name}: unknown marker <!-- {marker} --> before a block"
     skip_without_data(code)
     for slow, fast in FAST.items():
         code = code.replace(slow, fast)
@@ -72,10 +82,49 @@ def test_every_python_block_runs_alone_as_pasted(page: Path, code: str, not_run:
 
 def test_the_blocks_not_run_are_the_client_libraries():
     """Only the libraries of .venv-clients are left out, and those pages still show them."""
-    skipped = [code for _, code, why in (param.values for param in BLOCKS) if why]
+    skipped = [code for _, code, marker in (param.values for param in BLOCKS) if marker and marker.startswith("not run:")]
     assert skipped, "docs/libraries.md shows TorchRL, Tianshou and RLlib as text"
     for code in skipped:
         assert re.search(r"^from (torchrl|tianshou|ray)", code, flags=re.M), code
+
+
+def apply_edit(package: Path, marker: str, code: str) -> None:
+    """Insert ``code`` into the file of the copied ``package`` that ``marker`` (an edit marker) names, at its anchor
+    line, which must occur exactly once."""
+    edit = EDIT.fullmatch(marker)
+    assert edit, marker
+    path = package.parent / edit["file"]
+    lines = path.read_text(encoding="utf-8").splitlines(keepends=True)
+    after = edit["where"].startswith("after")
+    hits = [i for i, line in enumerate(lines)
+            if (line.rstrip("\n").endswith(edit["anchor"]) if after else line.startswith(edit["anchor"]))]
+    assert len(hits) == 1, f"{edit['file']}: {len(hits)} lines match the anchor {edit['anchor']!r}"
+    at = hits[0] + (1 if after else 0)
+    path.write_text("".join(lines[:at]) + code + "".join(lines[at:]), encoding="utf-8")
+
+
+EDITED_EXAMPLES = [pytest.param(page, id=page.stem) for page in PAGES
+                   if f"<!-- {RUN_EDITED} -->" in page.read_text(encoding="utf-8")]
+
+
+@pytest.mark.parametrize("page", EDITED_EXAMPLES)
+def test_edits_of_the_library_work(page: Path, tmp_path: Path):
+    """The page's edits of the library, applied to a copy of the package, make its example run (docs/extending.md:
+    a degradation kind in one file). The example runs in a fresh process, importing the copy."""
+    package = tmp_path / "timegap_env"
+    shutil.copytree(REPO / "timegap_env", package, ignore=shutil.ignore_patterns("__pycache__"))
+    examples = []
+    for match in BLOCK.finditer(page.read_text(encoding="utf-8")):
+        if match["marker"] and EDIT.fullmatch(match["marker"]):
+            apply_edit(package, match["marker"], match["code"])
+        elif match["marker"] == RUN_EDITED:
+            examples.append(match["code"])
+    assert examples
+    for code in examples:
+        check = f"import timegap_env\nassert timegap_env.__file__.startswith({str(tmp_path)!r}), timegap_env.__file__\n"
+        run = subprocess.run([sys.executable, "-c", check + code], cwd=tmp_path, capture_output=True, text=True,
+                             timeout=600, env={**os.environ, "PYTHONPATH": str(tmp_path)})
+        assert run.returncode == 0, f"{page.name}'s edited example failed:\n{run.stdout[-2000:]}{run.stderr[-5000:]}"
 
 
 @pytest.mark.parametrize("page", [*PAGES, REPO / "README.md"], ids=lambda page: page.name)

@@ -52,8 +52,9 @@ def _say_when_compiling() -> None:
 _say_when_compiling()  # before the imports below, some of which compile a kernel
 
 from timegap_env.config import (
-    MONITOR_PRESETS, AggressiveCyclesConfig, ChartConfig, EnvConfig, HardBrakingConfig, HumanLeaderConfig,
-    LeaderConfig, MonitorConfig, PlatoonConfig, RewardWeights, SensorConfig, SinusoidConfig, StochasticHumanConfig,
+    MONITOR_PRESETS, AggressiveCyclesConfig, ChartConfig, DegradationConfig, EnvConfig, HardBrakingConfig,
+    HumanLeaderConfig, LeaderConfig, MonitorConfig, PlatoonConfig, RewardScales, RewardWeights, SensorConfig,
+    SinusoidConfig, StochasticHumanConfig,
 )
 from timegap_env.leaders import (
     SCENARIOS, LeaderFamily, LeaderProfile, OpenAccRun, aggressive_cycles, default_ngsim_path, default_openacc_dir,
@@ -80,9 +81,9 @@ if ENV_ID not in registry:
     )
 
 __all__ = [
-    "__version__", "COMMERCIAL_ACC", "ENV_ID", "MONITOR_PRESETS", "SCENARIOS", "AggressiveCyclesConfig", "ChartConfig", "EnvConfig",
+    "__version__", "COMMERCIAL_ACC", "ENV_ID", "MONITOR_PRESETS", "SCENARIOS", "AggressiveCyclesConfig", "ChartConfig", "DegradationConfig", "EnvConfig",
     "HardBrakingConfig", "HumanLeaderConfig", "LeaderConfig", "LeaderFamily", "LeaderProfile", "MonitorConfig", "OpenAccRun",
-    "PlatoonConfig", "RewardWeights", "SensorConfig", "SinusoidConfig", "StochasticHumanConfig", "TimeGapEstimate", "TimeGapMonitor",
+    "PlatoonConfig", "RewardScales", "RewardWeights", "SensorConfig", "SinusoidConfig", "StochasticHumanConfig", "TimeGapEstimate", "TimeGapMonitor",
     "Trajectory", "acc_platoon", "acc_presets", "aggressive_cycles", "default_ngsim_path", "default_openacc_dir", "estimate_time_gap", "hard_braking", "idm_leader",
     "make_leader", "openacc_paths", "platoon_string_stability", "posterior", "read_ngsim", "read_openacc", "register_family", "simulate",
     "sinusoid", "stochastic_human", "string_stability", "vehicle_ids", "vehicle_profile",

@@ -21,7 +21,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Mapping
-from typing import Any, NoReturn, Self, cast
+from typing import Any, NamedTuple, NoReturn, Self, cast
 
 import numpy as np
 
@@ -29,10 +29,6 @@ MPH = 0.44704  # [m/s per mph]
 ACTION_MODES = ("platoon", "per_vehicle", "relative")  # one setting for all followers, one each, or one step
 # of the platoon's setting down the ladder, none, or up
 CHART_KINDS = ("shewhart", "ewma", "cusum")  # the charts of timegap_env.monitoring.charts.CHARTS
-# What can go wrong with a follower (timegap_env.sim.degradation); only v2v_outage shows (the V2V flag drops).
-DEGRADATION_KINDS = (
-    "lag", "gain", "v2v_latency", "packet_loss", "v2v_outage", "radar_bias", "radar_noise", "commercial_acc",
-)
 
 # Bounds shared by several fields (each field's own are in its comment).
 TIME_GAP_MIN_SPEED = 1.0  # below this speed (s - s0) / v says nothing of the time gap: the monitor leaves such
@@ -517,17 +513,104 @@ class RewardWeights(ConfigMixin):
             self._number(field.name, 0.0, MAX_WEIGHT)
 
 
-SIZE_RANGE_FIELDS = {  # each sized degradation kind and the DegradationConfig field holding its range
-    "lag": "lag_factor_range", "gain": "gain_range", "v2v_latency": "v2v_latency_range",
-    "packet_loss": "packet_loss_range", "radar_bias": "radar_bias_range", "radar_noise": "radar_noise_range",
-}
+@dataclasses.dataclass(frozen=True)
+class RewardScales(ConfigMixin):
+    """What one unit of each reward term is, in natural units: the reference scales beside :class:`RewardWeights`
+    (:mod:`timegap_env.envs.reward` gives each term's formula)."""
+
+    tracking_reference: float = 0.25  # a tick's |actual time gap - setting| costing one tracking unit [s],
+    # [0.001, MAX_TIME_GAP] (smaller would make the term, tracking_cap over it, absurdly large)
+    tracking_cap: float = 0.5  # a tick's |actual time gap - setting| counts up to this in the tracking term [s],
+    # (0, MAX_TIME_GAP]
+    accel_growth_reference: float = 1.0  # growth of the peak acceleration down the platoon costing one
+    # string-stability unit [m/s^2], [0.001, MAX_ACCEL]
+    accel_envelope_time: float = 5.0  # time constant of the decaying peak acceleration the growth compares [s],
+    # (0, MAX_DURATION]
+    ttc_threshold: float = 4.0  # time-to-collision below which safety is penalised [s], (0, 60]
+    jerk_reference: float = 2.0  # jerk that costs one comfort unit [m/s^3], [0.01, MAX_JERK] (smaller would let the
+    # squared term overflow)
+
+    def __post_init__(self) -> None:
+        self._number("tracking_reference", 0.001, MAX_TIME_GAP)
+        self._number("tracking_cap", 0.0, MAX_TIME_GAP, open_low=True)
+        self._number("accel_growth_reference", 0.001, MAX_ACCEL)
+        self._number("accel_envelope_time", 0.0, MAX_DURATION, open_low=True)
+        self._number("ttc_threshold", 0.0, 60.0, open_low=True)
+        self._number("jerk_reference", 0.01, MAX_JERK)
+
+
+class Interval(NamedTuple):
+    """The numbers from ``low`` to ``high``, each end closed unless it is open."""
+
+    low: float
+    high: float
+    open_low: bool = False
+    open_high: bool = False
+
+    def __contains__(self, value: object) -> bool:
+        return is_real(value) and _within(float(cast(float, value)), *self)
+
+    def __str__(self) -> str:
+        return _interval(*self)
+
+
+@dataclasses.dataclass(frozen=True)
+class DegradationKind:
+    """What can go wrong with a follower, as one record of :data:`DEGRADATIONS` (:mod:`timegap_env.sim.degradation`
+    draws it, writes it into the physics and the sensors, and reports its ground truth from these fields alone).
+
+    A sized kind sets one parameter of the follower, its ``lever``: a field of
+    :class:`~timegap_env.sim.degradation.DegradationTable` read by the physics, the sensors and the ground truth:
+    ``lag`` [s], ``gain`` [-], ``k_s`` [1/s^2], ``k_v`` [1/s], ``accel_max`` [m/s^2], ``extra_delay`` [ticks],
+    ``packet_loss`` [-], ``radar_bias`` [m], ``radar_noise`` [m] or the flag ``v2v_down``. The smallest
+    string-stable setting follows from the lever's new value.
+    """
+
+    name: str
+    effect: str  # what happens while it acts, for the docs
+    lever: str | None  # the DegradationTable parameter it sets; None: commercial_acc, which replaces the car's model
+    size: str | None = None  # what its size is, with its unit; None: the kind has no size (a flag lever is set)
+    size_bounds: Interval | None = None  # a size given by hand (reset options) must lie in it
+    range_field: str | None = None  # the DegradationConfig field its drawn sizes come from (a magnitude if signed)
+    range_bounds: Interval | None = None  # that field's ends must lie in it
+    scales: bool = False  # the size multiplies the lever's nominal value instead of replacing it
+    signed: bool = False  # the draw flips the size's sign with chance 1/2
+    whole_ticks: bool = False  # the size is a time: drawn on whole ticks of dt, and the lever holds it in ticks
+    duration_field: str | None = None  # the DegradationConfig field of how long it lasts when drawn: it starts
+    # anywhere it fits and always ends (without one it starts at 0 or midway and ends with recovery_probability)
+    default_weight: float = 1.0  # its weight in the default DegradationConfig.kind_weights [-]
+
+
+DEGRADATIONS: dict[str, DegradationKind] = {kind.name: kind for kind in (  # in the order of their int8 codes (1, 2, ...)
+    DegradationKind("lag", "the GLVD lag grows (brake fade, load)", "lag", "factor on the lag T [-]",
+                    Interval(0.0, 10.0, open_low=True), "lag_factor_range", Interval(1.0, 10.0), scales=True),
+    DegradationKind("gain", "the car realises less of the command (grade, weight)", "gain", "gain K [-]",
+                    Interval(0.0, 10.0, open_low=True), "gain_range", Interval(0.0, 1.0, open_low=True)),
+    DegradationKind("v2v_latency", "V2V messages arrive later; the flag stays up", "extra_delay",
+                    "added V2V delay [s]", Interval(0.0, MAX_TIME_GAP), "v2v_latency_range", Interval(0.0, MAX_TIME_GAP),
+                    whole_ticks=True),
+    DegradationKind("packet_loss", "V2V messages are lost, the feed-forward holds the last one received; the flag "
+                    "stays up", "packet_loss", "chance per tick [-]", Interval(0.0, 1.0, open_high=True),
+                    "packet_loss_range", Interval(0.0, 1.0, open_high=True), default_weight=4.0),
+    DegradationKind("v2v_outage", "the link is down and the flag shows it: ACC", "v2v_down",
+                    duration_field="v2v_outage_duration_range"),
+    DegradationKind("radar_bias", "the radar reads the spacing off by it, for the controller and the monitor alike: "
+                    "with a positive bias the car keeps less than its setting, by bias / v", "radar_bias",
+                    "spacing bias [m]", Interval(-100.0, 100.0), "radar_bias_range", Interval(0.0, 100.0), signed=True),
+    DegradationKind("radar_noise", "the radar's spacing reading is this noisy (the monitor's view; the controller "
+                    "filters)", "radar_noise", "spacing noise std [m]", Interval(0.0, 100.0), "radar_noise_range",
+                    Interval(0.0, 100.0), default_weight=4.0),
+    DegradationKind("commercial_acc", "the follower is a commercial ACC car calibrated to OpenACC "
+                    "(timegap_env.sim.presets): its lag, gains and highest command, and no V2V", None),
+)}
+DEGRADATION_KINDS = tuple(DEGRADATIONS)  # what can go wrong with a follower; only v2v_outage shows (the flag drops)
 
 
 def _default_degradation_weights() -> dict[str, float]:
     """Chosen by measurement (``python -m train.choose_degradation_mix``, ``results/degradation/mix.md``): of the mixes
     keeping every kind at weight 1, 2 or 4, the one where knowing the hidden degradations is worth most (2 % of the
     best blind constant's return; every kind at 1: 1 %)."""
-    return {"none": 4.0, **{kind: 1.0 for kind in DEGRADATION_KINDS}, "packet_loss": 4.0, "radar_noise": 4.0}
+    return {"none": 4.0, **{name: kind.default_weight for name, kind in DEGRADATIONS.items()}}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -559,19 +642,24 @@ class DegradationConfig(ConfigMixin):
 
     def __post_init__(self) -> None:
         self._weights("kind_weights", "kind", ("none", *DEGRADATION_KINDS))
-        self._pair("lag_factor_range", 1.0, 10.0)
-        self._pair("gain_range", 0.0, 1.0, open_low=True)
-        self._pair("v2v_latency_range", 0.0, MAX_TIME_GAP)
-        self._pair("packet_loss_range", 0.0, 1.0, open_high=True)
-        self._pair("v2v_outage_duration_range", 0.0, MAX_DURATION)
-        self._pair("radar_bias_range", 0.0, 100.0)
-        self._pair("radar_noise_range", 0.0, 100.0)
+        for kind in DEGRADATIONS.values():
+            if kind.range_field is not None:
+                assert kind.range_bounds is not None  # a record with a range field bounds it
+                bounds = kind.range_bounds
+                self._pair(kind.range_field, bounds.low, bounds.high, open_low=bounds.open_low,
+                           open_high=bounds.open_high)
+            if kind.duration_field is not None:
+                self._pair(kind.duration_field, 0.0, MAX_DURATION)
         for field in ("follower_probability", "midway_onset_probability", "recovery_probability"):
             self._number(field, 0.0, 1.0)
 
     def size_range(self, kind: str) -> tuple[float, float]:
-        """The range a sized ``kind``'s size is drawn from (for radar_bias, its magnitude); ``KeyError`` otherwise."""
-        return getattr(self, SIZE_RANGE_FIELDS[kind])
+        """The range a sized ``kind``'s size is drawn from (of a signed kind, its magnitude); ``KeyError`` for a kind
+        without one."""
+        field = DEGRADATIONS[kind].range_field
+        if field is None:
+            raise KeyError(f"degradation kind {kind!r} has no size range")
+        return cast(tuple[float, float], getattr(self, field))
 
 
 def _default_scenario_weights() -> dict[str, float]:
@@ -580,7 +668,8 @@ def _default_scenario_weights() -> dict[str, float]:
 
 NESTED_CONFIGS: dict[str, type[ConfigMixin]] = {  # EnvConfig's nested configs, each given as a dict of its fields
     "platoon": PlatoonConfig, "leader": LeaderConfig, "sensors": SensorConfig, "monitor": MonitorConfig,
-    "chart": ChartConfig, "reward_weights": RewardWeights, "degradation": DegradationConfig,
+    "chart": ChartConfig, "reward_weights": RewardWeights, "reward_scales": RewardScales,
+    "degradation": DegradationConfig,
 }
 
 
@@ -599,6 +688,7 @@ class EnvConfig(ConfigMixin):
     monitor: MonitorConfig = MonitorConfig()
     chart: ChartConfig = ChartConfig()
     reward_weights: RewardWeights = RewardWeights()
+    reward_scales: RewardScales = RewardScales()
     decision_interval: float = 1.0  # time between two actions, a multiple of platoon.dt [s], at most
     # MAX_DECISION_TICKS ticks and episode_duration
     episode_duration: float = 250.0  # [s], a multiple of platoon.dt, at most MAX_EPISODE_TICKS ticks
@@ -613,21 +703,10 @@ class EnvConfig(ConfigMixin):
     # weight in [0, MAX_WEIGHT], not all 0; the families are checked against SCENARIOS when the env is built
     degradation: DegradationConfig = DegradationConfig()  # what can go wrong with the followers, drawn per episode
     leader_params: dict[str, dict[str, Any]] = dataclasses.field(default_factory=dict)  # synthetic leader family ->
-    # overrides of its parameter dataclass (timegap_env.leaders.scenarios.FAMILY_PARAMS), e.g. {"sinusoid":
+    # overrides of its parameter dataclass (its LeaderFamily record's params, timegap_env.leaders), e.g. {"sinusoid":
     # {"amplitude_range": (4.0, 8.0)}}; the families and fields are checked when the env is built
     dropout_probability_range: tuple[float, float] = (0.0, 0.05)  # per-episode sensor dropout rate drawn from [-],
     # 0 <= low <= high < 1
-    ttc_threshold: float = 4.0  # time-to-collision below which safety is penalised [s], (0, 60]
-    jerk_reference: float = 2.0  # jerk that costs one comfort unit [m/s^3], [0.01, MAX_JERK] (smaller would let the
-    # squared term overflow)
-    tracking_reference: float = 0.25  # a tick's |actual time gap - setting| costing one tracking unit [s],
-    # [0.001, MAX_TIME_GAP] (smaller would make the term, tracking_cap over it, absurdly large)
-    tracking_cap: float = 0.5  # a tick's |actual time gap - setting| counts up to this in the tracking term [s],
-    # (0, MAX_TIME_GAP]
-    accel_growth_reference: float = 1.0  # growth of the peak acceleration down the platoon costing one unit [m/s^2],
-    # [0.001, MAX_ACCEL]
-    accel_envelope_time: float = 5.0  # time constant of the decaying peak acceleration the growth compares [s],
-    # (0, MAX_DURATION]
 
     def __post_init__(self) -> None:
         for field, kind in NESTED_CONFIGS.items():
@@ -673,12 +752,6 @@ class EnvConfig(ConfigMixin):
             self._fail("degradation.v2v_latency_range", self.degradation.v2v_latency_range,
                        f"must stay within platoon.max_v2v_latency = {self.platoon.max_v2v_latency} s")
         self._pair("dropout_probability_range", 0.0, 1.0, open_high=True, strict=False)
-        self._number("ttc_threshold", 0.0, 60.0, open_low=True)
-        self._number("jerk_reference", 0.01, MAX_JERK)
-        self._number("tracking_reference", 0.001, MAX_TIME_GAP)
-        self._number("tracking_cap", 0.0, MAX_TIME_GAP, open_low=True)
-        self._number("accel_growth_reference", 0.001, MAX_ACCEL)
-        self._number("accel_envelope_time", 0.0, MAX_DURATION, open_low=True)
 
     @classmethod
     def from_dict(cls, overrides: Mapping[str, Any] | None = None) -> EnvConfig:

@@ -54,7 +54,7 @@ import numpy as np
 
 from timegap_env.agents.protocol import EVAL_SEED_START
 from timegap_env import cli
-from timegap_env.config import DEGRADATION_KINDS, SIZE_RANGE_FIELDS, ChartConfig, DegradationConfig, LeaderConfig, PlatoonConfig
+from timegap_env.config import DEGRADATION_KINDS, DEGRADATIONS, ChartConfig, DegradationConfig, LeaderConfig, PlatoonConfig
 from timegap_env.leaders.openacc import default_openacc_dir, openacc_paths, read_openacc, repeated_runs
 from timegap_env.leaders.scenarios import make_leader
 from timegap_env.monitoring.charts import make_chart
@@ -167,14 +167,14 @@ def detection_delays(starts: np.ndarray, batch: Batch, dt: float) -> tuple[np.nd
 
 
 def conditions(config: DegradationConfig) -> dict[str, dict[str, Any]]:
-    """Each labelled degradation: every sized kind at SIZES of its range (radar bias positive), the others once."""
+    """Each labelled degradation: every sized kind at SIZES of its range (a signed one positive), the others once."""
     labelled = {}
     for kind in DEGRADATION_KINDS:
-        if kind in SIZE_RANGE_FIELDS:
+        if DEGRADATIONS[kind].range_field is not None:
             low, high = config.size_range(kind)
             for position in SIZES:
                 size = low + position * (high - low)
-                size = round_to_tick(size, PlatoonConfig.dt) if kind == "v2v_latency" else round(size, 3)
+                size = round_to_tick(size, PlatoonConfig.dt) if DEGRADATIONS[kind].whole_ticks else round(size, 3)
                 labelled[f"{kind} {size:g}"] = {"kind": kind, "size": size, "onset": ONSET}
         else:
             labelled[kind] = {"kind": kind, "onset": 0.0 if kind == "commercial_acc" else ONSET}

@@ -105,8 +105,8 @@ def paired_difference(values: np.ndarray, reference: np.ndarray) -> tuple[float,
 
 
 def close_calls(min_ttc: np.ndarray, config: EnvConfig) -> int:
-    """Episodes whose smallest time-to-collision fell below the reward's ``config.ttc_threshold`` [-]."""
-    return int((min_ttc < config.ttc_threshold).sum())
+    """Episodes whose smallest time-to-collision fell below the reward's ``config.reward_scales.ttc_threshold`` [-]."""
+    return int((min_ttc < config.reward_scales.ttc_threshold).sum())
 
 
 def write_csv(path: Path, config: EnvConfig, policies: Sequence[NamedPolicy], results: dict[str, np.ndarray],
@@ -142,7 +142,7 @@ def write_report(path: Path, config: EnvConfig, seeds: Sequence[int], cells: Seq
 
     header = [f"| policy | k_up | quiet time [s] | floor [s] | mean return | vs {policies[yardstick].name} (95 %) | "
               f"collisions | mean setting [s] | follower switches per episode | episodes with TTC < "
-              f"{config.ttc_threshold:g} s |", "|" + "---|" * 10]
+              f"{config.reward_scales.ttc_threshold:g} s |", "|" + "---|" * 10]
     lines = [
         "# Tuning the chart step rule (`python -m train.tune_rule`)", "",
         f"{len(seeds)} training episodes of the default env (seeds {seeds[0]}-{seeds[-1]}, below the evaluation's "

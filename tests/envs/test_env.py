@@ -238,10 +238,10 @@ def test_rgb_array_frames_are_drawn_and_change():
 
 def test_whole_numbers_in_the_config_run_as_their_floats():
     """Integer-valued overrides (weights, thresholds, gains, noise) give bit for bit what the same floats give."""
-    as_int = {"reward_weights": {"safety": 3, "collision": 1000}, "ttc_threshold": 4, "jerk_reference": 2,
+    as_int = {"reward_weights": {"safety": 3, "collision": 1000}, "reward_scales": {"ttc_threshold": 4, "jerk_reference": 2},
               "platoon": {"k_a": 0, "standstill_spacing": 5, "vehicle_length": 5}, "monitor": {"forgetting": 1},
               "sensors": {"spacing_noise_std": 0}, "chart": {"limit_width": 2}}
-    as_float = {"reward_weights": {"safety": 3.0, "collision": 1000.0}, "ttc_threshold": 4.0, "jerk_reference": 2.0,
+    as_float = {"reward_weights": {"safety": 3.0, "collision": 1000.0}, "reward_scales": {"ttc_threshold": 4.0, "jerk_reference": 2.0},
                 "platoon": {"k_a": 0.0, "standstill_spacing": 5.0, "vehicle_length": 5.0},
                 "monitor": {"forgetting": 1.0}, "sensors": {"spacing_noise_std": 0.0}, "chart": {"limit_width": 2.0}}
     first = run_episode(gym.make("TimeGapMonitor-v0", config=as_int), lambda obs: level_index(1.0), seed=3)

@@ -161,13 +161,14 @@ def test_weights_of_the_default_config_are_the_reward_weights_in_field_order():
 
 
 def test_reward_constants_come_from_the_config():
-    config = EnvConfig.from_dict({"chart": {"limit_width": 3.0}, "setting_levels": [0.8, 1.2, 2.0], "ttc_threshold": 5.0,
+    config = EnvConfig.from_dict({"chart": {"limit_width": 3.0}, "setting_levels": [0.8, 1.2, 2.0],
+                                  "reward_scales": {"ttc_threshold": 5.0},
                                   "platoon": {"standstill_spacing": 2.0, "initial_setting": 1.2}})
     constants = RewardConstants.from_config(config)
-    assert constants.tracking_reference == config.tracking_reference  # the reward's own, not the chart's
+    assert constants.tracking_reference == config.reward_scales.tracking_reference  # the reward's own, not the chart's
     assert (constants.smallest_level, constants.level_span) == (0.8, pytest.approx(1.2, rel=1e-15))
     assert (constants.ttc_threshold, constants.gap_per_vehicle) == (5.0, 2.0 + config.platoon.vehicle_length)
-    assert (constants.jerk_reference, constants.preferred_setting) == (config.jerk_reference, config.preferred_setting)
+    assert (constants.jerk_reference, constants.preferred_setting) == (config.reward_scales.jerk_reference, config.preferred_setting)
 
 
 @pytest.mark.parametrize("name", REWARD_TERMS)

@@ -29,9 +29,8 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 import timegap_env  # noqa: F401 - registers the env
-from timegap_env.config import DEGRADATION_KINDS, MAX_SPEED
+from timegap_env.config import DEGRADATION_KINDS, DEGRADATIONS, MAX_SPEED
 from timegap_env.envs.env import TimeGapMonitorEnv
-from timegap_env.sim.degradation import SIZED
 from timegap_env.sim.presets import acc_presets
 from tests.fuzz.fuzzing import (
     DATA_PRESENT, ENV_ID, NO_DATA, PLAYABLE, Defects, Digest, bad_step, bad_values, call, fuzz_settings, short,
@@ -419,9 +418,10 @@ def leader_speed_values() -> st.SearchStrategy:
 
 
 def sizes_for(kind: str) -> list[tuple[Any, str]]:
-    if kind not in SIZED:
+    bounds = DEGRADATIONS[kind].size_bounds if kind in DEGRADATIONS else None
+    if bounds is None:
         return [(None, VALID), (1.0, INVALID), (0.0, INVALID), ("none", INVALID)]
-    _, (low, high, open_low, open_high) = SIZED[kind]
+    low, high, open_low, open_high = bounds
     inside = [low + (high - low) * f for f in (0.0, 0.25, 0.5, 1.0)]
     inside = [x for x in inside if (x > low if open_low else x >= low) and (x < high if open_high else x <= high)]
     if kind == "v2v_latency":  # a multiple of dt = 0.1 s, up to max_v2v_latency = 1 s
@@ -449,7 +449,7 @@ def degradation_dicts(draw: st.DrawFn) -> tuple[Any, str]:
         ("", INVALID), ("LAG", INVALID), ("none", INVALID), (None, INVALID), (1, INVALID), (["lag"], INVALID)]))
     description: dict[Any, Any] = {} if draw(st.integers(0, 9)) == 0 else {"kind": kind}
     statuses = [status if "kind" in description else INVALID]
-    sized = isinstance(kind, str) and kind in SIZED
+    sized = isinstance(kind, str) and kind in DEGRADATIONS and DEGRADATIONS[kind].size_bounds is not None
     if draw(st.booleans()) or sized:
         size, s = draw(tagged(sizes_for(kind if isinstance(kind, str) else "")))
         if size is not None or not sized:

@@ -90,7 +90,7 @@ def test_fuzzed_configs_are_valid(name):
     """The configs above are within the documented bounds: the env must build them."""
     gym.make(ENV_ID, config=CONFIGS[name])
 
-# Pinned degradations at the ends of their documented ranges (timegap_env.sim.degradation.SIZED), onsets and ends
+# Pinned degradations at the ends of their documented ranges (timegap_env.config.DEGRADATIONS' size_bounds), onsets and ends
 # anywhere up to the longest episode. The env runs them clean or refuses them with a ValueError naming the option.
 EXTREME_SIZES: dict[str, list[float | None]] = {
     "lag": [1e-300, 1e-6, 1.0, 10.0], "gain": [1e-300, 1e-6, 1.0, 10.0], "v2v_latency": [0.0, 0.1, 1.0],

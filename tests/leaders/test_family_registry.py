@@ -150,6 +150,7 @@ def test_a_name_is_registered_once_unless_replaced():
 def test_a_registration_lives_in_its_process_and_a_module_prefix_imports_it(tmp_path):
     (tmp_path / "my_leaders.py").write_text(textwrap.dedent("""
         import numpy as np
+        from timegap_env.config import LeaderConfig
         from timegap_env.leaders import LeaderFamily, LeaderProfile, register_family
 
         def constant(seed: int | None, params: None, leader: LeaderConfig) -> LeaderProfile:

@@ -46,8 +46,8 @@ def test_bad_descriptions_are_named(description, message):
 
 def test_a_latency_off_the_tick_or_beyond_the_buffer_is_named():
     table = DegradationTable(PlatoonConfig(), n_envs=1)
-    for size in (0.25, 1.2):
-        with pytest.raises(ValueError, match=f"degradation size = {size}: a v2v_latency must be a multiple"):
+    for size, rule in ((0.25, "must be a multiple of dt = 0.1 s"), (1.2, "must be at most max_v2v_latency = 1.0 s")):
+        with pytest.raises(ValueError, match=f"degradation size = {size}: a v2v_latency {rule}"):
             table.set(0, parse_degradations({"kind": "v2v_latency", "size": size}, 5))
 
 

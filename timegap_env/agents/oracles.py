@@ -24,16 +24,16 @@ from typing import Any, cast
 import numpy as np
 
 from timegap_env.agents.policies import as_config
-from timegap_env.config import SIZE_RANGE_FIELDS, DegradationConfig, EnvConfig
+from timegap_env.config import DEGRADATIONS, DegradationConfig, EnvConfig
 
 NOMINAL = "none"  # the condition of a follower no degradation acts on
-SIZE_BINS = 3  # a sized degradation's range is cut into this many equal bins (per sign for radar_bias)
+SIZE_BINS = 3  # a sized degradation's range is cut into this many equal bins (per sign for a signed kind)
 
 
 def condition_keys(truth: Mapping[str, np.ndarray], config: DegradationConfig, whole_episode: bool = False) -> np.ndarray:
     """Each follower's true condition as a string key, shaped like ``truth["kind"]``: "none" when nothing
     acts, "<kind>:<bin>" for a sized kind (bin 0 .. SIZE_BINS - 1 of its drawn range, "-" before the bin
-    of a negative radar bias), else the kind (a commercial ACC: whichever car). With ``whole_episode`` the
+    of a negative size of a signed kind: radar bias), else the kind (a commercial ACC: whichever car). With ``whole_episode`` the
     follower's degradation counts whether it acts now or not (before its onset, after its end)."""
     kinds, sizes, active = np.asarray(truth["kind"]), np.asarray(truth["size"]), np.asarray(truth["active"])
     keys = np.full(kinds.shape, NOMINAL, dtype=object)
@@ -41,7 +41,7 @@ def condition_keys(truth: Mapping[str, np.ndarray], config: DegradationConfig, w
         kind = cast(str, kinds[index])  # one element (a full index): the kind's name
         if not (whole_episode or active[index]) or kind == NOMINAL:
             continue
-        if kind in SIZE_RANGE_FIELDS:
+        if DEGRADATIONS[kind].range_field is not None:
             keys[index] = f"{kind}:{size_bin(kind, float(sizes[index]), config)}"
         else:
             keys[index] = kind
@@ -51,16 +51,17 @@ def condition_keys(truth: Mapping[str, np.ndarray], config: DegradationConfig, w
 def size_bin(kind: str, size: float, config: DegradationConfig) -> str:
     """The bin of ``size`` in ``kind``'s drawn range (clipped to it): "0" .. "2", with a "-" for a negative bias."""
     low, high = config.size_range(kind)
-    magnitude = abs(size) if kind == "radar_bias" else size
+    signed = DEGRADATIONS[kind].signed
+    magnitude = abs(size) if signed else size
     index = int(np.clip(np.floor((magnitude - low) / (high - low) * SIZE_BINS), 0, SIZE_BINS - 1))
-    return ("-" if kind == "radar_bias" and size < 0 else "") + str(index)
+    return ("-" if signed and size < 0 else "") + str(index)
 
 
 def bin_centres(kind: str, config: DegradationConfig) -> dict[str, float]:
-    """Each bin of ``kind`` and the size at its centre (signed for radar_bias)."""
+    """Each bin of ``kind`` and the size at its centre (both signs for a signed kind)."""
     low, high = config.size_range(kind)
     centres = {str(i): low + (i + 0.5) * (high - low) / SIZE_BINS for i in range(SIZE_BINS)}
-    if kind == "radar_bias":
+    if DEGRADATIONS[kind].signed:
         centres |= {f"-{key}": -value for key, value in centres.items()}
     return centres
 

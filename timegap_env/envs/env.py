@@ -66,12 +66,12 @@ class TimeGapMonitorEnv(gym.Env):
 
     ## Rewards
 
-    A weighted sum of named terms, each <= 0 and about -1 at its worst, each in
-    ``info["reward_<term>"]``: ``tracking``, ``string_stability``, ``safety``, ``collision``,
-    ``comfort``, ``efficiency``, ``preference`` and ``switching``. They judge the true state, never
-    the monitor. Their formulas and the reasons for the default weights are in
-    :mod:`timegap_env.envs.reward`; the weights are ``config["reward_weights"]``
-    (:class:`timegap_env.config.RewardWeights`).
+    A weighted sum of named terms (the fields of :class:`timegap_env.config.RewardWeights`: tracking,
+    string stability, safety, collision, comfort, ...), each <= 0 and about -1 at its worst, each in
+    ``info["reward_<term>"]``. They judge the true state, never the monitor. Their formulas and the
+    reasons for the default weights are in :mod:`timegap_env.envs.reward`; the weights are
+    ``config["reward_weights"]``, the scales of one unit of each ``config["reward_scales"]``
+    (:class:`timegap_env.config.RewardScales`).
 
     ## Info
 

@@ -19,8 +19,8 @@ A step is scored in three steps, each a compiled function over named structures:
 
 :func:`score_step` runs the three in one compiled call, the env's hot path.
 
-The terms, means over followers (their weights are :class:`~timegap_env.config.RewardWeights`'s); the
-applied setting is the tau* the controller uses (it ramps after a change of setting), s0 the platoon's:
+The terms, means over followers (their weights are :class:`~timegap_env.config.RewardWeights`'s, their
+scales, named below, :class:`~timegap_env.config.RewardScales`'s); the applied setting is the tau* the controller uses (it ramps after a change of setting), s0 the platoon's:
 
 | term | value | why |
 |---|---|---|
@@ -128,18 +128,18 @@ class RewardConstants(NamedTuple):
         return cls(
             dt=float(config.platoon.dt),
             ticks_per_step=config.ticks_per_decision,
-            tracking_reference=float(config.tracking_reference),
-            ttc_threshold=float(config.ttc_threshold),
-            jerk_reference=float(config.jerk_reference),
+            tracking_reference=float(config.reward_scales.tracking_reference),
+            ttc_threshold=float(config.reward_scales.ttc_threshold),
+            jerk_reference=float(config.reward_scales.jerk_reference),
             smallest_level=float(config.setting_levels[0]),
             level_span=config.setting_span,
             preferred_setting=float(config.preferred_setting),
             gap_per_vehicle=float(config.platoon.standstill_spacing + config.platoon.vehicle_length),
             standstill_spacing=float(config.platoon.standstill_spacing),
             min_speed=TIME_GAP_MIN_SPEED,
-            tracking_cap=float(config.tracking_cap),
-            accel_growth_reference=float(config.accel_growth_reference),
-            envelope_decay=math.exp(-config.platoon.dt / config.accel_envelope_time),
+            tracking_cap=float(config.reward_scales.tracking_cap),
+            accel_growth_reference=float(config.reward_scales.accel_growth_reference),
+            envelope_decay=math.exp(-config.platoon.dt / config.reward_scales.accel_envelope_time),
         )
 
 

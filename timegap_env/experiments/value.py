@@ -25,7 +25,7 @@ import numpy as np
 from timegap_env.agents.oracles import NOMINAL, LookupOracle, StabilityOracle, TruthPolicy, bin_centres
 from timegap_env.agents.policies import seconds
 from timegap_env.agents.protocol import EVAL_SEED_START
-from timegap_env.config import DEGRADATION_KINDS, SIZE_RANGE_FIELDS, EnvConfig
+from timegap_env.config import DEGRADATION_KINDS, DEGRADATIONS, EnvConfig
 from timegap_env.envs.info import truth_of
 from timegap_env.experiments.backends import Backend
 from timegap_env.experiments.rollout import rollout
@@ -102,8 +102,8 @@ def constants(config: EnvConfig, seeds: Sequence[int], options: dict[str, Any] |
 
 
 def sized(kind: str, size: float, config: EnvConfig) -> float:
-    """``size`` as a degradation of ``kind`` takes it: a V2V latency on whole ticks."""
-    return round_to_tick(size, config.platoon.dt) if kind == "v2v_latency" else size
+    """``size`` as a degradation of ``kind`` takes it: a time (a V2V latency) on whole ticks."""
+    return round_to_tick(size, config.platoon.dt) if DEGRADATIONS[kind].whole_ticks else size
 
 
 def diagonal(pairs: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
@@ -116,7 +116,7 @@ def training_conditions(config: EnvConfig) -> dict[str, tuple[EnvConfig, dict[st
     its bin's centre from the start on every follower; a commercial ACC platoon draws its cars as the mix does."""
     conditions: dict[str, tuple[EnvConfig, dict[str, Any]]] = {NOMINAL: (config, {"degradation": None})}
     for kind in DEGRADATION_KINDS:
-        if kind in SIZE_RANGE_FIELDS:
+        if DEGRADATIONS[kind].range_field is not None:
             conditions |= {f"{kind}:{b}": (config, {"degradation": {"kind": kind, "size": sized(kind, size, config)}})
                            for b, size in bin_centres(kind, config.degradation).items()}
         elif kind == "commercial_acc":

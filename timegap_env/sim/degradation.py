@@ -4,16 +4,11 @@ A :class:`Degradation` names a kind, a size, the followers it hits (1 = right be
 when it starts and whether it ends. Only a V2V outage shows in the car's V2V flag; the rest is
 hidden, and spotting it from spacing and speed is what the monitor is for.
 
-| kind | ``size`` | while it acts |
-|---|---|---|
-| ``lag`` | factor on the lag T [-] | the GLVD lag grows (brake fade, load) |
-| ``gain`` | the gain K [-] | the car realises less of the command (grade, weight) |
-| ``v2v_latency`` | added delay [s] | V2V messages arrive later; the flag stays up |
-| ``packet_loss`` | chance per tick [-] | V2V messages are lost, the feed-forward holds the last one received; the flag stays up |
-| ``v2v_outage`` | none | the link is down and the flag shows it: ACC |
-| ``radar_bias`` | bias [m] | the radar reads the spacing off by it, for the controller and the monitor alike: with a positive bias the car keeps less than its setting, by bias / v |
-| ``radar_noise`` | std [m] | the radar's spacing reading is this noisy (the monitor's view; the controller filters) |
-| ``commercial_acc`` | none (``car``) | the follower is a commercial ACC car calibrated to OpenACC (:mod:`timegap_env.sim.presets`): its lag, gains and highest command, and no V2V |
+The kinds are the records of :data:`~timegap_env.config.DEGRADATIONS`, each with what it does, what
+its size is and the bounds of a size, the config field of its drawn range and the parameter (the
+``lever``) it sets: this module draws, writes and reports every kind from those records alone
+(``commercial_acc``, which swaps the whole car model for a calibrated one, is the one kind handled by
+name).
 
 A commercial ACC keeps the platoon's s0, so its actual time gap and the monitor's prior mean the
 same thing as for the others. :class:`DegradationTable` holds every follower's degradation of
@@ -34,21 +29,13 @@ from typing import Any, NoReturn
 import numpy as np
 
 from timegap_env.config import (
-    DEGRADATION_KINDS, MAX_DT, MAX_EPISODE_TICKS, MAX_TIME_GAP, DegradationConfig, PlatoonConfig, SensorConfig,
+    DEGRADATION_KINDS, DEGRADATIONS, MAX_DT, MAX_EPISODE_TICKS, MAX_TIME_GAP, DegradationConfig, PlatoonConfig, SensorConfig,
     is_finite, is_real, shown,
 )
 from timegap_env.sim.platoon import Platoon, ZOHCoefficients
 from timegap_env.sim.stability import SettingSweep
 
 KINDS = ("none", *DEGRADATION_KINDS)  # kind codes: the index in this tuple
-SIZED = {  # each sized kind: what its size is, and the interval a size must lie in (low, high, low open, high open)
-    "lag": ("factor on the lag T [-]", (0.0, 10.0, True, False)),
-    "gain": ("gain K [-]", (0.0, 10.0, True, False)),
-    "v2v_latency": ("added V2V delay [s]", (0.0, MAX_TIME_GAP, False, False)),
-    "packet_loss": ("chance per tick [-]", (0.0, 1.0, False, True)),
-    "radar_bias": ("spacing bias [m]", (-100.0, 100.0, False, False)),
-    "radar_noise": ("spacing noise std [m]", (0.0, 100.0, False, False)),
-}
 MAX_TIME = MAX_EPISODE_TICKS * MAX_DT  # latest onset or end of a degradation, the longest episode there can be [s]
 DESCRIPTION_KEYS = ("kind", "size", "followers", "onset", "end", "car")  # what a degradation dict may hold
 NEVER = np.iinfo(np.int64).max // 4  # the end tick of a degradation that does not end
@@ -85,15 +72,11 @@ class Degradation:
                 or len(set(followers)) != len(followers)):
             self._fail("followers", followers, "must be distinct follower numbers >= 1 (1 = right behind the leader)")
         object.__setattr__(self, "followers", tuple(int(f) for f in followers))
-        if self.kind in SIZED:
-            meaning, (low, high, open_low, open_high) = SIZED[self.kind]
-            interval = f"{'(' if open_low else '['}{low:g}, {high:g}{')' if open_high else ']'}"
-            self._time_or_size("size", f"a {self.kind} degradation needs a finite size: {meaning}")
-            size = self.size
-            assert size is not None  # _time_or_size stored a float
-            if not ((low < size if open_low else low <= size)
-                    and (size < high if open_high else size <= high)):
-                self._fail("size", self.size, f"out of range for {self.kind}: {meaning} in {interval}")
+        record = DEGRADATIONS[self.kind]
+        if record.size_bounds is not None:
+            self._time_or_size("size", f"a {self.kind} degradation needs a finite size: {record.size}")
+            if self.size not in record.size_bounds:
+                self._fail("size", self.size, f"out of range for {self.kind}: {record.size} in {record.size_bounds}")
         elif self.size is not None:
             self._fail("size", self.size, f"a {self.kind} degradation has no size")
         if self.car is not None and (self.kind != "commercial_acc" or not isinstance(self.car, str)):
@@ -194,19 +177,22 @@ def draw_degradation(rng: np.random.Generator, config: DegradationConfig, n_foll
     end = end if end is not None and onset < end < duration else None  # (in a one-tick episode both round to 0)
     if kind == "none":
         return ()
-    if kind == "v2v_outage":
-        length = max(round_to_tick(rng.uniform(*config.v2v_outage_duration_range), dt), dt)  # at least a tick
+    record = DEGRADATIONS[kind]
+    if record.duration_field is not None:
+        length = max(round_to_tick(rng.uniform(*getattr(config, record.duration_field)), dt), dt)  # at least a tick
         onset = round_to_tick(rng.uniform(0.0, max(duration - length, 0.0)), dt)
-        return (Degradation(kind, followers, onset=onset, end=onset + length),)
+        end = onset + length
     if kind == "commercial_acc":
         from timegap_env.sim.presets import COMMERCIAL_ACC, acc_presets  # scipy-backed: imported when used
 
         cars = sorted(car for car in acc_presets() if car != COMMERCIAL_ACC)
         return tuple(Degradation(kind, (f,), car=cars[rng.integers(len(cars))]) for f in followers)
+    if record.range_field is None:
+        return (Degradation(kind, followers, onset=onset, end=end),)
     size = float(rng.uniform(*config.size_range(kind)))
-    if kind == "v2v_latency":
+    if record.whole_ticks:
         size = round_to_tick(size, dt)
-    if kind == "radar_bias" and rng.random() < 0.5:
+    if record.signed and rng.random() < 0.5:
         size = -size
     return (Degradation(kind, followers, size=size, onset=onset, end=end),)
 
@@ -403,11 +389,14 @@ class _Hits:
         """Env ``env``'s followers that ``degradation`` hits; ``ValueError`` for a V2V latency the table cannot hold or
         an unknown car."""
         cfg, kind, size = table.config, degradation.kind, degradation.size
-        if kind == "v2v_latency":
-            assert size is not None  # a v2v_latency has a size
-            if size > cfg.max_v2v_latency + 1e-9 or abs(size / cfg.dt - round(size / cfg.dt)) > 1e-9:
-                raise ValueError(f"degradation size = {size!r}: a v2v_latency must be a multiple of dt = {cfg.dt} s "
-                                 f"up to max_v2v_latency = {cfg.max_v2v_latency} s")
+        record = DEGRADATIONS[kind]
+        if record.whole_ticks:
+            assert size is not None  # a kind on whole ticks has a size
+            if abs(size / cfg.dt - round(size / cfg.dt)) > 1e-9:
+                raise ValueError(f"degradation size = {size!r}: a {kind} must be a multiple of dt = {cfg.dt} s")
+        if record.lever == "extra_delay" and size is not None and size > cfg.max_v2v_latency + 1e-9:
+            raise ValueError(f"degradation size = {size!r}: a {kind} must be at most max_v2v_latency = "
+                             f"{cfg.max_v2v_latency} s (the V2V buffer's length)")
         if kind == "commercial_acc":
             from timegap_env.sim.presets import COMMERCIAL_ACC, acc_presets  # scipy-backed: imported when used
 
@@ -435,21 +424,17 @@ class _Hits:
         table.kind[rows, columns], table.size[rows, columns] = kinds, sizes
         table.start[rows, columns], table.end[rows, columns] = self.starts, self.ends
 
-        def where(kind: str) -> tuple[tuple[np.ndarray, np.ndarray], np.ndarray]:
-            chosen = kinds == KINDS.index(kind)
-            return (rows[chosen], columns[chosen]), sizes[chosen]
-
-        at, size = where("lag")
-        table.lag[at] *= size
-        at, size = where("gain")
-        table.gain[at] = size
-        at, size = where("v2v_latency")
-        table.extra_delay[at] = np.rint(size / table.config.dt)
-        for kind, target in (("packet_loss", table.packet_loss), ("radar_bias", table.radar_bias),
-                             ("radar_noise", table.radar_noise)):
-            at, size = where(kind)
-            target[at] = size
-        table.v2v_down[where("v2v_outage")[0]] = True
+        for code, record in enumerate(DEGRADATIONS.values(), start=1):  # each kind sets its lever
+            chosen = kinds == code
+            if record.lever is None or not chosen.any():
+                continue
+            at, size, lever = (rows[chosen], columns[chosen]), sizes[chosen], getattr(table, record.lever)
+            if record.size is None:
+                lever[at] = True  # a flag
+            elif record.scales:
+                lever[at] *= size
+            else:
+                lever[at] = np.rint(size / table.config.dt) if record.whole_ticks else size
         if self.cars:
             from timegap_env.sim.presets import acc_presets
 
