@@ -7,7 +7,7 @@ PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 EXTRAS := dev,train,render,docs
 
-.PHONY: install demo test typecheck package clients train bench calibrate degradation clean
+.PHONY: install demo test typecheck package clients train bench calibrate map degradation clean
 
 install: $(STAMP)
 
@@ -27,6 +27,7 @@ demo: $(STAMP)
 	MPLBACKEND=Agg $(PY) -m train.detection_benchmark
 	MPLBACKEND=Agg $(PY) -m train.tune_rule
 	MPLBACKEND=Agg $(PY) -m train.evaluate
+	MPLBACKEND=Agg $(PY) -m train.task_map
 
 test: $(STAMP)
 	MPLBACKEND=Agg $(PY) -m pytest -q
@@ -48,6 +49,9 @@ bench: $(STAMP)
 
 calibrate: $(STAMP)
 	MPLBACKEND=Agg $(PY) -m train.calibrate_openacc
+
+map: $(STAMP)  # where reading the monitor can pay: weightings x severities x traffic (results/task, docs/task.md)
+	MPLBACKEND=Agg $(PY) -m train.task_map
 
 degradation: $(STAMP)
 	MPLBACKEND=Agg $(PY) -m train.choose_degradation_mix

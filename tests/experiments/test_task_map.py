@@ -1,0 +1,72 @@
+"""The map of issue 24: its post-hoc weighting is the env's reward, its seeds are disjoint, its references behave."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from timegap_env.config import EnvConfig
+from timegap_env.experiments.backends import Backend
+from timegap_env.experiments.rollout import rollout
+from timegap_env.experiments.task_map import (
+    REFERENCES, SEVERITIES, TRAFFIC, WEIGHTINGS, Plan, cell_config, choose_default, hypervolume, map_cell, term_sums,
+    weigh,
+)
+
+
+def constant(level: int):
+    return lambda obs, infos: np.full(len(obs), level)
+
+
+@pytest.mark.parametrize("name", sorted(WEIGHTINGS))
+def test_weighing_the_terms_afterwards_is_the_env_s_reward_under_that_weighting(name):
+    weighting = WEIGHTINGS[name]
+    config = cell_config("default", "default").with_overrides({"episode_duration": 40.0})
+    terms, _ = term_sums(config, [5, 6, 7], constant(2))
+    weighted = config.with_overrides({"reward_weights": weighting.weights})
+    returns = [record.episode_return for record in rollout(constant(2), weighted, [5, 6, 7]).records]
+    np.testing.assert_allclose(weigh(terms, weighting), returns, rtol=1e-9, atol=1e-9)
+
+
+def test_the_seeds_of_each_step_are_disjoint():
+    train, selection, held_out = Plan(train=16, selection=32, held_out=100).seeds()
+    assert not (set(train) & set(selection)) and not (set(selection) & set(held_out)) and not (set(train) & set(held_out))
+    assert min(held_out) == 10_000
+
+
+def test_every_cell_is_a_valid_config_and_unknown_ones_are_named():
+    for severity in SEVERITIES:
+        for traffic in TRAFFIC:
+            assert isinstance(cell_config(severity, traffic), EnvConfig)
+    with pytest.raises(ValueError, match="severity = 'mild'"):
+        cell_config("mild", "default")
+    with pytest.raises(ValueError, match="traffic = 'jam'"):
+        cell_config("default", "jam")
+
+
+def test_a_cell_gives_every_weighting_and_reference_and_hindsight_never_loses():
+    rows, fronts = map_cell("default", "default", Plan(train=2, selection=3, held_out=4), Backend())
+    assert [row["weighting"] for row in rows] == list(WEIGHTINGS)
+    for row in rows:
+        for reference in REFERENCES:
+            assert row[f"{reference}_gain_low"] <= row[f"{reference}_gain"] <= row[f"{reference}_gain_high"]
+        assert row["hindsight_gain_low"] >= 0  # the best constant per episode includes the blind one
+        assert isinstance(row["meets_target"], bool)
+    chosen = choose_default(rows)
+    assert chosen["degradation_aware_share"] == max(row["degradation_aware_share"] for row in rows)
+    assert len(fronts) == len(WEIGHTINGS) * (len(EnvConfig().setting_levels) + len(REFERENCES))
+    for front in fronts:  # adding a point never loses volume
+        assert front["hypervolume"] >= front["constants_hypervolume"] - 1e-12
+
+
+def test_hypervolume_of_known_boxes():
+    origin = np.zeros(3)
+    assert hypervolume(np.array([[1.0, 1.0, 1.0]]), origin) == pytest.approx(1.0)
+    two = np.array([[1.0, 0.5, 0.5], [0.5, 1.0, 1.0]])  # 0.25 + 0.5 - their overlap 0.125
+    assert hypervolume(two, origin) == pytest.approx(0.625)
+    assert hypervolume(np.vstack([two, [[0.4, 0.4, 0.4]]]), origin) == pytest.approx(0.625)  # a dominated point adds 0
+    rng = np.random.default_rng(0)
+    points = rng.uniform(0, 1, (6, 3))
+    samples = rng.uniform(0, 1, (200_000, 3))
+    dominated = (samples[:, None, :] <= points[None, :, :]).all(axis=2).any(axis=1).mean()
+    assert hypervolume(points, origin) == pytest.approx(dominated, abs=0.01)

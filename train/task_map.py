@@ -1,0 +1,166 @@
+"""The map of where reading the monitor can pay, and the default task's criterion (issue 24, docs/task.md).
+
+    python -m train.task_map [--train 16] [--selection 32] [--held-out 100] [--out results/task]
+                             [--backend serial|ray] [--address A]
+
+For each weighting x degradation severity x traffic mix of ``timegap_env.experiments.task_map``: the best
+blind constant (chosen on selection seeds) and the gain of each reference over it on held-out seeds, with
+95 % bootstrap intervals, which weighting the criterion picks, and the Pareto fronts (capacity, string
+stability, variation) of the constants against the references with their hypervolumes. Writes ``map.md``,
+``map.csv``, ``map_fronts.csv``, ``map.png`` and ``map_fronts.png`` to ``--out`` (through a partial directory: a failed run overwrites nothing); reruns give the same
+files.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import time
+from pathlib import Path
+from typing import Any
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt
+import numpy as np
+
+from timegap_env import cli
+from timegap_env.experiments.backends import Backend, add_arguments
+from timegap_env.experiments.task_map import (
+    FRONT_OBJECTIVES, MAX_BLIND_COLLISION_RATE, REFERENCES, SEVERITIES, TARGET_SHARE, TRAFFIC, WEIGHTINGS, Plan,
+    choose_default, task_map,
+)
+
+
+def count(text: str) -> int:
+    """A command-line count: an integer >= 1."""
+    value = int(text)
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"{text!r}: must be an integer >= 1")
+    return value
+
+
+def write_csv(rows: list[dict[str, Any]], path: Path) -> None:
+    with open(path, "w", newline="", encoding="utf-8") as file:
+        writer = csv.DictWriter(file, fieldnames=list(rows[0]))
+        writer.writeheader()
+        writer.writerows({key: f"{value:.6g}" if isinstance(value, float) else value for key, value in row.items()}
+                         for row in rows)
+
+
+def hypervolume_lines(fronts: list[dict[str, Any]]) -> list[str]:
+    lines = ["## Pareto fronts", "",
+             f"Capacity (the efficiency term), string stability and time-gap variation (tracking), each summed over the "
+             f"episode and averaged over the held-out seeds (map_fronts.csv). Hypervolume of the nine constants, and of "
+             f"the constants with each reference added, in units of each objective's spread over the cell's points "
+             f"above its worst point: a reference that adds volume reaches trade-offs no constant does.", "",
+             "| weighting | severity | traffic | constants | " + " | ".join(f"+ {ref}" for ref in REFERENCES) + " |",
+             "|---|---|---|---|" + "---|" * len(REFERENCES)]
+    cells = sorted({(f["weighting"], f["severity"], f["traffic"]) for f in fronts},
+                   key=lambda c: (list(WEIGHTINGS).index(c[0]), list(SEVERITIES).index(c[1]), list(TRAFFIC).index(c[2])))
+    for cell in cells:
+        points = {f["point"]: f for f in fronts if (f["weighting"], f["severity"], f["traffic"]) == cell}
+        constants = next(iter(points.values()))["constants_hypervolume"]
+        lines.append(f"| {' | '.join(cell)} | {constants:.3f} | "
+                     + " | ".join(f"{points[ref]['hypervolume']:.3f}" for ref in REFERENCES) + " |")
+    return lines + [""]
+
+
+def markdown(rows: list[dict[str, Any]], fronts: list[dict[str, Any]], plan: Plan, chosen: dict[str, Any],
+             runtime: str) -> str:
+    lines = ["# Where reading the monitor can pay: the map", "",
+             "Written by `python -m train.task_map` (criterion and weightings: docs/task.md). Seeds: lookup tables on "
+             f"training seeds 0-{plan.train - 1}; every choice (best blind constant, V2V pair, which oracle) on "
+             f"{plan.selection} selection seeds from 5000; every number below on {plan.held_out} held-out seeds from "
+             "10000. Gain: mean return of the reference minus the best blind constant's, per episode, [95 % bootstrap "
+             "interval]; share: gain / |best blind return|; collisions: episodes of the held-out ones.", ""]
+    for name, weighting in WEIGHTINGS.items():
+        lines += [f"## {name}", "", f"{weighting.why}.", "",
+                  "| severity | traffic | best blind | its return | its collisions | "
+                  + " | ".join(f"{ref} gain [CI] (share)" for ref in REFERENCES) + " | oracle chosen |",
+                  "|---|---|---|---|---|" + "---|" * len(REFERENCES) + "---|"]
+        for row in rows:
+            if row["weighting"] != name:
+                continue
+            cells = [f"{row[f'{ref}_gain']:.1f} [{row[f'{ref}_gain_low']:.1f}, {row[f'{ref}_gain_high']:.1f}] "
+                     f"({100 * row[f'{ref}_share']:.1f} %)" for ref in REFERENCES]
+            lines.append(f"| {row['severity']} | {row['traffic']} | {row['best_blind']} | {row['best_blind_return']:.1f} "
+                         f"| {row['best_blind_collisions']} | " + " | ".join(cells) + f" | {row['degradation_aware_chosen']} |")
+        lines.append("")
+    verdict = "meets" if chosen["meets_target"] else "does not meet"
+    lines += ["## The criterion", "",
+              f"On the default severity and traffic, the weighting whose degradation-aware oracle gains the largest "
+              f"share over the best blind constant is **{chosen['weighting']}**: "
+              f"{100 * chosen['degradation_aware_share']:.1f} % "
+              f"[{chosen['degradation_aware_gain_low']:.1f}, {chosen['degradation_aware_gain_high']:.1f}] per episode, "
+              f"the best blind constant ({chosen['best_blind']}) colliding in {chosen['best_blind_collisions']} of "
+              f"{chosen['episodes']}. It {verdict} the target (at least {100 * TARGET_SHARE:.0f} %, interval above 0, "
+              f"at most {100 * MAX_BLIND_COLLISION_RATE:.0f} % collisions of the best blind constant).", "",
+              *hypervolume_lines(fronts), f"Runtime: {runtime}", ""]
+    return "\n".join(lines)
+
+
+def front_figure(fronts: list[dict[str, Any]], path: Path) -> None:
+    """Capacity against string stability (colour: variation) on the default cell, one panel per weighting."""
+    x_name, y_name, colour = FRONT_OBJECTIVES
+    fig, axes = plt.subplots(1, len(WEIGHTINGS), figsize=(4.2 * len(WEIGHTINGS), 3.8), sharex=True, sharey=True)
+    for ax, name in zip(axes, WEIGHTINGS):
+        points = [f for f in fronts if f["weighting"] == name and f["severity"] == "default" and f["traffic"] == "default"]
+        values = np.array([[p[x_name], p[y_name], p[colour]] for p in points])
+        shown = ax.scatter(values[:, 0], values[:, 1], c=values[:, 2], cmap="viridis", s=28)
+        for point, (x, y, _) in zip(points, values):
+            ax.annotate(point["point"].replace("constant ", ""), (x, y), fontsize=6, xytext=(3, 2),
+                        textcoords="offset points")
+        ax.set_title(f"{name}: default severity and traffic", fontsize=8)
+        ax.set_xlabel(f"{x_name} (capacity) per episode")
+    axes[0].set_ylabel(f"{y_name} per episode")
+    fig.colorbar(shown, ax=axes, label=f"{colour} (time-gap variation) per episode")
+    fig.savefig(path, dpi=110, metadata={"Software": None})
+    plt.close(fig)
+
+
+def figure(rows: list[dict[str, Any]], path: Path) -> None:
+    fig, axes = plt.subplots(1, len(WEIGHTINGS), figsize=(4.2 * len(WEIGHTINGS), 4.0), sharey=True)
+    cells = [(severity, traffic) for severity in SEVERITIES for traffic in TRAFFIC]
+    x = np.arange(len(cells))
+    for ax, name in zip(axes, WEIGHTINGS):
+        by_cell = {(row["severity"], row["traffic"]): row for row in rows if row["weighting"] == name}
+        for i, ref in enumerate(REFERENCES):
+            share = np.array([100 * by_cell[cell][f"{ref}_share"] for cell in cells])
+            ax.bar(x + (i - 1) * 0.27, share, width=0.27, label=ref)
+        ax.axhline(100 * TARGET_SHARE, color="k", lw=0.8, ls="--")
+        ax.set_xticks(x, [f"{s}\n{t}" for s, t in cells], fontsize=7)
+        ax.set_title(name, fontsize=9)
+    axes[0].set_ylabel("gain over the best blind constant [% of |its return|]")
+    axes[0].legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110, metadata={"Software": None})
+    plt.close(fig)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    defaults = Plan()
+    parser.add_argument("--train", type=count, default=defaults.train, help="training seeds per condition")
+    parser.add_argument("--selection", type=count, default=defaults.selection, help="selection seeds")
+    parser.add_argument("--held-out", type=count, default=defaults.held_out, help="held-out seeds")
+    parser.add_argument("--out", default="results/task", help="directory for map.md, map.csv, map.png")
+    add_arguments(parser)
+    args = parser.parse_args()
+    plan, backend = Plan(args.train, args.selection, args.held_out), Backend.from_args(args)
+    work = cli.work_directory(args.out)
+    start = time.perf_counter()
+    rows, fronts = task_map(plan, backend)
+    runtime = f"{time.perf_counter() - start:.0f} s ({backend.name} backend)"
+    write_csv(rows, work / "map.csv")
+    write_csv(fronts, work / "map_fronts.csv")
+    (work / "map.md").write_text(markdown(rows, fronts, plan, choose_default(rows), runtime), encoding="utf-8")
+    figure(rows, work / "map.png")
+    front_figure(fronts, work / "map_fronts.png")
+    cli.publish(work, args.out)
+    print((Path(args.out) / "map.md").read_text(encoding="utf-8"))
+
+
+if __name__ == "__main__":
+    main()
