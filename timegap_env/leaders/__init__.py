@@ -3,6 +3,7 @@
 - :mod:`~timegap_env.leaders.profile`: :class:`LeaderProfile`, from speeds, accelerations or a CSV;
 - :mod:`~timegap_env.leaders.synthetic`: seeded synthetic families (the paper's aggressive cycles, ...,
   and the held-out harsh ones: stop-and-go waves, emergency braking);
+- :mod:`~timegap_env.leaders.regimes`: traffic that changes within an episode, a leader that strings regimes;
 - :mod:`~timegap_env.leaders.ngsim`: real NGSIM I-80 drivers;
 - :mod:`~timegap_env.leaders.openacc`: real commercial ACC platoons (OpenACC), and their lead cars;
 - :mod:`~timegap_env.leaders.idm`: highway-env's IDM driver reacting to a disturbance;
@@ -14,6 +15,7 @@ from timegap_env.leaders.idm import idm_leader
 from timegap_env.leaders.ngsim import default_ngsim_path, read_ngsim, vehicle_ids, vehicle_profile
 from timegap_env.leaders.openacc import OpenAccRun, default_openacc_dir, openacc_paths, read_openacc
 from timegap_env.leaders.profile import LeaderProfile
+from timegap_env.leaders.regimes import REGIMES, RegimesConfig, regime_schedule  # its leader: make_leader("regimes")
 from timegap_env.leaders.scenarios import (
     HELD_OUT_FAMILIES, SCENARIOS, LeaderFamily, get_scenario, make_leader, register_family,
 )
@@ -29,8 +31,9 @@ from timegap_env.leaders.synthetic import (
 )
 
 __all__ = [
-    "HELD_OUT_FAMILIES", "SCENARIOS", "EmergencyBrakingConfig", "LeaderFamily", "LeaderProfile", "OpenAccRun",
-    "StopAndGoConfig", "aggressive_cycles", "default_ngsim_path", "default_openacc_dir", "emergency_braking",
-    "get_scenario", "hard_braking", "idm_leader", "make_leader", "openacc_paths", "read_ngsim", "read_openacc",
-    "register_family", "sinusoid", "stochastic_human", "stop_and_go", "vehicle_ids", "vehicle_profile",
+    "HELD_OUT_FAMILIES", "REGIMES", "SCENARIOS", "EmergencyBrakingConfig", "LeaderFamily", "LeaderProfile",
+    "OpenAccRun", "RegimesConfig", "StopAndGoConfig", "aggressive_cycles", "default_ngsim_path", "default_openacc_dir",
+    "emergency_braking", "get_scenario", "hard_braking", "idm_leader", "make_leader", "openacc_paths", "read_ngsim",
+    "read_openacc", "regime_schedule", "register_family", "sinusoid", "stochastic_human", "stop_and_go",
+    "vehicle_ids", "vehicle_profile",
 ]

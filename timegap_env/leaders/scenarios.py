@@ -24,7 +24,7 @@ import numpy as np
 from timegap_env.config import (
     AggressiveCyclesConfig, ConfigMixin, HardBrakingConfig, LeaderConfig, SinusoidConfig, StochasticHumanConfig, shown,
 )
-from timegap_env.leaders import idm, ngsim, openacc, synthetic
+from timegap_env.leaders import idm, ngsim, openacc, regimes, synthetic
 from timegap_env.leaders.profile import LeaderProfile, LeaderProfiles
 
 Build = Callable[[int | None, Any, LeaderConfig], LeaderProfile]  # (seed, params, leader) -> profile
@@ -118,6 +118,9 @@ LEADER_FAMILIES: dict[str, LeaderFamily] = {family.name: family for family in (
     LeaderFamily("emergency_braking", synthetic.emergency_braking,
                  "Highway cruising with emergency stops at 6-7.5 m/s^2.",
                  synthetic.EmergencyBrakingConfig, synthetic.emergency_braking_batch),
+    LeaderFamily("regimes", regimes.regimes,
+                 "Traffic that changes within an episode: free flow, slow oscillation, aggressive cycles, "
+                 "stop-and-go and hard braking regimes in turn.", regimes.RegimesConfig),
     LeaderFamily("ngsim", lambda seed, params, leader: ngsim_leader(seed, leader, within_band=False),
                  "A real NGSIM I-80 driver's recorded speed."),
     LeaderFamily("ngsim_in_band", lambda seed, params, leader: ngsim_leader(seed, leader, within_band=True),
