@@ -148,6 +148,7 @@ def main() -> None:
     parser.add_argument("--out", default="results/task", help="directory for map.md, map.csv, map.png")
     add_arguments(parser)
     args = parser.parse_args()
+    cli.output_dir(args.out)
     plan, backend = Plan(args.train, args.selection, args.held_out), Backend.from_args(args)
     work = cli.work_directory(args.out)
     start = time.perf_counter()
@@ -163,4 +164,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    cli.run(main, "python -m train.task_map")

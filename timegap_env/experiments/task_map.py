@@ -61,6 +61,7 @@ SEVERITIES: dict[str, dict[str, Any]] = {  # EnvConfig.degradation overrides
 TRAFFIC: dict[str, dict[str, float]] = {  # EnvConfig.scenario_weights
     "default": dict(EnvConfig().scenario_weights),
     "harsh": {"stop_and_go": 1.0, "emergency_braking": 1.0},
+    "changing": {"regimes": 1.0},  # regimes that change within an episode (timegap_env.leaders.regimes)
 }
 REFERENCES = ("v2v_pair", "degradation_aware", "hindsight")
 FRONT_OBJECTIVES = ("efficiency", "string_stability", "tracking")  # capacity, string stability, time-gap variation:
