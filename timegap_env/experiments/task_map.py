@@ -33,7 +33,7 @@ from timegap_env.experiments.heldout import LARGER_DEGRADATIONS
 from timegap_env.experiments.rollout import rollout
 from timegap_env.experiments.stats import bootstrap_mean
 from timegap_env.experiments.value import (
-    BATCH, MARGINS, SELECTION_SEED_START, flag_aware_actions, oracle_actions, training_conditions,
+    MARGINS, SELECTION_SEED_START, oracle_actions, pair_pieces, training_conditions,
 )
 
 
@@ -106,24 +106,13 @@ def term_sums(config: EnvConfig, seeds: Sequence[int], choose: Any, options: dic
     return terms, np.array([bool(record.summary["collision"]) for record in records])
 
 
-def _pair_runs(config: EnvConfig, seeds: Sequence[int], pairs: Sequence[tuple[int, int]],
-               options: dict[str, Any] | None = None) -> list[tuple[Any, ...]]:
-    """Pieces of work running each (level while up, level while down) of ``pairs`` on every seed, BATCH envs each."""
-    jobs = [(seed, up, down) for up, down in pairs for seed in seeds]
-    pieces = []
-    for start in range(0, len(jobs), BATCH):
-        chunk = jobs[start:start + BATCH]
-        up, down = (np.array([job[i] for job in chunk]) for i in (1, 2))
-        pieces.append((config, [job[0] for job in chunk], functools.partial(flag_aware_actions, up, down), options))
-    return pieces
-
-
 def pair_terms(config: EnvConfig, seeds: Sequence[int], pairs: Sequence[tuple[int, int]], backend: Backend,
                options: dict[str, Any] | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Term sums (n_pairs, n_seeds, n_terms) and collisions (n_pairs, n_seeds) of every pair of levels."""
-    parts = backend.map(term_sums, _pair_runs(config, seeds, pairs, options))
-    terms = np.concatenate([part[0] for part in parts]).reshape(len(pairs), len(seeds), len(REWARD_TERMS))
-    return terms, np.concatenate([part[1] for part in parts]).reshape(len(pairs), len(seeds))
+    parts = backend.map(term_sums, pair_pieces(config, seeds, pairs, options))
+    terms = np.concatenate([part[0] for part in parts]).reshape(len(seeds), len(pairs), len(REWARD_TERMS))
+    collided = np.concatenate([part[1] for part in parts]).reshape(len(seeds), len(pairs))
+    return terms.transpose(1, 0, 2), collided.T
 
 
 def weigh(terms: np.ndarray, weighting: Weighting) -> np.ndarray:

@@ -74,6 +74,14 @@ def constant_pieces(config: EnvConfig, seeds: Sequence[int], options: dict[str, 
     n_levels = len(config.setting_levels)
     pairs = [(up, down) for up in range(n_levels) for down in range(n_levels)] if flag_aware else \
         [(level, level) for level in range(n_levels)]
+    return pair_pieces(config, seeds, pairs, options)
+
+
+def pair_pieces(config: EnvConfig, seeds: Sequence[int], pairs: Sequence[tuple[int, int]],
+                options: dict[str, Any] | None = None) -> list[tuple[Any, ...]]:
+    """The arguments of :func:`run` (or any function of the same arguments) that play each (level while every V2V
+    flag is up, level while any is down) of ``pairs`` on every seed, seed after seed, in batches of at most BATCH
+    envs: each a piece of work for a backend."""
     jobs = [(seed, up, down) for seed in seeds for up, down in pairs]
     pieces = []
     for start in range(0, len(jobs), BATCH):
@@ -172,4 +180,4 @@ def kind_groups(kinds: np.ndarray) -> list[tuple[str, np.ndarray]]:
 
 __all__ = ["BATCH", "DEFAULT_TRAIN_EPISODES", "MARGINS", "MONITOR_SIGNALS", "SELECTION_EPISODES", "SELECTION_SEED_START",
            "TARGET_SHARE", "all_oracles", "choose_oracle", "constant_pieces", "constants", "diagonal", "gather_constants",
-           "kind_groups", "measure_lookup", "oracle_piece", "run", "training_conditions"]
+           "kind_groups", "measure_lookup", "oracle_piece", "pair_pieces", "run", "training_conditions"]
