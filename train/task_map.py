@@ -51,10 +51,10 @@ def write_csv(rows: list[dict[str, Any]], path: Path) -> None:
 
 def hypervolume_lines(fronts: list[dict[str, Any]]) -> list[str]:
     lines = ["## Pareto fronts", "",
-             f"Capacity (the efficiency term), string stability and time-gap variation (tracking), each summed over the "
-             f"episode and averaged over the held-out seeds (map_fronts.csv). Hypervolume of the nine constants, and of "
-             f"the constants with each reference added, in units of each objective's spread over the cell's points "
-             f"above its worst point: a reference that adds volume reaches trade-offs no constant does.", "",
+             "Capacity (the efficiency term), string stability and time-gap variation (tracking), each summed over the "
+             "episode and averaged over the held-out seeds (map_fronts.csv). Hypervolume of the ladder's constants, and "
+             "of the constants with each reference added, in units of each objective's spread over the cell's points "
+             "above its worst point: a reference that adds volume reaches trade-offs no constant does.", "",
              "| weighting | severity | traffic | constants | " + " | ".join(f"+ {ref}" for ref in REFERENCES) + " |",
              "|---|---|---|---|" + "---|" * len(REFERENCES)]
     cells = sorted({(f["weighting"], f["severity"], f["traffic"]) for f in fronts},

@@ -164,11 +164,12 @@ def front_rows(constants: np.ndarray, references: dict[str, np.ndarray], levels:
     scaled = {name: (point - low) / spread for name, point in points.items()}
     blind = np.array([scaled[f"constant {level:g} s"] for level in levels])
     origin = np.zeros(3)
+    constants_volume = hypervolume(blind, origin)
     rows = []
     for name, point in points.items():
-        with_it = blind if name.startswith("constant") else np.vstack([blind, scaled[name]])
+        volume = constants_volume if name.startswith("constant") else hypervolume(np.vstack([blind, scaled[name]]), origin)
         rows.append({**cell, "point": name, **dict(zip(FRONT_OBJECTIVES, point.tolist())),
-                     "hypervolume": hypervolume(with_it, origin), "constants_hypervolume": hypervolume(blind, origin)})
+                     "hypervolume": volume, "constants_hypervolume": constants_volume})
     return rows
 
 

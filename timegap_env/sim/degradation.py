@@ -29,7 +29,7 @@ from typing import Any, NoReturn
 import numpy as np
 
 from timegap_env.config import (
-    DEGRADATION_KINDS, DEGRADATIONS, MAX_DT, MAX_EPISODE_TICKS, MAX_TIME_GAP, DegradationConfig, PlatoonConfig, SensorConfig,
+    DEGRADATION_KINDS, DEGRADATIONS, MAX_DT, MAX_EPISODE_TICKS, DegradationConfig, PlatoonConfig, SensorConfig,
     is_finite, is_real, shown,
 )
 from timegap_env.sim.platoon import Platoon, ZOHCoefficients
