@@ -66,22 +66,24 @@ from timegap_env.sim import (
     COMMERCIAL_ACC, Trajectory, acc_platoon, acc_presets, platoon_string_stability, simulate, string_stability,
 )
 
-ENV_ID = "TimeGapMonitor-v0"
+ENV_ID = "TimeGapMonitor-v0"  # the first task, kept bit for bit; the id the rollout harness builds its configs in
+ENV_IDS = {0: ENV_ID, 1: "TimeGapMonitor-v1"}  # env version -> id; each version's defaults: config.TASK_VERSIONS
+LATEST_ENV_ID = ENV_IDS[max(ENV_IDS)]  # the default task (docs/task.md says how it was chosen)
+MO_ENV_ID = "mo-TimeGapMonitor-v1"  # LATEST_ENV_ID with the reward terms as a vector (MO-Gymnasium's API)
 
-
-if ENV_ID not in registry:
-    # no max_episode_steps: the env truncates itself at EnvConfig.episode_duration. No passive env checker: the
-    # tests run gymnasium's check_env, and the checker (gymnasium 1.2-1.4) breaks every step() after a reset()
-    # that raised (e.g. on a bad option) with "cannot unpack non-iterable NoneType object", even after a good reset.
-    register(
-        id=ENV_ID,
-        disable_env_checker=True,
-        entry_point="timegap_env.envs.env:TimeGapMonitorEnv",
-        vector_entry_point="timegap_env.envs.vector_env:TimeGapMonitorVectorEnv",
-    )
+# No max_episode_steps: the env truncates itself at EnvConfig.episode_duration. No passive env checker: the tests run
+# gymnasium's check_env, and the checker (gymnasium 1.2-1.4) breaks every step() after a reset() that raised (e.g. on a
+# bad option) with "cannot unpack non-iterable NoneType object", even after a good reset.
+for _version, _id in ENV_IDS.items():
+    if _id not in registry:
+        register(id=_id, disable_env_checker=True, entry_point="timegap_env.envs.env:TimeGapMonitorEnv",
+                 vector_entry_point="timegap_env.envs.vector_env:TimeGapMonitorVectorEnv", kwargs={"version": _version})
+if MO_ENV_ID not in registry:
+    register(id=MO_ENV_ID, disable_env_checker=True, entry_point="timegap_env.envs.mo_env:MOTimeGapMonitorEnv",
+             kwargs={"version": 1})
 
 __all__ = [
-    "__version__", "COMMERCIAL_ACC", "ENV_ID", "MONITOR_PRESETS", "SCENARIOS", "AggressiveCyclesConfig", "ChartConfig", "DegradationConfig", "EnvConfig",
+    "__version__", "COMMERCIAL_ACC", "ENV_ID", "ENV_IDS", "LATEST_ENV_ID", "MO_ENV_ID", "MONITOR_PRESETS", "SCENARIOS", "AggressiveCyclesConfig", "ChartConfig", "DegradationConfig", "EnvConfig",
     "HardBrakingConfig", "HumanLeaderConfig", "LeaderConfig", "LeaderFamily", "LeaderProfile", "MonitorConfig", "OpenAccRun",
     "PlatoonConfig", "RewardScales", "RewardWeights", "SensorConfig", "SinusoidConfig", "StochasticHumanConfig", "TimeGapEstimate", "TimeGapMonitor",
     "Trajectory", "acc_platoon", "acc_presets", "aggressive_cycles", "default_ngsim_path", "default_openacc_dir", "estimate_time_gap", "hard_braking", "idm_leader",

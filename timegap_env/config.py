@@ -512,6 +512,52 @@ class RewardWeights(ConfigMixin):
         for field in dataclasses.fields(self):
             self._number(field.name, 0.0, MAX_WEIGHT)
 
+    @classmethod
+    def of(cls, value: Any, field: str = "reward_weights") -> RewardWeights:
+        """``value`` as weights: RewardWeights, a preset's name (:data:`REWARD_PRESETS`), a dict of fields, or a
+        sequence of one weight per field in field order; ``ValueError`` naming ``field`` and the value otherwise."""
+        names = [f.name for f in dataclasses.fields(cls)]
+        if isinstance(value, cls):
+            return value
+        if isinstance(value, str):
+            if value not in REWARD_PRESETS:
+                raise ValueError(f"{field} = {value!r}: unknown preset; known: {list(REWARD_PRESETS)}")
+            return REWARD_PRESETS[value].weights
+        if isinstance(value, Mapping):
+            try:
+                return cls().with_overrides(value)
+            except ValueError as error:
+                raise ValueError(f"{field}: {error}") from error
+        items = _items(value)
+        if items is None:
+            raise ValueError(f"{field} = {shown(value)}: must be a preset's name {list(REWARD_PRESETS)}, a dict of "
+                             f"weights or a sequence of {len(names)} weights in the order {names}")
+        if len(items) != len(names):
+            raise ValueError(f"{field} = {shown(value)}: has {len(items)} weights; needs {len(names)}, one per term "
+                             f"in the order {names}")
+        try:
+            return cls(*items)
+        except ValueError as error:
+            raise ValueError(f"{field}: {error}") from error
+
+
+@dataclasses.dataclass(frozen=True)
+class RewardPreset:
+    """A whole weighting of the reward terms a traffic engineer could defend, and why (docs/task.md)."""
+
+    name: str
+    weights: RewardWeights
+    why: str
+
+
+REWARD_PRESETS: dict[str, RewardPreset] = {preset.name: preset for preset in (
+    RewardPreset("driver_preference", RewardWeights(), "TimeGapMonitor-v0's default: the driver chose 1.6 s"),
+    RewardPreset("variation_first", RewardWeights(tracking=2.0, efficiency=0.0, preference=0.0),
+                 "the paper's measure: the actual time gap kept at its setting; no capacity pressure, no preference"),
+    RewardPreset("capacity_first", RewardWeights(tracking=0.5, string_stability=2.0, efficiency=2.0, preference=0.0),
+                 "an operator's: capacity, guarded by string stability and safety; no driver preference"),
+)}
+
 
 @dataclasses.dataclass(frozen=True)
 class RewardScales(ConfigMixin):
@@ -707,8 +753,11 @@ class EnvConfig(ConfigMixin):
     # {"amplitude_range": (4.0, 8.0)}}; the families and fields are checked when the env is built
     dropout_probability_range: tuple[float, float] = (0.0, 0.05)  # per-episode sensor dropout rate drawn from [-],
     # 0 <= low <= high < 1
+    info_keys: str = "v0"  # the info's keys, one of INFO_KEYS: "v0" is v0's; "v1" adds vector_reward, cost,
+    # objective_<name> and truth_regime (timegap_env.envs.info)
 
     def __post_init__(self) -> None:
+        object.__setattr__(self, "reward_weights", RewardWeights.of(self.reward_weights, "EnvConfig.reward_weights"))
         for field, kind in NESTED_CONFIGS.items():
             if not isinstance(getattr(self, field), kind):
                 self._fail(field, getattr(self, field), f"must be a {kind.__name__} (or a dict of its fields)")
@@ -752,24 +801,35 @@ class EnvConfig(ConfigMixin):
             self._fail("degradation.v2v_latency_range", self.degradation.v2v_latency_range,
                        f"must stay within platoon.max_v2v_latency = {self.platoon.max_v2v_latency} s")
         self._pair("dropout_probability_range", 0.0, 1.0, open_high=True, strict=False)
+        self._choice("info_keys", INFO_KEYS)
 
     @classmethod
-    def from_dict(cls, overrides: Mapping[str, Any] | None = None) -> EnvConfig:
-        """The default config with ``overrides``; nested configs take dicts of their own fields."""
+    def from_dict(cls, overrides: Mapping[str, Any] | EnvConfig | None = None, version: int = 0) -> EnvConfig:
+        """The default config of env version ``version`` (:data:`TASK_VERSIONS`) with ``overrides``; nested configs
+        take dicts of their own fields (over the version's), ``reward_weights`` also a preset's name or a sequence of
+        weights (:meth:`RewardWeights.of`). An EnvConfig is already whole: it is returned as it is."""
+        if version not in TASK_VERSIONS:
+            raise ValueError(f"env version = {shown(version)}: unknown; known: {list(TASK_VERSIONS)}")
+        if isinstance(overrides, EnvConfig):
+            return overrides
+        return cls().nested_overrides(TASK_VERSIONS[version]).nested_overrides(overrides)
+
+    def nested_overrides(self, overrides: Mapping[str, Any] | None) -> EnvConfig:
+        """Copy of this config with ``overrides``, nested configs as dicts of their fields over this one's (a preset's
+        name or a sequence for ``reward_weights``); ``ValueError`` naming an unknown or bad field."""
         if overrides is not None and not isinstance(overrides, Mapping):
             raise ValueError(f"EnvConfig config = {shown(overrides)}: must be a dict of EnvConfig fields "
                              f"(nested configs as dicts) or None")
         overrides = dict(overrides or {})
-        default = cls()
         for field in NESTED_CONFIGS:
             if isinstance(overrides.get(field), Mapping):
                 try:
-                    overrides[field] = getattr(default, field).with_overrides(overrides[field])
+                    overrides[field] = getattr(self, field).with_overrides(overrides[field])
                 except ValueError as error:
                     raise ValueError(f"EnvConfig.{field}: {error}") from error
         if isinstance(overrides.get("setting_levels"), (list, np.ndarray)):
             overrides["setting_levels"] = tuple(overrides["setting_levels"])
-        return default.with_overrides(overrides)
+        return self.with_overrides(overrides)
 
     @property
     def ticks_per_decision(self) -> int:
@@ -785,3 +845,15 @@ class EnvConfig(ConfigMixin):
     def setting_span(self) -> float:
         """Largest setting level minus the smallest [s]."""
         return float(self.setting_levels[-1]) - float(self.setting_levels[0])
+
+
+INFO_KEYS = ("v0", "v1")  # EnvConfig.info_keys's values
+TASK_VERSIONS: dict[int, dict[str, Any]] = {  # env version -> its defaults, as overrides of EnvConfig's (docs/task.md)
+    0: {},  # TimeGapMonitor-v0: EnvConfig's own defaults
+    1: {  # TimeGapMonitor-v1: the weighting the criterion chose, traffic that changes within an episode among the
+        # families, and the objectives in the info
+        "reward_weights": "variation_first",
+        "scenario_weights": {**_default_scenario_weights(), "regimes": 1.0},
+        "info_keys": "v1",
+    },
+}

@@ -13,7 +13,11 @@ any follower needs), (n_envs, N) or (N,) for ``"per_vehicle"``.
   the true condition (the active degradation's kind and size bin), from a table measured by
   ``train/value_of_information.py``; with ``whole_episode=True`` it reads the episode's schedule
   instead (it sees the future) and holds the setting for the episode's condition from reset on,
-  so that the platoon is ready before the onset.
+  so that the platoon is ready before the onset;
+- :class:`RegimeOracle`: the setting that scored best for the leader's regime now (its family, or the regime of a
+  leader whose traffic changes within the episode: ``truth["regime"]``, which envs with ``info_keys="v1"`` report),
+  on training seeds; with a ``floor`` (another oracle), at least the floor's setting for each follower: it then knows
+  the traffic and the car's condition together.
 """
 
 from __future__ import annotations
@@ -120,3 +124,29 @@ class LookupOracle(TruthPolicy):
     def _settings(self, truth: Mapping[str, np.ndarray]) -> np.ndarray:
         keys = condition_keys(truth, self.config.degradation, self.whole_episode)
         return np.vectorize(lambda key: self.table.get(key, self.table[NOMINAL]), otypes=[float])(keys)
+
+
+class RegimeOracle(TruthPolicy):
+    """Every follower's setting [s] from ``table`` (the leader's regime, a name of
+    :func:`~timegap_env.leaders.scenarios.regime_names` -> setting), raised for each follower to ``floor``'s setting
+    when a floor is given (for a :class:`LookupOracle` floor, only where a degradation acts: its nominal entry does
+    not raise it). ``KeyError`` naming a regime missing from the table."""
+
+    def __init__(self, table: Mapping[str, float], config: EnvConfig | Mapping[str, Any] | None = None,
+                 floor: TruthPolicy | None = None) -> None:
+        super().__init__(config)
+        self.table = dict(table)
+        self.floor = floor
+        if isinstance(floor, LookupOracle):  # its nominal entry is the traffic's best, which the regime knows better
+            self.floor = LookupOracle({**floor.table, NOMINAL: 0.0}, floor.config, floor.whole_episode)
+        self.name = "oracle_regime" + ("" if floor is None else "+" + floor.name.removeprefix("oracle_"))
+
+    def _settings(self, truth: Mapping[str, np.ndarray]) -> np.ndarray:
+        if "regime" not in truth:
+            raise KeyError("the ground truth has no regime: run the env with info_keys='v1' (TimeGapMonitor-v1)")
+        regimes = np.asarray(truth["regime"]).reshape(-1)
+        missing = sorted(set(regimes.tolist()) - set(self.table))
+        if missing:
+            raise KeyError(f"regimes {missing} are not in the table (it has {sorted(self.table)})")
+        settings = np.array([self.table[regime] for regime in regimes])[:, None] * np.ones_like(truth["size"], float)
+        return settings if self.floor is None else np.maximum(settings, self.floor._settings(truth))

@@ -1,7 +1,7 @@
 """The native vector env at growing sizes, for ``train.bench``: env-steps/s, peak memory per env and batched reset.
 
-Each size gets a fresh ``gym.make_vec("TimeGapMonitor-v0", vectorization_mode="vector_entry_point")`` in this
-process, random actions, one core (numba's kernels are single-threaded). Stepping is timed within episodes: the
+Each size gets a fresh native vector env (what ``gym.make_vec("TimeGapMonitor-v0",
+vectorization_mode="vector_entry_point")`` builds) in this process, random actions, one core (numba's kernels are single-threaded). Stepping is timed within episodes: the
 envs are reset before the episode limit, so that the synchronised end of every episode (all sub-envs reset in
 the same step) does not land in some sizes' timing and not in others'; batched resets are timed on their own.
 
@@ -19,15 +19,9 @@ import sys
 import time
 import tracemalloc
 from pathlib import Path
-from typing import TYPE_CHECKING, cast
-
-import gymnasium as gym
 import numpy as np
 
-from timegap_env import ENV_ID
-
-if TYPE_CHECKING:
-    from timegap_env.envs.vector_env import TimeGapMonitorVectorEnv
+from timegap_env.envs.vector_env import TimeGapMonitorVectorEnv
 
 TRACED_STEPS = 3  # steps taken under tracemalloc after the reset, so that the peak covers stepping too
 ACTION_POOL = 16  # distinct random action batches cycled while timing (sampled beforehand, not timed)
@@ -72,9 +66,7 @@ def restart_peak_rss() -> int | None:
 
 def make_native(n_envs: int, step_diagnostics: bool) -> TimeGapMonitorVectorEnv:
     """The native vector env of n_envs platoons."""
-    return cast("TimeGapMonitorVectorEnv", gym.make_vec(  # the entry point's class, unwrapped
-        ENV_ID, num_envs=n_envs, vectorization_mode="vector_entry_point", step_diagnostics=step_diagnostics,
-        autoreset_mode="same_step"))
+    return TimeGapMonitorVectorEnv(num_envs=n_envs, step_diagnostics=step_diagnostics, autoreset_mode="same_step")
 
 
 class Stepper:

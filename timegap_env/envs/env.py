@@ -11,7 +11,7 @@ import numpy as np
 
 from timegap_env.config import EnvConfig, shown
 from timegap_env.envs.action import action_space
-from timegap_env.envs.info import EPISODE_PREFIX, REWARD_PREFIX, no_rewards, of_env, prefixed, step_diagnostics_flag
+from timegap_env.envs.info import EPISODE_PREFIX, no_scores, of_env, prefixed, step_diagnostics_flag, step_scores
 from timegap_env.envs.observation import observation_space
 from timegap_env.envs.rendering import DEFAULT_TIME_WINDOW
 from timegap_env.envs.task import PlatoonTask
@@ -125,10 +125,10 @@ class TimeGapMonitorEnv(gym.Env):
     metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 10}
 
     def __init__(self, config: Mapping[str, Any] | None = None, render_mode: str | None = None,
-                 step_diagnostics: bool = True) -> None:
+                 step_diagnostics: bool = True, version: int = 0) -> None:
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode = {render_mode!r}: must be None or one of {self.metadata['render_modes']}")
-        self.config = EnvConfig.from_dict(config)
+        self.config = EnvConfig.from_dict(config, version)
         self.render_mode = render_mode
         self.task = PlatoonTask(self.config, n_envs=1)
         if render_mode is not None:
@@ -147,7 +147,7 @@ class TimeGapMonitorEnv(gym.Env):
         self._needs_reset = False
         if self.task.trace is not None:
             self.task.trace.clear()
-        info = {**self._info(), **of_env(no_rewards(1), 0)} if self.step_diagnostics else {}
+        info = {**self._info(), **of_env(no_scores(1, self.config.info_keys), 0)} if self.step_diagnostics else {}
         return self.task.observation()[0].ravel(), info
 
     def __getstate__(self) -> dict[str, Any]:
@@ -160,7 +160,8 @@ class TimeGapMonitorEnv(gym.Env):
             raise ResetNeeded("TimeGapMonitorEnv.step() called before reset() or after the episode ended "
                               "(terminated or truncated): call reset() first")
         result = self.task._run_step(self._checked(action))
-        info = {**self._info(), **of_env(prefixed(REWARD_PREFIX, result.terms), 0)} if self.step_diagnostics else {}
+        info = {**self._info(), **of_env(step_scores(result.terms, self.task.objectives()), 0)} \
+            if self.step_diagnostics else {}
         terminated, truncated = bool(result.terminated[0]), bool(result.truncated[0])
         if terminated or truncated:
             info.update(of_env(prefixed(EPISODE_PREFIX, self.task.episode_summary()), 0))

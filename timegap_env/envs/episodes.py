@@ -19,7 +19,7 @@ import numpy as np
 
 from timegap_env.config import EnvConfig, shown
 from timegap_env.leaders.profile import LeaderProfile, LeaderProfiles
-from timegap_env.leaders.scenarios import SCENARIOS, family_params, make_leaders
+from timegap_env.leaders.scenarios import LEADER_FAMILIES, SCENARIOS, USER, family_params, make_leaders, regime_names
 from timegap_env.sim.degradation import Categorical, Degradation, draw_degradation, parse_degradations
 
 RESET_OPTIONS = ("leader_speed", "scenario", "degradation")  # the keys reset(options=...) takes
@@ -66,7 +66,9 @@ class Episodes:
     ticks in the episode; ``degradations`` (a tuple of :class:`~timegap_env.sim.degradation.Degradation`
     per env); ``dropout_probability`` (n_envs,) [-]; ``initial_setting`` (n_envs,) [s], the setting the episode
     starts at; ``noise_keys`` (n_envs,) uint64 of the sensor noise
-    and ``packet_loss_keys`` of the V2V losses; ``scenario`` (n_envs,), the leader's name.
+    and ``packet_loss_keys`` of the V2V losses; ``scenario`` (n_envs,), the leader's name; with ``info_keys`` "v1",
+    ``regime`` (n_envs, max_ticks + 1) int16, the leader's regime at every tick (an index into
+    :func:`~timegap_env.leaders.scenarios.regime_names`, held at its last value beyond the profile), else None.
     """
 
     def __init__(self, config: EnvConfig, n_envs: int) -> None:
@@ -84,6 +86,7 @@ class Episodes:
         self.initial_setting = np.full(n_envs, config.platoon.initial_setting)  # [s]
         self.noise_keys = np.zeros(n_envs, dtype=np.uint64)
         self.scenario = np.full(n_envs, "", dtype=object)
+        self.regime = np.zeros((n_envs, max_ticks + 1), dtype=np.int16) if config.info_keys != "v0" else None
         self._params = family_params(config.leader_params)  # leader family -> its parameter dataclass
         self._families = list(config.scenario_weights)
         self._family_draw = Categorical([config.scenario_weights[f] for f in self._families])
@@ -117,6 +120,7 @@ class Episodes:
             except ValueError as error:
                 raise ValueError(f"reset option leader_speed: {error}") from None
             self._load_leaders(envs, LeaderProfiles.of(profile))
+            self._load_regimes(envs, USER, [None] * len(envs))
         else:
             families: dict[str, tuple[list[int], list[int]]] = {}  # family -> its envs and their leaders' seeds
             for env in envs.tolist():
@@ -138,6 +142,8 @@ class Episodes:
                             raise ValueError(f"scenario {family!r} has dt = {batch.dt} s; the env runs at {dt} s")
                         self._load_leaders(np.array(members[loaded : loaded + len(batch)]), batch)
                         loaded += len(batch)
+                    self._load_regimes(np.array(members[first : first + LEADER_BATCH]), family,
+                                       seeds[first : first + LEADER_BATCH])
         durations = self.episode_ticks * dt  # [s]
         for env in envs.tolist():
             rng = rngs[env]
@@ -162,6 +168,24 @@ class Episodes:
         self.leader_accel[envs, n:] = 0.0
         self.episode_ticks[envs] = ticks
         self.scenario[envs] = profiles.name
+
+    def _load_regimes(self, envs: np.ndarray, scenario: str, seeds: Sequence[int | None]) -> None:
+        """Each env of ``envs``'s regime at every tick (with ``info_keys`` "v1"): its family's schedule for its
+        leader's seed, or the family (USER: the user's leader) throughout; after :meth:`_load_leaders`."""
+        if self.regime is None:
+            return
+        names = {name: code for code, name in enumerate(regime_names())}
+        family = None if scenario == USER else LEADER_FAMILIES[SCENARIOS[scenario].leader_family]
+        for env, seed in zip(envs.tolist(), seeds):
+            if family is None or family.schedule is None:
+                self.regime[env] = names[USER if family is None else family.name]
+                continue
+            params = self._params.get(family.name) or (family.params() if family.params is not None else None)
+            codes, regimes = family.schedule(seed, params, self.config.leader)
+            ticks = int(self.episode_ticks[env])
+            row = np.array([names[f"{family.name}:{regime}"] for regime in regimes], dtype=np.int16)[codes[: ticks + 1]]
+            self.regime[env, : row.size] = row
+            self.regime[env, row.size :] = row[-1]
 
     def leader_at(self, ticks: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The leader's speed [m/s] and acceleration [m/s^2] at ``ticks`` (n_ticks, n_envs), held after the episode."""

@@ -13,6 +13,17 @@ plain string key (no nested dicts, no strings), so that gymnasium's vector envs,
 - at the step that ends an episode, ``episode_<name>``, its summary
   (:meth:`~timegap_env.envs.totals.EpisodeTotals.summary`).
 
+With ``EnvConfig.info_keys = "v1"`` (``TimeGapMonitor-v1``'s default) it also holds, the last step's (0 at reset):
+
+- ``vector_reward`` (n_terms,): the reward terms in REWARD_TERMS order, so that the reward is the weights
+  (``RewardWeights``, in the same order) times it (MO-Gymnasium's ``LinearReward`` convention);
+- ``cost`` (): the step's string instability, TTC shortfall and collision, each in [0, 1]
+  (:data:`~timegap_env.envs.reward.COST_TERMS`; Safety-Gymnasium's convention: >= 0, 0 when safe);
+- ``objective_<name>`` (): what each term measures in natural units (:data:`~timegap_env.envs.reward.OBJECTIVES`:
+  ``objective_capacity`` [veh/h], ``objective_time_gap_variation`` [s], ...);
+- ``truth_regime`` (): the leader's regime now, an index into
+  :func:`~timegap_env.leaders.scenarios.regime_names` (:func:`truth_of` gives the name).
+
 The native vector env's infos are what gymnasium's own vector envs make of these (arrays with a
 leading num_envs axis, a boolean ``_<key>`` mask beside each key, ``final_obs`` and ``final_info``
 at same-step autoresets). :func:`truth_of`, :func:`summary_of` and :func:`rewards_of` read the
@@ -25,11 +36,13 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from timegap_env.envs.reward import REWARD_TERMS
+from timegap_env.envs.reward import OBJECTIVES, REWARD_TERMS, step_cost
+from timegap_env.leaders.scenarios import regime_names
 from timegap_env.sim.degradation import KINDS
 
 KIND_NAMES = np.array(KINDS, dtype=object)  # truth_kind -> the degradation's name ("none": not hit)
-REWARD_PREFIX, TRUTH_PREFIX, EPISODE_PREFIX = "reward_", "truth_", "episode_"
+REWARD_PREFIX, TRUTH_PREFIX, EPISODE_PREFIX, OBJECTIVE_PREFIX = "reward_", "truth_", "episode_", "objective_"
+VECTOR_REWARD, COST = "vector_reward", "cost"  # info_keys "v1"'s keys beside the reward terms
 
 
 def step_diagnostics_flag(value: object) -> bool:
@@ -48,6 +61,23 @@ def prefixed(prefix: str, values: Mapping[str, np.ndarray]) -> dict[str, np.ndar
 def no_rewards(n_envs: int) -> dict[str, np.ndarray]:
     """``reward_<term>`` = 0 for each term, (n_envs,): what reset's info holds, so that step's keys are there too."""
     return {REWARD_PREFIX + name: np.zeros(n_envs) for name in REWARD_TERMS}
+
+
+def step_scores(terms: Mapping[str, np.ndarray], objectives: Mapping[str, np.ndarray] | None) -> dict[str, np.ndarray]:
+    """A step's scores as the info holds them: ``reward_<term>``; with ``objectives`` (name -> (n_envs,), given with
+    ``info_keys`` "v1") also ``vector_reward`` (n_envs, n_terms), ``cost`` and ``objective_<name>``."""
+    scores = prefixed(REWARD_PREFIX, terms)
+    if objectives is not None:
+        scores[VECTOR_REWARD] = np.stack([terms[name] for name in REWARD_TERMS], axis=-1)
+        scores[COST] = step_cost(terms)
+        scores.update(prefixed(OBJECTIVE_PREFIX, objectives))
+    return scores
+
+
+def no_scores(n_envs: int, info_keys: str) -> dict[str, np.ndarray]:
+    """:func:`step_scores` of no step, zeros (n_envs,): what reset's info holds, so that step's keys are there too."""
+    objectives = {objective.name: np.zeros(n_envs) for objective in OBJECTIVES.values()} if info_keys != "v0" else None
+    return step_scores({name: np.zeros(n_envs) for name in REWARD_TERMS}, objectives)
 
 
 def with_masks(infos: Mapping[str, np.ndarray], mask: np.ndarray) -> dict[str, np.ndarray]:
@@ -77,6 +107,8 @@ def truth_of(info: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
     if "kind" not in truth:
         raise KeyError(f"info has no ground truth ({TRUTH_PREFIX}* keys); its keys: {sorted(info)}")
     truth["kind"] = KIND_NAMES[np.asarray(truth["kind"], dtype=np.intp)]
+    if "regime" in truth:
+        truth["regime"] = np.array(regime_names(), dtype=object)[np.asarray(truth["regime"], dtype=np.intp)]
     return truth
 
 
@@ -90,5 +122,11 @@ def rewards_of(info: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
     return _group(info, REWARD_PREFIX)
 
 
-__all__ = ["EPISODE_PREFIX", "KIND_NAMES", "REWARD_PREFIX", "TRUTH_PREFIX", "no_rewards", "of_env", "prefixed", "rewards_of",
-           "step_diagnostics_flag", "summary_of", "truth_of", "with_masks"]
+def objectives_of(info: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """The objectives in ``info`` (``info_keys`` "v1") as ``{name: value}`` in natural units."""
+    return _group(info, OBJECTIVE_PREFIX)
+
+
+__all__ = ["COST", "EPISODE_PREFIX", "KIND_NAMES", "OBJECTIVE_PREFIX", "REWARD_PREFIX", "TRUTH_PREFIX", "VECTOR_REWARD",
+           "no_rewards", "no_scores", "objectives_of", "of_env", "prefixed", "rewards_of", "step_diagnostics_flag",
+           "step_scores", "summary_of", "truth_of", "with_masks"]

@@ -46,6 +46,7 @@ from __future__ import annotations
 import collections
 import dataclasses
 import math
+from collections.abc import Mapping
 from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numba
@@ -153,6 +154,61 @@ class StepScore(NamedTuple):
 def weights_of(config: EnvConfig) -> RewardTerms:
     """The reward weights as :class:`RewardTerms` of floats, in REWARD_TERMS order."""
     return RewardTerms(*(float(weight) for weight in dataclasses.astuple(config.reward_weights)))
+
+
+class Objective(NamedTuple):
+    """What a reward term measures, in natural units, and how the term is made of it."""
+
+    name: str  # info["objective_<name>"] (TimeGapMonitor-v1)
+    unit: str
+    term: str  # the term as a function of the objective (per follower, then the mean, where it says so)
+
+
+# Reward term -> its objective, in REWARD_TERMS order: each term is the documented function of its objective, so the
+# objectives say in natural units what the terms weigh.
+OBJECTIVES: dict[str, Objective] = {
+    "tracking": Objective("time_gap_variation", "s", "-time_gap_variation / tracking_reference: the mean over "
+                          "follower-ticks of min(abs(actual time gap - applied setting), tracking_cap), 0 below 1 m/s"),
+    "string_stability": Objective("acceleration_growth", "m/s^2", "-min(1, acceleration_growth / "
+                                  "accel_growth_reference): the rise of the acceleration envelopes down the platoon"),
+    "safety": Objective("ttc_shortfall", "s", "-ttc_shortfall / ttc_threshold: the mean over followers of "
+                        "max(0, ttc_threshold - the step's smallest time-to-collision)"),
+    "collision": Objective("collision", "-", "-collision: 1 on the step a gap reaches 0"),
+    "comfort": Objective("jerk_squared", "m^2/s^6", "-jerk_squared / jerk_reference^2: the mean over follower-ticks "
+                         "of jerk^2"),
+    "efficiency": Objective("capacity", "veh/h", "-mean over followers of (1 - capacity / capacity at the smallest "
+                            "level); capacity = 3600 v / (v tau* + s0 + vehicle length) at the step's final speed v, "
+                            "the objective its mean over followers"),
+    "preference": Objective("preference_deviation", "s", "-preference_deviation / span of the levels: the mean over "
+                            "followers of abs(tau* - preferred_setting)"),
+    "switching": Objective("switching", "-", "-switching: the share of followers whose setting changed"),
+}
+assert tuple(OBJECTIVES) == REWARD_TERMS
+COST_TERMS = ("string_stability", "safety", "collision")  # info["cost"] = -(the sum of these terms), in [0, 3]: a step's
+# string instability, TTC shortfall and collision, each in [0, 1] (Safety-Gymnasium's convention: >= 0, 0 when safe)
+
+
+def step_objectives(readouts: StepReadouts, setting: np.ndarray, changed: np.ndarray,
+                    constants: RewardConstants) -> dict[str, np.ndarray]:
+    """The objectives of :data:`OBJECTIVES` of a step, each (n_envs,) in its natural unit, from its ``readouts``;
+    ``setting`` [s] and ``changed`` (n_envs, n_followers) as in :func:`reward_terms`."""
+    n_ticks = constants.ticks_per_step
+    speed = readouts.final_speed
+    return {
+        "time_gap_variation": readouts.gap_deviation_sum / (n_ticks * setting.shape[1]),
+        "acceleration_growth": readouts.accel_growth.copy(),
+        "ttc_shortfall": np.maximum(0.0, constants.ttc_threshold - readouts.min_ttc).mean(axis=1),
+        "collision": readouts.collided.astype(float),
+        "jerk_squared": readouts.jerk_squared.mean(axis=1) / n_ticks,
+        "capacity": (3600.0 * speed / (speed * setting + constants.gap_per_vehicle)).mean(axis=1),
+        "preference_deviation": np.abs(setting - constants.preferred_setting).mean(axis=1),
+        "switching": changed.mean(axis=1),
+    }
+
+
+def step_cost(terms: Mapping[str, np.ndarray]) -> np.ndarray:
+    """A step's cost from its reward ``terms`` (name -> (n_envs,)): -(the sum of :data:`COST_TERMS`), >= 0."""
+    return 0.0 - np.sum([terms[name] for name in COST_TERMS], axis=0)  # 0.0 - : a safe step costs 0.0, not -0.0
 
 
 def step_readouts(step: StepTicks, previous_accel: np.ndarray, envelope: np.ndarray,

@@ -1,7 +1,7 @@
 """Stable-Baselines3 adapter: the native vector ``TimeGapMonitor-v0`` as an SB3 ``VecEnv``.
 
 ``TimeGapVecEnv(n_envs=16, config={...})`` steps all platoons in one batched NumPy
-call (``gym.make_vec(..., vectorization_mode="vector_entry_point")``) instead of
+call (the native vector env, as ``gym.make_vec(..., vectorization_mode="vector_entry_point")`` builds it) instead of
 N Python envs in a ``DummyVecEnv``, and follows SB3's conventions:
 
 - ``reset()`` returns the observations only; seeds set by ``seed(s)`` (sub-env i
@@ -23,24 +23,22 @@ from __future__ import annotations
 
 import time
 from collections.abc import Mapping
-from typing import TYPE_CHECKING, Any, cast
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
 from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices, VecEnvStepReturn
 
-from timegap_env import ENV_ID
 from timegap_env.envs.info import of_env
-
-if TYPE_CHECKING:
-    from timegap_env.envs.vector_env import TimeGapMonitorVectorEnv
+from timegap_env.envs.vector_env import TimeGapMonitorVectorEnv
 
 
 class TimeGapVecEnv(VecEnv):
     """``n_envs`` platoons of ``TimeGapMonitor-v0`` behind SB3's ``VecEnv`` API.
 
-    ``config`` overrides the env's :class:`~timegap_env.config.EnvConfig` as in ``gym.make``;
+    ``config`` overrides the env's :class:`~timegap_env.config.EnvConfig` as in ``gym.make`` of env version
+    ``version`` (0: ``TimeGapMonitor-v0``'s defaults, 1: ``-v1``'s);
     ``max_episode_steps``, optional, cuts episodes shorter than ``episode_duration``.
 
     The sub-envs are rows of one native vector env, not objects of their own:
@@ -51,12 +49,11 @@ class TimeGapVecEnv(VecEnv):
     """
 
     def __init__(
-        self, n_envs: int = 1, config: Mapping[str, Any] | None = None, max_episode_steps: int | None = None
+        self, n_envs: int = 1, config: Mapping[str, Any] | None = None, max_episode_steps: int | None = None,
+        version: int = 0,
     ) -> None:
-        limit: dict[str, Any] = {} if max_episode_steps is None else {"max_episode_steps": max_episode_steps}
-        self.venv = cast("TimeGapMonitorVectorEnv", gym.make_vec(
-            ENV_ID, num_envs=n_envs, vectorization_mode="vector_entry_point", config=config,
-            step_diagnostics=False, autoreset_mode="same_step", **limit))  # the entry point's class, unwrapped
+        self.venv = TimeGapMonitorVectorEnv(num_envs=n_envs, config=config, max_episode_steps=max_episode_steps,
+                                            step_diagnostics=False, autoreset_mode="same_step", version=version)
         super().__init__(n_envs, self.venv.single_observation_space, self.venv.single_action_space)
         self.config = self.venv.config
         self._actions: np.ndarray | None = None

@@ -29,7 +29,9 @@ from timegap_env.envs.episodes import Episodes, check_reset_options
 from timegap_env.envs.info import TRUTH_PREFIX, prefixed
 from timegap_env.envs.observation import FEATURES, FollowerState, ObservationScales, observe_into
 from timegap_env.envs.rendering import DEFAULT_TIME_WINDOW, RenderFrame
-from timegap_env.envs.reward import REWARD_TERMS, RewardConstants, StepReadouts, StepTicks, score_step, weights_of
+from timegap_env.envs.reward import (
+    REWARD_TERMS, RewardConstants, StepReadouts, StepTicks, score_step, step_objectives, weights_of,
+)
 from timegap_env.envs.step_kernel import StepRules, StepState, fused_step
 from timegap_env.envs.totals import EpisodeTotals
 from timegap_env.monitoring.loop import MonitoredPlatoon
@@ -284,6 +286,13 @@ class PlatoonTask:
             "skipped_measurements": monitor.skipped.copy(),  # since reset [-]
         }
 
+    def objectives(self) -> dict[str, np.ndarray] | None:
+        """The last step's objectives in natural units, each (n_envs,)
+        (:func:`~timegap_env.envs.reward.step_objectives`), with ``info_keys`` "v1"; else None."""
+        if self.config.info_keys == "v0":
+            return None
+        return step_objectives(self._readouts, self.loop.platoon.setting, self._changed, self._reward_constants)
+
     def step_info(self) -> dict[str, np.ndarray]:
         """Every env's info now, flat (:mod:`~timegap_env.envs.info`): :meth:`monitor_info` and the ground truth as
         ``truth_<name>``, each array with a leading n_envs axis."""
@@ -291,10 +300,13 @@ class PlatoonTask:
 
     def ground_truth(self) -> dict[str, np.ndarray]:
         """Each follower's degradation now, its true parameters and the smallest string-stable setting for them,
-        arrays (n_envs, n_followers) (:meth:`~timegap_env.sim.degradation.DegradationTable.truth`): for
+        arrays (n_envs, n_followers), and with ``info_keys`` "v1" the leader's regime (n_envs,) (:meth:`~timegap_env.sim.degradation.DegradationTable.truth`): for
         oracles and evaluation, never in the observation."""
-        loop = self.loop
-        return loop.degradation.truth(loop.ticks, self._v2v_during(loop.ticks))
+        loop, regime = self.loop, self.episodes.regime
+        truth = loop.degradation.truth(loop.ticks, self._v2v_during(loop.ticks))
+        if regime is not None:  # info_keys "v1": the leader's regime now, (n_envs,)
+            truth["regime"] = regime[np.arange(self.n_envs), np.minimum(loop.ticks, self.episodes.episode_ticks)]
+        return truth
 
     def episode_summary(self) -> dict[str, np.ndarray]:
         """Episode statistics so far, each (n_envs,)."""

@@ -21,7 +21,7 @@ from gymnasium.vector.utils import batch_space
 from timegap_env.config import EnvConfig, shown
 from timegap_env.envs.action import action_space
 from timegap_env.envs.info import (
-    EPISODE_PREFIX, REWARD_PREFIX, TRUTH_PREFIX, no_rewards, prefixed, step_diagnostics_flag, truth_of, with_masks,
+    EPISODE_PREFIX, TRUTH_PREFIX, no_scores, prefixed, step_diagnostics_flag, step_scores, truth_of, with_masks,
 )
 from timegap_env.envs.episodes import RESET_OPTIONS
 from timegap_env.envs.observation import observation_space
@@ -100,13 +100,14 @@ class TimeGapMonitorVectorEnv(VectorEnv):
         max_episode_steps: int | None = None,
         step_diagnostics: bool = True,
         autoreset_mode: str | AutoresetMode = AutoresetMode.NEXT_STEP,
+        version: int = 0,
     ) -> None:
         if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) or num_envs < 1:
             raise ValueError(f"num_envs = {shown(num_envs)}: must be an integer >= 1")
         self.autoreset_mode = parse_autoreset_mode(autoreset_mode)
         self.metadata = {**type(self).metadata, "autoreset_mode": self.autoreset_mode}
         self.num_envs = int(num_envs)
-        self.config = EnvConfig.from_dict(config)
+        self.config = EnvConfig.from_dict(config, version)
         check_fits(self.num_envs, PlatoonTask.bytes_per_env(self.config), available_memory())
         self.max_episode_steps = max_episode_steps or self.config.max_episode_steps
         self.task = PlatoonTask(self.config, self.num_envs)
@@ -151,7 +152,7 @@ class TimeGapMonitorVectorEnv(VectorEnv):
         self._ended[mask] = False
         if not self.step_diagnostics:
             return self._observations(), {}
-        infos = {**self.task.step_info(), **no_rewards(self.num_envs)}
+        infos = {**self.task.step_info(), **no_scores(self.num_envs, self.config.info_keys)}
         return self._observations(), with_masks(infos, mask)
 
     def ground_truth(self) -> dict[str, np.ndarray]:
@@ -196,18 +197,18 @@ class TimeGapMonitorVectorEnv(VectorEnv):
         self._steps += 1
         done = (result.terminated | result.truncated | (self._steps >= self.max_episode_steps)) & ~restarting
         terminated, truncated = result.terminated & done, ~result.terminated & done
-        reward, terms = result.reward.copy(), result.terms
+        reward, terms, objectives = result.reward.copy(), result.terms, self.task.objectives()
         if restarting.any():  # next_step: their step above ran past the episode's end and is dropped
             self._reset_task(restarting, None)
             self._steps[restarting] = 0
             reward = np.where(restarting, 0.0, reward)
-            terms = {name: np.where(restarting, 0.0, term) for name, term in terms.items()}
+            terms, objectives = _zeroed(terms, restarting), objectives and _zeroed(objectives, restarting)
         everyone = np.ones(self.num_envs, dtype=bool)
         infos: dict[str, Any] = {}
         if self.autoreset_mode == AutoresetMode.SAME_STEP and done.any():
             final_info = prefixed(EPISODE_PREFIX, self.task.episode_summary())
             if self.step_diagnostics:
-                final_info = {**self.task.step_info(), **prefixed(REWARD_PREFIX, terms), **final_info}
+                final_info = {**self.task.step_info(), **step_scores(terms, objectives), **final_info}
             final_obs = np.full(self.num_envs, None, dtype=object)
             for env, row in zip(np.flatnonzero(done), self._observations()[done]):
                 final_obs[env] = row
@@ -215,9 +216,10 @@ class TimeGapMonitorVectorEnv(VectorEnv):
                      "final_info": with_masks(final_info, done), "_final_info": done.copy()}
             self._reset_task(done, None)
             self._steps[done] = 0
-            terms = {name: np.where(done, 0.0, term) for name, term in terms.items()}  # the reset's, as reset() gives
+            terms, objectives = _zeroed(terms, done), objectives and _zeroed(objectives, done)  # the reset's, as
+            # reset() gives
         if self.step_diagnostics:
-            infos.update(with_masks({**self.task.step_info(), **prefixed(REWARD_PREFIX, terms)}, everyone))
+            infos.update(with_masks({**self.task.step_info(), **step_scores(terms, objectives)}, everyone))
         if self.autoreset_mode != AutoresetMode.SAME_STEP:
             if done.any():
                 infos.update(with_masks(prefixed(EPISODE_PREFIX, self.task.episode_summary()), done))
@@ -233,6 +235,11 @@ class TimeGapMonitorVectorEnv(VectorEnv):
 
     def _observations(self) -> np.ndarray:
         return self.task.observation().reshape(self.num_envs, -1)
+
+
+def _zeroed(values: dict[str, np.ndarray], mask: np.ndarray) -> dict[str, np.ndarray]:
+    """``values`` (name -> (num_envs,)) with 0 where ``mask``."""
+    return {name: np.where(mask, 0.0, value) for name, value in values.items()}
 
 
 __all__ = ["TimeGapMonitorVectorEnv"]

@@ -16,12 +16,11 @@ import os
 import time
 from collections.abc import Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, cast
+from typing import Any
 
-import gymnasium as gym
 import numpy as np
 
-import timegap_env
+from timegap_env.envs.vector_env import TimeGapMonitorVectorEnv
 from timegap_env.agents.oracles import TruthPolicy
 from timegap_env.agents.policies import NamedPolicy
 from timegap_env.agents.protocol import EVAL_SEED_START, MODEL_FILE
@@ -38,8 +37,6 @@ from timegap_env.experiments.stats import bootstrap_mean, oracle_share, wilson_i
 from timegap_env.experiments.value import DEFAULT_TRAIN_EPISODES
 from timegap_env.leaders import default_ngsim_path, default_openacc_dir, openacc_paths
 
-if TYPE_CHECKING:
-    from timegap_env.envs.vector_env import TimeGapMonitorVectorEnv
 
 REPO = Path(__file__).resolve().parents[2]  # data paths in the table are written relative to it
 DEFAULT_EPISODES = 112  # per policy, split across the groups
@@ -194,9 +191,7 @@ def check_data(plan: list[Episode]) -> None:
         if GROUPS[group].data is None:
             continue
         seed = next(episode.seed for episode in plan if episode.group == group)
-        venv = cast("TimeGapMonitorVectorEnv", gym.make_vec(  # the entry point's class, unwrapped
-            timegap_env.ENV_ID, num_envs=1, vectorization_mode="vector_entry_point", config=GROUPS[group].config,
-            autoreset_mode="same_step"))
+        venv = TimeGapMonitorVectorEnv(num_envs=1, config=GROUPS[group].config, autoreset_mode="same_step")
         try:
             venv.reset(seed=[seed], options=GROUPS[group].options)
         except cli.INPUT_ERRORS as error:
@@ -292,9 +287,7 @@ def run_all(
 def profile_first(group: str, seeds: list[int]) -> list[int]:
     """``seeds`` with the first one whose episode degrades a follower midway (a hidden kind) moved to the front, so
     that profiles.png shows an onset; unchanged if there is none."""
-    venv = cast("TimeGapMonitorVectorEnv", gym.make_vec(  # the entry point's class, unwrapped
-        timegap_env.ENV_ID, num_envs=len(seeds), vectorization_mode="vector_entry_point", config=GROUPS[group].config,
-        autoreset_mode="same_step"))
+    venv = TimeGapMonitorVectorEnv(num_envs=len(seeds), config=GROUPS[group].config, autoreset_mode="same_step")
     _, infos = venv.reset(seed=seeds, options=GROUPS[group].options)
     venv.close()
     truth = truth_of(infos)

@@ -27,18 +27,15 @@ from __future__ import annotations
 import dataclasses
 import time
 from collections.abc import Callable, Mapping, Sequence
-from typing import TYPE_CHECKING, Any, cast
+from typing import Any
 
-import gymnasium as gym
 import numpy as np
 
-import timegap_env
+from timegap_env.envs.vector_env import TimeGapMonitorVectorEnv
 from timegap_env.config import EnvConfig
 from timegap_env.envs.info import rewards_of, summary_of, truth_of
 from timegap_env.experiments.backends import Backend
 
-if TYPE_CHECKING:
-    from timegap_env.envs.vector_env import TimeGapMonitorVectorEnv
 
 NOMINAL = "none"  # the ground truth's kind of a follower no degradation hits
 STABLE_TOLERANCE = 1e-9  # a setting this close to the smallest string-stable one counts as stable [s]
@@ -128,9 +125,8 @@ def rollout_side_by_side(policies: Sequence[Any], config: Config, seeds: Sequenc
     if len(modes) > 1:
         raise ValueError(f"policies act in different action modes {sorted(map(str, modes))}: run them apart")
     mode = modes.pop()
-    venv = cast("TimeGapMonitorVectorEnv", gym.make_vec(  # the entry point's class, unwrapped
-        timegap_env.ENV_ID, num_envs=n * m, vectorization_mode="vector_entry_point",
-        config=env_config(config, mode), autoreset_mode="same_step", step_diagnostics=step_diagnostics))
+    venv = TimeGapMonitorVectorEnv(num_envs=n * m, config=env_config(config, mode), autoreset_mode="same_step",
+                                   step_diagnostics=step_diagnostics)
     try:
         obs, infos = venv.reset(seed=list(seeds) * m, options=options)
         task, env_config_ = venv.unwrapped.task, venv.unwrapped.config

@@ -26,7 +26,7 @@ import numpy as np
 
 from timegap_env.agents.oracles import LookupOracle, StabilityOracle, TruthPolicy
 from timegap_env.agents.protocol import EVAL_SEED_START
-from timegap_env.config import EnvConfig, RewardWeights
+from timegap_env.config import REWARD_PRESETS, EnvConfig, RewardPreset
 from timegap_env.envs.reward import REWARD_TERMS
 from timegap_env.experiments.backends import Backend
 from timegap_env.experiments.heldout import LARGER_DEGRADATIONS
@@ -37,22 +37,7 @@ from timegap_env.experiments.value import (
 )
 
 
-@dataclasses.dataclass(frozen=True)
-class Weighting:
-    """A weighting of the reward terms a traffic engineer could defend, and why."""
-
-    name: str
-    weights: RewardWeights
-    why: str
-
-
-WEIGHTINGS: dict[str, Weighting] = {w.name: w for w in (
-    Weighting("driver_preference", RewardWeights(), "TimeGapMonitor-v0's default: the driver chose 1.6 s"),
-    Weighting("variation_first", RewardWeights(tracking=2.0, efficiency=0.0, preference=0.0),
-              "the paper's measure: the actual time gap kept at its setting; no capacity pressure, no preference"),
-    Weighting("capacity_first", RewardWeights(tracking=0.5, string_stability=2.0, efficiency=2.0, preference=0.0),
-              "an operator's: capacity, guarded by string stability and safety; no driver preference"),
-)}
+WEIGHTINGS: dict[str, RewardPreset] = REWARD_PRESETS  # the defensible weightings, the config's presets
 SEVERITIES: dict[str, dict[str, Any]] = {  # EnvConfig.degradation overrides
     "none": {"kind_weights": {"none": 1.0}},
     "default": {},
@@ -115,7 +100,7 @@ def pair_terms(config: EnvConfig, seeds: Sequence[int], pairs: Sequence[tuple[in
     return terms.transpose(1, 0, 2), collided.T
 
 
-def weigh(terms: np.ndarray, weighting: Weighting) -> np.ndarray:
+def weigh(terms: np.ndarray, weighting: RewardPreset) -> np.ndarray:
     """The return under ``weighting`` of term sums (..., n_terms)."""
     return terms @ np.array([getattr(weighting.weights, name) for name in REWARD_TERMS])
 
@@ -248,4 +233,4 @@ def choose_default(rows: Sequence[dict[str, Any]]) -> dict[str, Any]:
 
 
 __all__ = ["FRONT_OBJECTIVES", "MAX_BLIND_COLLISION_RATE", "REFERENCES", "SEVERITIES", "TARGET_SHARE", "TRAFFIC", "WEIGHTINGS", "Plan",
-           "Weighting", "cell_config", "choose_default", "front_rows", "hypervolume", "map_cell", "task_map", "weigh"]
+           "cell_config", "choose_default", "front_rows", "hypervolume", "map_cell", "task_map", "weigh"]

@@ -29,6 +29,9 @@ from timegap_env.leaders.profile import LeaderProfile, LeaderProfiles
 
 Build = Callable[[int | None, Any, LeaderConfig], LeaderProfile]  # (seed, params, leader) -> profile
 BatchBuild = Callable[[Sequence[int | None], Any, LeaderConfig], LeaderProfiles]  # (seeds, params, leader) -> rows
+Schedule = Callable[[int | None, Any, LeaderConfig], tuple[np.ndarray, tuple[str, ...]]]  # (seed, params, leader) ->
+# (the regime of each tick as codes, the regimes' names)
+USER = "user"  # the scenario of the user's own leader (reset(options={"leader_speed": ...}))
 
 
 @dataclasses.dataclass(frozen=True)
@@ -41,7 +44,10 @@ class LeaderFamily:
     family's parameter dataclass (a :class:`~timegap_env.config.ConfigMixin` subclass: its defaults are the family's,
     ``EnvConfig.leader_params`` overrides its fields), or None for a family without parameters, whose ``build`` gets
     None. ``batch(seeds, params, leader)``, optional, builds many seeds' profiles at once (one length), row ``i``
-    equal to ``build(seeds[i], params, leader)``: batched resets use it.
+    equal to ``build(seeds[i], params, leader)``: batched resets use it. A family whose traffic changes within an
+    episode names its ``regimes`` and gives their ``schedule(seed, params, leader)``: a code per tick of ``build``'s
+    profile (an index into ``regimes``) and the names; the ground truth reports it (:func:`regime_names`). A family
+    without is one regime throughout, named after itself.
     """
 
     name: str  # the scenario name that draws it
@@ -49,6 +55,8 @@ class LeaderFamily:
     description: str
     params: type[ConfigMixin] | None = None
     batch: BatchBuild | None = None
+    regimes: tuple[str, ...] = ()
+    schedule: Schedule | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.name, str) or not self.name:
@@ -64,6 +72,11 @@ class LeaderFamily:
         if self.batch is not None and not callable(self.batch):
             self._fail("batch", self.batch, "must be None or callable as batch(seeds, params, leader) -> "
                        "LeaderProfiles")
+        if not isinstance(self.regimes, tuple) or not all(isinstance(name, str) and name for name in self.regimes):
+            self._fail("regimes", self.regimes, "must be a tuple of non-empty names")
+        if (self.schedule is None) != (not self.regimes) or (self.schedule is not None and not callable(self.schedule)):
+            self._fail("schedule", self.schedule, "must be callable as schedule(seed, params, leader) -> (codes, "
+                       "names) when the family names regimes, else None")
 
     def _fail(self, field: str, value: Any, rule: str) -> NoReturn:
         raise ValueError(f"LeaderFamily.{field} = {shown(value)}: {rule}")
@@ -120,7 +133,8 @@ LEADER_FAMILIES: dict[str, LeaderFamily] = {family.name: family for family in (
                  synthetic.EmergencyBrakingConfig, synthetic.emergency_braking_batch),
     LeaderFamily("regimes", regimes.regimes,
                  "Traffic that changes within an episode: free flow, slow oscillation, aggressive cycles, "
-                 "stop-and-go and hard braking regimes in turn.", regimes.RegimesConfig),
+                 "stop-and-go and hard braking regimes in turn.", regimes.RegimesConfig,
+                 regimes=regimes.REGIMES, schedule=regimes.regime_schedule),
     LeaderFamily("ngsim", lambda seed, params, leader: ngsim_leader(seed, leader, within_band=False),
                  "A real NGSIM I-80 driver's recorded speed."),
     LeaderFamily("ngsim_in_band", lambda seed, params, leader: ngsim_leader(seed, leader, within_band=True),
@@ -154,6 +168,8 @@ def register_family(family: LeaderFamily, *, replace: bool = False) -> None:
     """
     if not isinstance(family, LeaderFamily):
         raise ValueError(f"register_family: family = {shown(family)} must be a LeaderFamily")
+    if family.name == USER:
+        raise ValueError(f"LeaderFamily.name = {family.name!r}: the name of the user's own leader; choose another")
     if family.name in _ALIASES:
         raise ValueError(f"LeaderFamily.name = {family.name!r}: a scenario name already (the "
                          f"{_ALIASES[family.name].leader_family} family's); choose another")
@@ -180,6 +196,16 @@ class _Scenarios(Mapping[str, Scenario]):
 
 
 SCENARIOS: Mapping[str, Scenario] = _Scenarios()
+
+
+def regime_names() -> tuple[str, ...]:
+    """Every regime a leader can be in, the ground truth's ``regime`` codes (indices into it): each family of
+    LEADER_FAMILIES in turn, as its own name, or ``"<family>:<regime>"`` for each regime of a family that names
+    them; then USER. A family registered later adds its names at the end (the codes before stay)."""
+    names: list[str] = []
+    for name, family in LEADER_FAMILIES.items():
+        names += [f"{name}:{regime}" for regime in family.regimes] if family.regimes else [name]
+    return (*names, USER)
 
 
 def get_scenario(name: str) -> Scenario:

@@ -1,0 +1,67 @@
+"""``mo-TimeGapMonitor-v1``: ``TimeGapMonitor-v1`` whose reward is the vector of its terms (MO-Gymnasium's API).
+
+``step`` returns, in place of the scalar, the reward terms (:data:`~timegap_env.envs.reward.REWARD_TERMS`, or the
+ones chosen with ``objectives``) as a float32 vector, each <= 0; ``reward_space`` and ``reward_dim`` say its shape.
+The scalar env's reward is ``RewardWeights`` times this vector (all terms), so MO-Gymnasium's
+``LinearReward(env, weight=...)`` with the weights of a preset gives back that preset's scalar env. What each term
+measures in natural units is in the info (``objective_<name>``) and in :data:`~timegap_env.envs.reward.OBJECTIVES`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from timegap_env.config import EnvConfig, shown
+from timegap_env.envs.env import TimeGapMonitorEnv
+from timegap_env.envs.reward import REWARD_TERMS
+
+def term_lows(config: EnvConfig) -> dict[str, float]:
+    """The lowest value of each reward term in a step under ``config``, in REWARD_TERMS order; -inf where it has none
+    (safety: a negative TTC once a gap is gone; comfort: jerk squared)."""
+    scales = config.reward_scales
+    return {"tracking": -scales.tracking_cap / scales.tracking_reference, "string_stability": -1.0, "safety": -np.inf,
+            "collision": -1.0, "comfort": -np.inf, "efficiency": -1.0, "preference": -1.0, "switching": -1.0}
+
+
+def chosen_objectives(objectives: Sequence[str] | None) -> tuple[str, ...]:
+    """``objectives`` checked: None (every term), or distinct names of REWARD_TERMS; ``ValueError`` naming the value."""
+    if objectives is None:
+        return REWARD_TERMS
+    if isinstance(objectives, str) or not isinstance(objectives, Sequence) or not objectives:
+        raise ValueError(f"objectives = {shown(objectives)}: must be None (all) or a non-empty list of reward terms "
+                         f"among {list(REWARD_TERMS)}")
+    unknown = [name for name in objectives if name not in REWARD_TERMS]
+    if unknown:
+        raise ValueError(f"objectives = {shown(objectives)}: unknown objective(s) {unknown}; known: {list(REWARD_TERMS)}")
+    if len(set(objectives)) != len(objectives):
+        raise ValueError(f"objectives = {shown(objectives)}: each may appear once")
+    return tuple(objectives)
+
+
+class MOTimeGapMonitorEnv(TimeGapMonitorEnv):
+    """``TimeGapMonitorEnv`` with a vector reward: ``gym.make("mo-TimeGapMonitor-v1", objectives=None | [terms],
+    config=..., ...)`` (or ``mo_gymnasium.make``). ``objectives`` picks reward terms (by name, in the given order) for
+    the vector; the default is all of them. Everything else is ``TimeGapMonitor-v1``'s (``version=0`` gives v0's task).
+    """
+
+    def __init__(self, config: Mapping[str, Any] | None = None, render_mode: str | None = None,
+                 step_diagnostics: bool = True, version: int = 1, objectives: Sequence[str] | None = None) -> None:
+        self.objectives = chosen_objectives(objectives)
+        super().__init__(config, render_mode, step_diagnostics, version)
+        self._rows = np.array([REWARD_TERMS.index(name) for name in self.objectives])
+        self.reward_dim = len(self.objectives)
+        lows = term_lows(self.config)
+        self.reward_space = gym.spaces.Box(low=np.array([lows[name] for name in self.objectives], np.float32),
+                                           high=np.zeros(self.reward_dim, np.float32), dtype=np.float32)
+
+    def step(self, action: Any) -> tuple[np.ndarray, np.ndarray, bool, bool, dict]:  # type: ignore[override]
+        obs, _, terminated, truncated, info = super().step(action)
+        vector = self.task._result.term_rows[self._rows, 0].astype(np.float32)
+        return obs, vector, terminated, truncated, info
+
+
+__all__ = ["MOTimeGapMonitorEnv", "chosen_objectives", "term_lows"]
