@@ -59,7 +59,7 @@ def test_train_your_own_policy_gives_an_action():
 
 
 def test_the_environment_example_makes_what_it_says():
-    namespace = run(python_block_after("## The environment: `TimeGapMonitor-v0`"))
+    namespace = run(python_block_after("## The environment: `TimeGapMonitor-v1`"))
     assert namespace["envs"].num_envs == 256
     assert namespace["workers"].num_envs == 2
     namespace["workers"].close()

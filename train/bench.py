@@ -6,7 +6,8 @@ rates. The targets are issue 16's.
 
 1. single env steps/s of ``TimeGapMonitor-v0``, with its full per-step info and with
    ``step_diagnostics=False``, against gymnasium's ``CartPole-v1`` and highway-env's ``highway-fast-v0``,
-   the envs taking turns over several rounds; then where its step goes (:mod:`timegap_env.benchmarks.single`): a fused
+   the envs taking turns over several rounds, and ``TimeGapMonitor-v1`` (the vector reward, cost, objectives and
+   regime in its info) against v0 (issue 24: within 10 %); then where its step goes (:mod:`timegap_env.benchmarks.single`): a fused
    step's call, numba's unpacking of its arguments, and its arithmetic per env-step;
 2. the native vector env (``step_diagnostics=False``) from 256 to 65,536 envs on one core: env-steps/s
    against the 256-env figure and CartPole-v1's steps/s, peak memory per env (tracemalloc), 256 envs with
@@ -47,6 +48,7 @@ from timegap_env.sim import Platoon
 
 TARGET_VS_HIGHWAY = 100.0  # single env steps/s over highway-fast-v0's [-]
 TARGET_VS_CARTPOLE = 0.5  # single env (step_diagnostics=False) steps/s over CartPole-v1's [-]
+TARGET_V1_VS_V0 = 0.9  # TimeGapMonitor-v1's single env steps/s over v0's, full info and lean alike (issue 24) [-]
 TARGET_VEHICLE_TICKS = 10e6  # batched simulator at 1024 envs [vehicle-ticks/s]
 TARGET_VECTOR_RATE = 150e3  # native vector env at TARGET_VECTOR_BASE envs, one core [env-steps/s]
 TARGET_VECTOR_BASE = 256  # envs
@@ -180,6 +182,8 @@ def single_env_rows(sizes: Sizes) -> tuple[list[Row], float]:
     envs = {
         "ours": (gym.make(timegap_env.ENV_ID), sizes.env_steps),
         "lean": (gym.make(timegap_env.ENV_ID, step_diagnostics=False), sizes.env_steps),
+        "v1": (gym.make(timegap_env.ENV_IDS[1]), sizes.env_steps),
+        "v1 lean": (gym.make(timegap_env.ENV_IDS[1], step_diagnostics=False), sizes.env_steps),
         "cartpole": (gym.make("CartPole-v1"), sizes.env_steps),
         "highway": (gym.make("highway-fast-v0"), sizes.highway_steps),
     }
@@ -194,6 +198,12 @@ def single_env_rows(sizes: Sizes) -> tuple[list[Row], float]:
         Row("TimeGapMonitor-v0, one env, full info [steps/s]", f"{ours:,.0f}", against_cartpole,
             f"{ours / cartpole:.3f}x", ""),
         lean_row,
+        Row("TimeGapMonitor-v1, one env, full info (+ vector reward, cost, objectives, regime) [steps/s]",
+            f"{rates['v1']:,.0f}", f"TimeGapMonitor-v0, full info: {ours:,.0f}", f"{rates['v1'] / ours:.3f}x",
+            verdict(f">= {TARGET_V1_VS_V0}x v0's", rates["v1"] / ours >= TARGET_V1_VS_V0)),
+        Row("TimeGapMonitor-v1, one env, step_diagnostics=False [steps/s]", f"{rates['v1 lean']:,.0f}",
+            f"TimeGapMonitor-v0, step_diagnostics=False: {rates['lean']:,.0f}", f"{rates['v1 lean'] / rates['lean']:.3f}x",
+            verdict(f">= {TARGET_V1_VS_V0}x v0's", rates["v1 lean"] / rates["lean"] >= TARGET_V1_VS_V0)),
         Row("TimeGapMonitor-v0, one env, full info [steps/s] against highway-env", f"{ours:,.0f}",
             f"highway-fast-v0, one env: {highway:,.1f}", f"{ours / highway:,.1f}x",
             verdict(f">= {TARGET_VS_HIGHWAY:.0f}x highway-fast-v0", ours / highway >= TARGET_VS_HIGHWAY)),

@@ -5,13 +5,16 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from timegap_env.agents.oracles import LookupOracle, RegimeOracle, StabilityOracle, size_bin
 from timegap_env.config import EnvConfig
+from timegap_env.envs.info import truth_of
 from timegap_env.experiments.backends import Backend
 from timegap_env.experiments.rollout import rollout
 from timegap_env.experiments.task_map import (
-    REFERENCES, SEVERITIES, TRAFFIC, WEIGHTINGS, Plan, cell_config, choose_default, hypervolume, map_cell, term_sums,
-    weigh,
+    REFERENCES, SEVERITIES, TRAFFIC, V1_CELL, WEIGHTINGS, Plan, cell_config, choose_default, hypervolume, map_cell,
+    regime_contexts, term_sums, v1_headroom, weigh,
 )
+from timegap_env.leaders.regimes import REGIMES
 
 
 def constant(level: int):
@@ -70,3 +73,48 @@ def test_hypervolume_of_known_boxes():
     samples = rng.uniform(0, 1, (200_000, 3))
     dominated = (samples[:, None, :] <= points[None, :, :]).all(axis=2).any(axis=1).mean()
     assert hypervolume(points, origin) == pytest.approx(dominated, abs=0.01)
+
+
+def test_each_regime_context_runs_that_regime_alone():
+    config = cell_config("default", "changing")
+    contexts = regime_contexts(config)
+    assert list(contexts) == [f"regimes:{regime}" for regime in REGIMES]
+    for key, (context_config, options) in contexts.items():
+        seen: set[str] = set()
+
+        def note_regime(obs, infos):
+            seen.update(truth_of(infos)["regime"].tolist())
+            return np.full(len(obs), 5)
+
+        records = rollout(note_regime, context_config.with_overrides({"episode_duration": 60.0}), [0, 1], options).records
+        assert all(record.scenario == "regimes" for record in records) and seen == {key}
+    assert list(regime_contexts(cell_config("default", "default"))) == list(EnvConfig().scenario_weights)
+
+
+def test_regime_oracle_reads_the_regime_and_raises_to_its_floor():
+    config = cell_config("default", "changing")
+    table = {f"regimes:{regime}": 0.8 for regime in REGIMES}
+    truth = {"regime": np.array(["regimes:free_flow", "regimes:stop_and_go"], dtype=object),
+             "kind": np.array([["none", "lag"], ["none", "none"]], dtype=object),
+             "size": np.array([[0.0, 0.9], [0.0, 0.0]]), "active": np.ones((2, 2), dtype=bool),
+             "smallest_stable_setting": np.array([[0.5, 1.5], [0.5, 0.5]])}
+    levels = np.asarray(config.setting_levels)
+    assert np.array_equal(RegimeOracle(table, config).act(truth), np.searchsorted(levels, [0.8, 0.8]))
+    floored = RegimeOracle(table, config, StabilityOracle(config, 0.1)).act(truth)
+    assert np.array_equal(levels[floored], [1.6, 0.8])  # the lagging car needs 1.5 + 0.1 s
+    lag_key = f"lag:{size_bin('lag', 0.9, config.degradation)}"
+    lookup = RegimeOracle(table, config, LookupOracle({"none": 2.2, lag_key: 2.0}, config))
+    assert np.array_equal(levels[lookup.act(truth)], [2.0, 0.8])  # the lookup's nominal entry does not raise it
+    with pytest.raises(KeyError, match="regimes:free_flow"):
+        RegimeOracle({"regimes:stop_and_go": 1.0}, config).act(truth)
+    with pytest.raises(KeyError, match="info_keys='v1'"):
+        RegimeOracle(table, config).act({key: value for key, value in truth.items() if key != "regime"})
+
+
+def test_v1_headroom_is_a_row_of_its_own_weighting():
+    rows, fronts = v1_headroom(Plan(train=1, selection=2, held_out=3))
+    assert len(rows) == 1 and rows[0]["weighting"] == "variation_first"
+    assert {key: rows[0][key] for key in V1_CELL} == V1_CELL
+    for reference in REFERENCES:
+        assert rows[0][f"{reference}_gain_low"] <= rows[0][f"{reference}_gain"] <= rows[0][f"{reference}_gain_high"]
+    assert isinstance(rows[0]["full_oracle_meets_target"], bool) and fronts

@@ -25,6 +25,8 @@ def expected_measures(sizes: bench.Sizes) -> list[str]:
     return [
         "TimeGapMonitor-v0, one env, full info [steps/s]",
         "TimeGapMonitor-v0, one env, step_diagnostics=False",
+        "TimeGapMonitor-v1, one env, full info (+ vector reward",
+        "TimeGapMonitor-v1, one env, step_diagnostics=False",
         "TimeGapMonitor-v0, one env, full info [steps/s] against highway-env",
         "one env: a fused_step call",
         "one env: of that call, numba unpacking",

@@ -1,4 +1,4 @@
-"""``TimeGapMonitor-v0``: choose automated vehicles' time gap setting from a Bayesian monitor's view of it."""
+"""``TimeGapMonitor-v1`` (and v0): choose automated vehicles' time gap setting from a Bayesian monitor's view of it."""
 
 from __future__ import annotations
 
@@ -79,7 +79,8 @@ class TimeGapMonitorEnv(gym.Env):
     the platoon (``estimate``, ``lcl``, ``ucl``, ``alarm``, ``actual_time_gap``, ``setting``, ...),
     ``reward_<term>`` (0 at reset), the ground truth ``truth_<name>``, and at the step that ends an
     episode its summary ``episode_<name>``. ``timegap_env.envs.info.truth_of(info)`` and
-    ``summary_of(info)`` read the groups back as dicts. ``env.unwrapped.scenario`` names the leader.
+    ``summary_of(info)`` read the groups back as dicts. ``env.unwrapped.scenario`` names the leader. v1
+    (``info_keys="v1"``) adds ``vector_reward``, ``cost``, ``objective_<name>`` and ``truth_regime``.
 
     ## Starting State
 
@@ -109,8 +110,9 @@ class TimeGapMonitorEnv(gym.Env):
 
     ## Arguments
 
-    ``gym.make("TimeGapMonitor-v0", config={...}, render_mode=None | "rgb_array" | "human", step_diagnostics=True)``;
-    ``config`` overrides :class:`timegap_env.config.EnvConfig` (units in its comments), nested
+    ``gym.make("TimeGapMonitor-v1", config={...}, render_mode=None | "rgb_array" | "human", step_diagnostics=True)``;
+    ``config`` overrides the version's defaults (``config.TASK_VERSIONS``, over
+    :class:`timegap_env.config.EnvConfig`, units in its comments; ``version`` is the registered id's), nested
     configs as dicts, e.g. ``{"action_mode": "per_vehicle", "platoon": {"n_followers": 3}}``.
     Unknown keys and bad values raise ``ValueError``. ``step_diagnostics=False`` leaves the per-step keys
     (monitor, reward terms, ground truth) out of ``reset``'s and ``step``'s info, for learners that never
@@ -119,7 +121,11 @@ class TimeGapMonitorEnv(gym.Env):
 
     ## Version History
 
-    * v0: initial version.
+    * v1: the default task (``config.TASK_VERSIONS[1]``, docs/task.md): the ``variation_first`` reward weighting,
+      the ``regimes`` leader family beside v0's four, and in the info ``vector_reward`` (the terms; the reward is
+      the weights times it), ``cost``, ``objective_<name>`` (natural units) and ``truth_regime``.
+      ``mo-TimeGapMonitor-v1`` returns the terms as the reward vector.
+    * v0: initial version, kept bit for bit.
     """
 
     metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 10}

@@ -15,17 +15,9 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from timegap_env.config import EnvConfig, shown
+from timegap_env.config import shown
 from timegap_env.envs.env import TimeGapMonitorEnv
-from timegap_env.envs.reward import REWARD_TERMS
-
-def term_lows(config: EnvConfig) -> dict[str, float]:
-    """The lowest value of each reward term in a step under ``config``, in REWARD_TERMS order; -inf where it has none
-    (safety: a negative TTC once a gap is gone; comfort: jerk squared)."""
-    scales = config.reward_scales
-    return {"tracking": -scales.tracking_cap / scales.tracking_reference, "string_stability": -1.0, "safety": -np.inf,
-            "collision": -1.0, "comfort": -np.inf, "efficiency": -1.0, "preference": -1.0, "switching": -1.0}
-
+from timegap_env.envs.reward import REWARD_TERMS, term_lows
 
 def chosen_objectives(objectives: Sequence[str] | None) -> tuple[str, ...]:
     """``objectives`` checked: None (every term), or distinct names of REWARD_TERMS; ``ValueError`` naming the value."""
@@ -64,4 +56,4 @@ class MOTimeGapMonitorEnv(TimeGapMonitorEnv):
         return obs, vector, terminated, truncated, info
 
 
-__all__ = ["MOTimeGapMonitorEnv", "chosen_objectives", "term_lows"]
+__all__ = ["MOTimeGapMonitorEnv", "chosen_objectives"]

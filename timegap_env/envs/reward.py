@@ -188,6 +188,14 @@ COST_TERMS = ("string_stability", "safety", "collision")  # info["cost"] = -(the
 # string instability, TTC shortfall and collision, each in [0, 1] (Safety-Gymnasium's convention: >= 0, 0 when safe)
 
 
+def term_lows(config: EnvConfig) -> dict[str, float]:
+    """The lowest value of each reward term in a step under ``config``, in REWARD_TERMS order; -inf where it has none
+    (safety: a negative TTC once a gap is gone; comfort: jerk squared)."""
+    scales = config.reward_scales
+    return {"tracking": -scales.tracking_cap / scales.tracking_reference, "string_stability": -1.0, "safety": -np.inf,
+            "collision": -1.0, "comfort": -np.inf, "efficiency": -1.0, "preference": -1.0, "switching": -1.0}
+
+
 def step_objectives(readouts: StepReadouts, setting: np.ndarray, changed: np.ndarray,
                     constants: RewardConstants) -> dict[str, np.ndarray]:
     """The objectives of :data:`OBJECTIVES` of a step, each (n_envs,) in its natural unit, from its ``readouts``;

@@ -1,12 +1,17 @@
-"""The map of where reading the monitor can pay (issue 24; the criterion is in ``docs/task.md``).
+"""The map of where reading the monitor can pay, and the default task's headroom (issue 24; the criterion is in
+``docs/task.md``).
 
 For each defensible weighting of the reward terms (:data:`WEIGHTINGS`), each degradation severity
-(:data:`SEVERITIES`) and each traffic mix (:data:`TRAFFIC`): the gap on held-out seeds from the best
-blind constant (chosen on selection seeds) to each reference that knows more:
+(:data:`SEVERITIES`) and each traffic mix (:data:`TRAFFIC`), and for ``TimeGapMonitor-v1`` itself: the gap on
+held-out seeds from the best blind constant (chosen on selection seeds) to each reference that knows more:
 
 - ``v2v_pair``: one constant while every V2V flag is up, another while any is down (chosen on selection seeds);
+- ``regime_aware``: per regime of the leader (its family, or the regime now of a leader whose traffic changes), the
+  constant best on training seeds (:class:`~timegap_env.agents.oracles.RegimeOracle`);
 - ``degradation_aware``: of the lookup oracles (per true condition, the constant best on training seeds) and the
   stability oracles (smallest string-stable setting + a margin), the best on selection seeds;
+- ``full_oracle``: knows the regime and the degradation: of the degradation-aware candidates, the regime-aware one
+  and the regime-aware one raised to each degradation-aware candidate's setting, the best on selection seeds;
 - ``hindsight``: per held-out episode, the best constant for it.
 
 A weighting only reweights the episode's reward terms, so every constant runs once per cell and is scored under
@@ -24,10 +29,11 @@ from typing import Any
 
 import numpy as np
 
-from timegap_env.agents.oracles import LookupOracle, StabilityOracle, TruthPolicy
+from timegap_env.agents.oracles import LookupOracle, RegimeOracle, StabilityOracle, TruthPolicy
 from timegap_env.agents.protocol import EVAL_SEED_START
-from timegap_env.config import REWARD_PRESETS, EnvConfig, RewardPreset
+from timegap_env.config import REWARD_PRESETS, TASK_VERSIONS, EnvConfig, RewardPreset
 from timegap_env.envs.reward import REWARD_TERMS
+from timegap_env.leaders.scenarios import LEADER_FAMILIES, family_params
 from timegap_env.experiments.backends import Backend
 from timegap_env.experiments.heldout import LARGER_DEGRADATIONS
 from timegap_env.experiments.rollout import rollout
@@ -48,10 +54,11 @@ TRAFFIC: dict[str, dict[str, float]] = {  # EnvConfig.scenario_weights
     "harsh": {"stop_and_go": 1.0, "emergency_braking": 1.0},
     "changing": {"regimes": 1.0},  # regimes that change within an episode (timegap_env.leaders.regimes)
 }
-REFERENCES = ("v2v_pair", "degradation_aware", "hindsight")
+REFERENCES = ("v2v_pair", "regime_aware", "degradation_aware", "full_oracle", "hindsight")
 FRONT_OBJECTIVES = ("efficiency", "string_stability", "tracking")  # capacity, string stability, time-gap variation:
 # the reward terms (each summed over the episode, higher is better) whose Pareto fronts the map compares
-TARGET_SHARE = 0.15  # the criterion: the degradation-aware oracle beats the best blind constant by this share [-]
+TARGET_SHARE = 0.15  # the criterion: the degradation-aware oracle (the issue: the full oracle) beats the best blind
+# constant by this share [-]
 MAX_BLIND_COLLISION_RATE = 0.01  # ... with the best blind constant colliding in at most this share of episodes [-]
 
 
@@ -73,13 +80,37 @@ class Plan:
 
 
 def cell_config(severity: str, traffic: str) -> EnvConfig:
-    """The env config of one cell of the map (v0's defaults otherwise); ``ValueError`` naming an unknown one."""
+    """The env config of one cell of the map (v0's defaults otherwise, the regimes in the info); ``ValueError`` naming
+    an unknown one."""
     for name, value, known in (("severity", severity, SEVERITIES), ("traffic", traffic, TRAFFIC)):
         if value not in known:
             raise ValueError(f"{name} = {value!r}: unknown; known: {list(known)}")
     default = EnvConfig()
     return default.with_overrides({"degradation": default.degradation.with_overrides(SEVERITIES[severity]),
-                                   "scenario_weights": TRAFFIC[traffic]})
+                                   "scenario_weights": TRAFFIC[traffic], "info_keys": "v1"})
+
+
+def regime_contexts(config: EnvConfig) -> dict[str, tuple[EnvConfig, dict[str, Any]]]:
+    """Each regime the leaders of ``config`` can be in (a name of ``regime_names()``) and how to run it alone:
+    (config, reset options). A family is one regime; a family with regimes runs each of its weighted regimes alone
+    (its regime weights pinned to that one); degradations are drawn as the mix draws them."""
+    contexts: dict[str, tuple[EnvConfig, dict[str, Any]]] = {}
+    params = family_params(config.leader_params)
+    for name, weight in config.scenario_weights.items():
+        family = LEADER_FAMILIES[name]
+        if weight <= 0:
+            continue
+        if not family.regimes:
+            contexts[name] = (config, {"scenario": name})
+            continue
+        weights = (params.get(name) or family.params()).regime_weights  # type: ignore[misc]
+        for regime in family.regimes:
+            if weights.get(regime, 0.0) > 0:
+                pinned = {**config.leader_params.get(name, {}), "regime_weights": {regime: 1.0}}
+                contexts[f"{name}:{regime}"] = (config.with_overrides({"leader_params": {**config.leader_params,
+                                                                                            name: pinned}}),
+                                                {"scenario": name})
+    return contexts
 
 
 def term_sums(config: EnvConfig, seeds: Sequence[int], choose: Any, options: dict[str, Any] | None = None
@@ -105,14 +136,26 @@ def weigh(terms: np.ndarray, weighting: RewardPreset) -> np.ndarray:
     return terms @ np.array([getattr(weighting.weights, name) for name in REWARD_TERMS])
 
 
-def lookup_tables(config: EnvConfig, train: Sequence[int], backend: Backend) -> dict[str, dict[str, float]]:
+def lookup_tables(config: EnvConfig, train: Sequence[int], weightings: dict[str, RewardPreset],
+                  backend: Backend) -> dict[str, dict[str, float]]:
     """Per weighting, the lookup oracle's table: per pinned condition, the constant best on ``train`` seeds."""
     conditions = training_conditions(config)
     n_levels = len(config.setting_levels)
     scored = {key: pair_terms(condition_config, train, [(level, level) for level in range(n_levels)], backend, options)[0]
               for key, (condition_config, options) in conditions.items()}
     return {name: {key: float(config.setting_levels[int(np.argmax(weigh(terms, weighting).mean(axis=1)))])
-                   for key, terms in scored.items()} for name, weighting in WEIGHTINGS.items()}
+                   for key, terms in scored.items()} for name, weighting in weightings.items()}
+
+
+def regime_tables(config: EnvConfig, train: Sequence[int], weightings: dict[str, RewardPreset],
+                  backend: Backend) -> dict[str, dict[str, float]]:
+    """Per weighting, the regime-aware oracle's table: per regime (:func:`regime_contexts`), the constant best on
+    ``train`` seeds."""
+    n_levels = len(config.setting_levels)
+    scored = {key: pair_terms(context_config, train, [(level, level) for level in range(n_levels)], backend, options)[0]
+              for key, (context_config, options) in regime_contexts(config).items()}
+    return {name: {key: float(config.setting_levels[int(np.argmax(weigh(terms, weighting).mean(axis=1)))])
+                   for key, terms in scored.items()} for name, weighting in weightings.items()}
 
 
 def oracle_terms(config: EnvConfig, seeds: Sequence[int], oracle: TruthPolicy) -> tuple[np.ndarray, np.ndarray]:
@@ -160,9 +203,17 @@ def front_rows(constants: np.ndarray, references: dict[str, np.ndarray], levels:
 
 def map_cell(severity: str, traffic: str, plan: Plan, backend: Backend
              ) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
-    """The rows of one cell: per weighting, the best blind constant and each reference on the held-out seeds; and
-    per weighting, the Pareto points (:func:`front_rows`) of the constants and the references."""
-    config = cell_config(severity, traffic)
+    """The rows of one cell of the map under every weighting (:func:`cell_rows`)."""
+    return cell_rows(cell_config(severity, traffic), {"severity": severity, "traffic": traffic}, WEIGHTINGS, plan,
+                     backend)
+
+
+def cell_rows(config: EnvConfig, cell: dict[str, Any], weightings: dict[str, RewardPreset], plan: Plan,
+              backend: Backend) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
+    """Per weighting, the best blind constant and each reference on the held-out seeds of ``config`` (a row that
+    starts with ``cell``'s entries; each gain also without the collision term, which one episode can dominate); and
+    per weighting, the Pareto points (:func:`front_rows`) of the constants and
+    the references. ``config`` must put the regime in the info (``info_keys="v1"``)."""
     train, selection, held_out = plan.seeds()
     levels = config.setting_levels
     n_levels = len(levels)
@@ -170,47 +221,67 @@ def map_cell(severity: str, traffic: str, plan: Plan, backend: Backend
     constants_held, collided_held = pair_terms(config, held_out, [(level, level) for level in range(n_levels)], backend)
     pairs = [(up, down) for up in range(n_levels) for down in range(n_levels)]
     pairs_sel, _ = pair_terms(config, selection, pairs, backend)
-    tables = lookup_tables(config, train, backend)
+    tables = lookup_tables(config, train, weightings, backend)
+    regimes = regime_tables(config, train, weightings, backend)
     stability = [StabilityOracle(config, margin) for margin in MARGINS]
     stability_sel = backend.map(oracle_terms, [(config, selection, oracle) for oracle in stability])
-    stability_held = backend.map(oracle_terms, [(config, held_out, oracle) for oracle in stability])
     rows, fronts = [], []
-    for name, weighting in WEIGHTINGS.items():
+    for name, weighting in weightings.items():
         blind = int(np.argmax(weigh(constants_sel, weighting).mean(axis=1)))
         blind_return = weigh(constants_held[blind], weighting)
         up, down = pairs[int(np.argmax(weigh(pairs_sel, weighting).mean(axis=1)))]
         pair_held = pair_terms(config, held_out, [(up, down)], backend)
         lookups = [LookupOracle(tables[name], config), LookupOracle(tables[name], config, whole_episode=True)]
         lookup_sel = backend.map(oracle_terms, [(config, selection, oracle) for oracle in lookups])
-        lookup_held = backend.map(oracle_terms, [(config, held_out, oracle) for oracle in lookups])
-        candidates = list(zip([*stability, *lookups], [*stability_sel, *lookup_sel], [*stability_held, *lookup_held]))
-        best = int(np.argmax([weigh(sel[0], weighting).mean() for _, sel, _ in candidates]))
-        oracle, _, oracle_held = candidates[best]
+        knowing = [*stability, *lookups]  # the degradation-aware candidates
+        regime_aware = RegimeOracle(regimes[name], config)
+        combined = [RegimeOracle(regimes[name], config, floor) for floor in knowing]
+        regime_sel = backend.map(oracle_terms, [(config, selection, oracle) for oracle in [regime_aware, *combined]])
+        scores = [float(weigh(terms, weighting).mean()) for terms, _ in [*stability_sel, *lookup_sel, *regime_sel]]
+        degradation_aware = knowing[int(np.argmax(scores[: len(knowing)]))]
+        full_oracle = [*knowing, regime_aware, *combined][int(np.argmax(scores))]
+        chosen = {"regime_aware": regime_aware, "degradation_aware": degradation_aware, "full_oracle": full_oracle}
+        unique = list(dict.fromkeys(chosen.values()))  # the full oracle may be one of the others
+        held = dict(zip(unique, backend.map(oracle_terms, [(config, held_out, oracle) for oracle in unique])))
         hindsight = np.argmax(weigh(constants_held, weighting), axis=0), np.arange(len(held_out))
-        reference_terms = {"v2v_pair": pair_held[0][0], "degradation_aware": oracle_held[0],
+        reference_terms = {"v2v_pair": pair_held[0][0], **{key: held[oracle][0] for key, oracle in chosen.items()},
                            "hindsight": constants_held[hindsight]}
-        references = {
-            "v2v_pair": (f"{levels[up]:g} s up / {levels[down]:g} s down", weigh(pair_held[0][0], weighting),
-                         pair_held[1][0]),
-            "degradation_aware": (f"{oracle.name}", weigh(oracle_held[0], weighting), oracle_held[1]),
-            "hindsight": ("best constant per episode", weigh(constants_held[hindsight], weighting),
-                          collided_held[hindsight]),
-        }
-        fronts += front_rows(constants_held, reference_terms, levels,
-                             {"weighting": name, "severity": severity, "traffic": traffic})
+        reference_collided = {"v2v_pair": pair_held[1][0], **{key: held[oracle][1] for key, oracle in chosen.items()},
+                              "hindsight": collided_held[hindsight]}
+        described = {"v2v_pair": f"{levels[up]:g} s up / {levels[down]:g} s down", "hindsight": "best constant per episode",
+                     **{key: oracle.name for key, oracle in chosen.items()}}
+        fronts += front_rows(constants_held, reference_terms, levels, {"weighting": name, **cell})
         blind_mean = float(blind_return.mean())
-        row: dict[str, Any] = {"weighting": name, "severity": severity, "traffic": traffic, "best_blind": f"{levels[blind]:g} s",
-               "best_blind_return": blind_mean, "best_blind_collisions": int(collided_held[blind].sum()),
-               "episodes": len(held_out)}
-        for reference, (chosen, returns, collided) in references.items():
-            mean, low, high = bootstrap_mean(returns - blind_return)
-            row |= {f"{reference}_chosen": chosen, f"{reference}_gain": mean, f"{reference}_gain_low": low,
-                    f"{reference}_gain_high": high, f"{reference}_share": mean / abs(blind_mean),
-                    f"{reference}_collisions": int(np.sum(collided))}
-        row["meets_target"] = bool(row["degradation_aware_share"] >= TARGET_SHARE and row["degradation_aware_gain_low"] > 0
-                                   and row["best_blind_collisions"] <= MAX_BLIND_COLLISION_RATE * len(held_out))
+        row: dict[str, Any] = {"weighting": name, **cell, "best_blind": f"{levels[blind]:g} s",
+                               "best_blind_return": blind_mean, "best_blind_collisions": int(collided_held[blind].sum()),
+                               "episodes": len(held_out)}
+        no_collision = dataclasses.replace(weighting, weights=weighting.weights.with_overrides({"collision": 0.0}))
+        for reference in REFERENCES:
+            mean, low, high = bootstrap_mean(weigh(reference_terms[reference], weighting) - blind_return)
+            rest = bootstrap_mean(weigh(reference_terms[reference], no_collision)
+                                  - weigh(constants_held[blind], no_collision))
+            row |= {f"{reference}_chosen": described[reference], f"{reference}_gain": mean,
+                    f"{reference}_gain_low": low, f"{reference}_gain_high": high,
+                    f"{reference}_share": mean / abs(blind_mean),
+                    f"{reference}_collisions": int(np.sum(reference_collided[reference])),
+                    **dict(zip([f"{reference}_gain_without_collisions{end}" for end in ("", "_low", "_high")], rest))}
+        blind_safe = row["best_blind_collisions"] <= MAX_BLIND_COLLISION_RATE * len(held_out)
+        for key, reference in (("meets_target", "degradation_aware"), ("full_oracle_meets_target", "full_oracle")):
+            row[key] = bool(row[f"{reference}_share"] >= TARGET_SHARE and row[f"{reference}_gain_low"] > 0 and blind_safe)
         rows.append(row)
     return rows, fronts
+
+
+V1_CELL = {"severity": "default", "traffic": "v1"}  # how TimeGapMonitor-v1's rows name their cell
+
+
+def v1_headroom(plan: Plan = Plan(), backend: Backend | None = None
+                ) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
+    """``TimeGapMonitor-v1``'s own row (its weighting) and Pareto points, as a cell of the map (:func:`cell_rows`)."""
+    config = EnvConfig.from_dict(version=1)
+    weighting = next(name for name, preset in WEIGHTINGS.items() if preset.weights == config.reward_weights)
+    assert TASK_VERSIONS[1]["reward_weights"] == weighting
+    return cell_rows(config, V1_CELL, {weighting: WEIGHTINGS[weighting]}, plan, backend or Backend())
 
 
 def task_map(plan: Plan = Plan(), backend: Backend | None = None) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
@@ -232,5 +303,6 @@ def choose_default(rows: Sequence[dict[str, Any]]) -> dict[str, Any]:
     return max(candidates, key=lambda row: row["degradation_aware_share"])
 
 
-__all__ = ["FRONT_OBJECTIVES", "MAX_BLIND_COLLISION_RATE", "REFERENCES", "SEVERITIES", "TARGET_SHARE", "TRAFFIC", "WEIGHTINGS", "Plan",
-           "cell_config", "choose_default", "front_rows", "hypervolume", "map_cell", "task_map", "weigh"]
+__all__ = ["FRONT_OBJECTIVES", "MAX_BLIND_COLLISION_RATE", "REFERENCES", "SEVERITIES", "TARGET_SHARE", "TRAFFIC", "V1_CELL",
+           "WEIGHTINGS", "Plan", "cell_config", "cell_rows", "choose_default", "front_rows", "hypervolume", "map_cell",
+           "regime_contexts", "task_map", "v1_headroom", "weigh"]
