@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -93,7 +93,7 @@ def cell_config(severity: str, traffic: str) -> EnvConfig:
 def regime_contexts(config: EnvConfig) -> dict[str, tuple[EnvConfig, dict[str, Any]]]:
     """Each regime the leaders of ``config`` can be in (a name of ``regime_names()``) and how to run it alone:
     (config, reset options). A family is one regime; a family with regimes runs each of its weighted regimes alone
-    (its ``regime_weights``, if it has them, pinned to that one); degradations are drawn as the mix draws them."""
+    (its params' ``regime_weights`` pinned to that one); degradations are drawn as the mix draws them."""
     contexts: dict[str, tuple[EnvConfig, dict[str, Any]]] = {}
     params = family_params(config.leader_params)
     for name, weight in config.scenario_weights.items():
@@ -103,8 +103,10 @@ def regime_contexts(config: EnvConfig) -> dict[str, tuple[EnvConfig, dict[str, A
         if not family.regimes:
             contexts[name] = (config, {"scenario": name})
             continue
-        family_params_ = params.get(name) or (family.params() if family.params is not None else None)
-        weights = getattr(family_params_, "regime_weights", dict.fromkeys(family.regimes, 1.0))  # the regimes family's
+        weights = getattr(params.get(name) or (family.params and family.params()), "regime_weights", None)
+        if not isinstance(weights, Mapping):
+            raise ValueError(f"leader family {name!r} names regimes but its params have no regime_weights: the map "
+                             "cannot run one of its regimes alone")
         for regime in family.regimes:
             if weights.get(regime, 0.0) > 0:
                 pinned = {**config.leader_params.get(name, {}), "regime_weights": {regime: 1.0}}
