@@ -85,7 +85,7 @@ def test_the_blocks_not_run_are_the_client_libraries():
     skipped = [code for _, code, marker in (param.values for param in BLOCKS) if marker and marker.startswith("not run:")]
     assert skipped, "docs/libraries.md shows TorchRL, Tianshou and RLlib as text"
     for code in skipped:
-        assert re.search(r"^from (torchrl|tianshou|ray)", code, flags=re.M), code
+        assert re.search(r"^from (torchrl|tianshou|ray|mo_gymnasium|morl_baselines)", code, flags=re.M), code
 
 
 def apply_edit(package: Path, marker: str, code: str) -> None:

@@ -754,7 +754,7 @@ class EnvConfig(ConfigMixin):
     dropout_probability_range: tuple[float, float] = (0.0, 0.05)  # per-episode sensor dropout rate drawn from [-],
     # 0 <= low <= high < 1
     info_keys: str = "v0"  # the info's keys, one of INFO_KEYS: "v0" is v0's; "v1" adds vector_reward, cost,
-    # objective_<name> and truth_regime (timegap_env.envs.info)
+    # objectives and truth_regime (timegap_env.envs.info)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "reward_weights", RewardWeights.of(self.reward_weights, "EnvConfig.reward_weights"))

@@ -10,12 +10,12 @@ from gymnasium.utils.env_checker import check_env
 
 import timegap_env
 from timegap_env.config import REWARD_PRESETS, TASK_VERSIONS, EnvConfig, RewardWeights
-from timegap_env.envs.info import COST, VECTOR_REWARD, objectives_of, rewards_of, truth_of
+from timegap_env.envs.info import COST, OBJECTIVES_KEY, VECTOR_REWARD, objectives_of, rewards_of, truth_of
 from timegap_env.envs.reward import COST_TERMS, OBJECTIVES, REWARD_TERMS
 from timegap_env.leaders.regimes import REGIMES
 from timegap_env.leaders.scenarios import USER, regime_names
 
-V1_KEYS = {VECTOR_REWARD, COST, "truth_regime", *(f"objective_{o.name}" for o in OBJECTIVES.values())}
+V1_KEYS = {VECTOR_REWARD, COST, OBJECTIVES_KEY, "truth_regime"}
 
 
 def weights_vector(config: EnvConfig) -> np.ndarray:

@@ -80,7 +80,7 @@ class TimeGapMonitorEnv(gym.Env):
     ``reward_<term>`` (0 at reset), the ground truth ``truth_<name>``, and at the step that ends an
     episode its summary ``episode_<name>``. ``timegap_env.envs.info.truth_of(info)`` and
     ``summary_of(info)`` read the groups back as dicts. ``env.unwrapped.scenario`` names the leader. v1
-    (``info_keys="v1"``) adds ``vector_reward``, ``cost``, ``objective_<name>`` and ``truth_regime``.
+    (``info_keys="v1"``) adds ``vector_reward``, ``cost``, ``objectives`` and ``truth_regime``.
 
     ## Starting State
 
@@ -123,7 +123,7 @@ class TimeGapMonitorEnv(gym.Env):
 
     * v1: the default task (``config.TASK_VERSIONS[1]``, docs/task.md): the ``variation_first`` reward weighting,
       the ``regimes`` leader family beside v0's four, and in the info ``vector_reward`` (the terms; the reward is
-      the weights times it), ``cost``, ``objective_<name>`` (natural units) and ``truth_regime``.
+      the weights times it), ``cost``, ``objectives`` (natural units) and ``truth_regime``.
       ``mo-TimeGapMonitor-v1`` returns the terms as the reward vector.
     * v0: initial version, kept bit for bit.
     """
@@ -166,7 +166,7 @@ class TimeGapMonitorEnv(gym.Env):
             raise ResetNeeded("TimeGapMonitorEnv.step() called before reset() or after the episode ended "
                               "(terminated or truncated): call reset() first")
         result = self.task._run_step(self._checked(action))
-        info = {**self._info(), **of_env(step_scores(result.terms, self.task.objectives()), 0)} \
+        info = {**self._info(), **of_env(step_scores(result.term_rows, self.task.objectives()), 0)} \
             if self.step_diagnostics else {}
         terminated, truncated = bool(result.terminated[0]), bool(result.truncated[0])
         if terminated or truncated:

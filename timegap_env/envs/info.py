@@ -19,8 +19,9 @@ With ``EnvConfig.info_keys = "v1"`` (``TimeGapMonitor-v1``'s default) it also ho
   (``RewardWeights``, in the same order) times it (MO-Gymnasium's ``LinearReward`` convention);
 - ``cost`` (): the step's string instability, TTC shortfall and collision, each in [0, 1]
   (:data:`~timegap_env.envs.reward.COST_TERMS`; Safety-Gymnasium's convention: >= 0, 0 when safe);
-- ``objective_<name>`` (): what each term measures in natural units (:data:`~timegap_env.envs.reward.OBJECTIVES`:
-  ``objective_capacity`` [veh/h], ``objective_time_gap_variation`` [s], ...);
+- ``objectives`` (n_terms,): what each term measures, in natural units, in the same order
+  (:data:`~timegap_env.envs.reward.OBJECTIVES`: capacity [veh/h], time-gap variation [s], ...;
+  :func:`objectives_of` gives them by name);
 - ``truth_regime`` (): the leader's regime now, an index into
   :func:`~timegap_env.leaders.scenarios.regime_names` (:func:`truth_of` gives the name).
 
@@ -36,13 +37,13 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from timegap_env.envs.reward import OBJECTIVES, REWARD_TERMS, step_cost
+from timegap_env.envs.reward import OBJECTIVES, REWARD_TERMS
 from timegap_env.leaders.scenarios import regime_names
 from timegap_env.sim.degradation import KINDS
 
 KIND_NAMES = np.array(KINDS, dtype=object)  # truth_kind -> the degradation's name ("none": not hit)
-REWARD_PREFIX, TRUTH_PREFIX, EPISODE_PREFIX, OBJECTIVE_PREFIX = "reward_", "truth_", "episode_", "objective_"
-VECTOR_REWARD, COST = "vector_reward", "cost"  # info_keys "v1"'s keys beside the reward terms
+REWARD_PREFIX, TRUTH_PREFIX, EPISODE_PREFIX = "reward_", "truth_", "episode_"
+VECTOR_REWARD, COST, OBJECTIVES_KEY = "vector_reward", "cost", "objectives"  # info_keys "v1"'s keys beside the terms
 
 
 def step_diagnostics_flag(value: object) -> bool:
@@ -63,21 +64,21 @@ def no_rewards(n_envs: int) -> dict[str, np.ndarray]:
     return {REWARD_PREFIX + name: np.zeros(n_envs) for name in REWARD_TERMS}
 
 
-def step_scores(terms: Mapping[str, np.ndarray], objectives: Mapping[str, np.ndarray] | None) -> dict[str, np.ndarray]:
-    """A step's scores as the info holds them: ``reward_<term>``; with ``objectives`` (name -> (n_envs,), given with
-    ``info_keys`` "v1") also ``vector_reward`` (n_envs, n_terms), ``cost`` and ``objective_<name>``."""
-    scores = prefixed(REWARD_PREFIX, terms)
+def step_scores(term_rows: np.ndarray, objectives: tuple[np.ndarray, np.ndarray] | None) -> dict[str, np.ndarray]:
+    """A step's scores as the info holds them, from its reward terms (n_terms, n_envs): ``reward_<term>``; with
+    ``objectives`` (given with ``info_keys`` "v1": the objectives (n_terms, n_envs) in natural units and the cost
+    (n_envs,)) also ``vector_reward`` (n_envs, n_terms), ``cost`` and ``objectives`` (n_envs, n_terms). The values
+    are views of the arguments."""
+    scores = {REWARD_PREFIX + name: row for name, row in zip(REWARD_TERMS, term_rows)}
     if objectives is not None:
-        scores[VECTOR_REWARD] = np.stack([terms[name] for name in REWARD_TERMS], axis=-1)
-        scores[COST] = step_cost(terms)
-        scores.update(prefixed(OBJECTIVE_PREFIX, objectives))
+        scores[VECTOR_REWARD], scores[OBJECTIVES_KEY], scores[COST] = term_rows.T, objectives[0].T, objectives[1]
     return scores
 
 
 def no_scores(n_envs: int, info_keys: str) -> dict[str, np.ndarray]:
-    """:func:`step_scores` of no step, zeros (n_envs,): what reset's info holds, so that step's keys are there too."""
-    objectives = {objective.name: np.zeros(n_envs) for objective in OBJECTIVES.values()} if info_keys != "v0" else None
-    return step_scores({name: np.zeros(n_envs) for name in REWARD_TERMS}, objectives)
+    """:func:`step_scores` of no step, zeros: what reset's info holds, so that step's keys are there too."""
+    zeros = np.zeros((len(REWARD_TERMS), n_envs))
+    return step_scores(zeros, None if info_keys == "v0" else (zeros.copy(), np.zeros(n_envs)))
 
 
 def with_masks(infos: Mapping[str, np.ndarray], mask: np.ndarray) -> dict[str, np.ndarray]:
@@ -123,10 +124,11 @@ def rewards_of(info: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
 
 
 def objectives_of(info: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
-    """The objectives in ``info`` (``info_keys`` "v1") as ``{name: value}`` in natural units."""
-    return _group(info, OBJECTIVE_PREFIX)
+    """The objectives in ``info`` (``info_keys`` "v1") as ``{name: value}`` in natural units (OBJECTIVES' names)."""
+    values = np.asarray(info[OBJECTIVES_KEY])
+    return {objective.name: values[..., i] for i, objective in enumerate(OBJECTIVES.values())}
 
 
-__all__ = ["COST", "EPISODE_PREFIX", "KIND_NAMES", "OBJECTIVE_PREFIX", "REWARD_PREFIX", "TRUTH_PREFIX", "VECTOR_REWARD",
+__all__ = ["COST", "EPISODE_PREFIX", "KIND_NAMES", "OBJECTIVES_KEY", "REWARD_PREFIX", "TRUTH_PREFIX", "VECTOR_REWARD",
            "no_rewards", "no_scores", "objectives_of", "of_env", "prefixed", "rewards_of", "step_diagnostics_flag",
            "step_scores", "summary_of", "truth_of", "with_masks"]

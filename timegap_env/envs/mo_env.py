@@ -4,7 +4,7 @@
 ones chosen with ``objectives``) as a float32 vector, each <= 0; ``reward_space`` and ``reward_dim`` say its shape.
 The scalar env's reward is ``RewardWeights`` times this vector (all terms), so MO-Gymnasium's
 ``LinearReward(env, weight=...)`` with the weights of a preset gives back that preset's scalar env. What each term
-measures in natural units is in the info (``objective_<name>``) and in :data:`~timegap_env.envs.reward.OBJECTIVES`.
+measures in natural units is in the info (``objectives``) and in :data:`~timegap_env.envs.reward.OBJECTIVES`.
 """
 
 from __future__ import annotations

@@ -46,7 +46,6 @@ from __future__ import annotations
 import collections
 import dataclasses
 import math
-from collections.abc import Mapping
 from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numba
@@ -149,6 +148,8 @@ class StepScore(NamedTuple):
 
     terms: RewardTerms  # each (n_envs,), <= 0
     reward: np.ndarray  # (n_envs,)
+    objectives: np.ndarray  # (n_terms, n_envs) each term's objective in its natural unit, REWARD_TERMS order
+    cost: np.ndarray  # (n_envs,) -(the sum of COST_TERMS), >= 0
 
 
 def weights_of(config: EnvConfig) -> RewardTerms:
@@ -159,7 +160,7 @@ def weights_of(config: EnvConfig) -> RewardTerms:
 class Objective(NamedTuple):
     """What a reward term measures, in natural units, and how the term is made of it."""
 
-    name: str  # info["objective_<name>"] (TimeGapMonitor-v1)
+    name: str  # its name in objectives_of(info) (TimeGapMonitor-v1's info["objectives"])
     unit: str
     term: str  # the term as a function of the objective (per follower, then the mean, where it says so)
 
@@ -185,7 +186,8 @@ OBJECTIVES: dict[str, Objective] = {
 }
 assert tuple(OBJECTIVES) == REWARD_TERMS
 COST_TERMS = ("string_stability", "safety", "collision")  # info["cost"] = -(the sum of these terms), in [0, 3]: a step's
-# string instability, TTC shortfall and collision, each in [0, 1] (Safety-Gymnasium's convention: >= 0, 0 when safe)
+# string instability, TTC shortfall and collision, each in [0, 1] (Safety-Gymnasium's convention: >= 0, 0 when safe);
+# env_objectives writes it
 
 
 def term_lows(config: EnvConfig) -> dict[str, float]:
@@ -194,29 +196,6 @@ def term_lows(config: EnvConfig) -> dict[str, float]:
     scales = config.reward_scales
     return {"tracking": -scales.tracking_cap / scales.tracking_reference, "string_stability": -1.0, "safety": -np.inf,
             "collision": -1.0, "comfort": -np.inf, "efficiency": -1.0, "preference": -1.0, "switching": -1.0}
-
-
-def step_objectives(readouts: StepReadouts, setting: np.ndarray, changed: np.ndarray,
-                    constants: RewardConstants) -> dict[str, np.ndarray]:
-    """The objectives of :data:`OBJECTIVES` of a step, each (n_envs,) in its natural unit, from its ``readouts``;
-    ``setting`` [s] and ``changed`` (n_envs, n_followers) as in :func:`reward_terms`."""
-    n_ticks = constants.ticks_per_step
-    speed = readouts.final_speed
-    return {
-        "time_gap_variation": readouts.gap_deviation_sum / (n_ticks * setting.shape[1]),
-        "acceleration_growth": readouts.accel_growth.copy(),
-        "ttc_shortfall": np.maximum(0.0, constants.ttc_threshold - readouts.min_ttc).mean(axis=1),
-        "collision": readouts.collided.astype(float),
-        "jerk_squared": readouts.jerk_squared.mean(axis=1) / n_ticks,
-        "capacity": (3600.0 * speed / (speed * setting + constants.gap_per_vehicle)).mean(axis=1),
-        "preference_deviation": np.abs(setting - constants.preferred_setting).mean(axis=1),
-        "switching": changed.mean(axis=1),
-    }
-
-
-def step_cost(terms: Mapping[str, np.ndarray]) -> np.ndarray:
-    """A step's cost from its reward ``terms`` (name -> (n_envs,)): -(the sum of :data:`COST_TERMS`), >= 0."""
-    return 0.0 - np.sum([terms[name] for name in COST_TERMS], axis=0)  # 0.0 - : a safe step costs 0.0, not -0.0
 
 
 def step_readouts(step: StepTicks, previous_accel: np.ndarray, envelope: np.ndarray,
@@ -257,24 +236,30 @@ def score_step(
     readouts: StepReadouts,
 ) -> StepScore:
     """:func:`step_readouts` into ``readouts`` (the caller's, e.g. from ``StepReadouts.empty``, reused step
-    after step), then :func:`reward_terms` and :func:`weighted_sum`, in one compiled call."""
+    after step), then :func:`reward_terms`, :func:`weighted_sum`, the objectives and the cost, in one compiled
+    call."""
     n_envs = setting.shape[0]
     terms = np.empty((len(REWARD_TERMS), n_envs))  # one row a term, in REWARD_TERMS order
-    score = StepScore(RewardTerms(*terms), np.empty(n_envs))
+    score = StepScore(RewardTerms(*terms), np.empty(n_envs), np.empty((len(REWARD_TERMS), n_envs)), np.empty(n_envs))
     _score(tuple(step), previous_accel, envelope, setting, changed, tuple(constants), np.array(weights),
-           tuple(readouts), tuple(score.terms), terms, score.reward)
+           tuple(readouts), tuple(score.terms), terms, score.reward, tuple(score.objectives), score.cost)
     return score
 
 
 @numba.njit(cache=True, error_model="numpy")
-def _score(step, previous_accel, envelope, setting, changed, constants, weights, readouts, terms, term_rows, reward):  # noqa: ANN001, ANN202, PLR0913
+def _score(step, previous_accel, envelope, setting, changed, constants, weights, readouts, terms, term_rows, reward,  # noqa: ANN001, ANN202, PLR0913
+           objectives, cost):
     """:func:`score_step`; the structures come as plain tuples (see :mod:`timegap_env.sim.platoon`); ``terms``
     are the rows of ``term_rows`` (n_terms, n_envs), written by name and summed by row against ``weights``
-    (n_terms,), in REWARD_TERMS order (a tuple indexed by a variable is slow in numba)."""
+    (n_terms,), in REWARD_TERMS order (a tuple indexed by a variable is slow in numba); ``objectives`` the rows
+    of the objectives, by term."""
     step, constants, readouts = StepTicks(*step), RewardConstants(*constants), StepReadouts(*readouts)
+    terms, objectives = RewardTerms(*terms), RewardTerms(*objectives)
     _step_readouts(step, previous_accel, envelope, constants, readouts)
-    _reward_terms(readouts, setting, changed, constants, RewardTerms(*terms))
+    _reward_terms(readouts, setting, changed, constants, terms)
     _weighted_sum(term_rows, weights, reward)
+    for e in range(setting.shape[0]):
+        env_objectives(readouts, setting, changed, terms, constants, objectives, cost, e)
 
 
 @numba.njit(cache=True, error_model="numpy")
@@ -358,6 +343,32 @@ def env_reward_terms(readouts, setting, changed, constants, out, e):  # noqa: AN
     out.efficiency[e] = -(efficiency / n_followers)
     out.preference[e] = -(preference / n_followers) / constants.level_span
     out.switching[e] = -(switching / n_followers)
+
+
+@numba.njit(cache=True, error_model="numpy", inline="always")
+def env_objectives(readouts, setting, changed, terms, constants, out, cost, e):  # noqa: ANN001, ANN201, PLR0913
+    """Env ``e``'s objectives of :data:`OBJECTIVES` in natural units (into ``out``, a :class:`RewardTerms` of
+    (n_envs,) rows, each term's objective under its name) from its read-outs, and its cost (into ``cost``,
+    (n_envs,)) from its ``terms`` (a :class:`RewardTerms`)."""
+    n_followers = setting.shape[1]
+    n_ticks = constants.ticks_per_step
+    shortfall = jerk_squared = capacity = preference = switching = 0.0
+    for f in range(n_followers):
+        v = readouts.final_speed[e, f]  # [m/s]
+        shortfall += max(0.0, constants.ttc_threshold - readouts.min_ttc[e, f])
+        jerk_squared += readouts.jerk_squared[e, f] / n_ticks
+        capacity += 3600.0 * v / (v * setting[e, f] + constants.gap_per_vehicle)
+        preference += abs(setting[e, f] - constants.preferred_setting)
+        switching += changed[e, f]
+    out.tracking[e] = readouts.gap_deviation_sum[e] / (n_ticks * n_followers)  # time_gap_variation [s]
+    out.string_stability[e] = readouts.accel_growth[e]  # acceleration_growth [m/s^2]
+    out.safety[e] = shortfall / n_followers  # ttc_shortfall [s]
+    out.collision[e] = 1.0 if readouts.collided[e] else 0.0
+    out.comfort[e] = jerk_squared / n_followers  # jerk_squared [m^2/s^6]
+    out.efficiency[e] = capacity / n_followers  # capacity [veh/h]
+    out.preference[e] = preference / n_followers  # preference_deviation [s]
+    out.switching[e] = switching / n_followers  # [-]
+    cost[e] = 0.0 - (terms.string_stability[e] + terms.safety[e] + terms.collision[e])  # 0.0 - : never -0.0
 
 
 @numba.njit(cache=True, error_model="numpy")

@@ -33,7 +33,8 @@ from timegap_env.config import ACTION_MODES, CHART_KINDS, EnvConfig
 from timegap_env.envs.action import RELATIVE_STEPS
 from timegap_env.envs.observation import FollowerState, encode_env
 from timegap_env.envs.reward import (
-    RewardConstants, RewardTerms, StepReadouts, StepTicks, env_readouts, env_reward_terms, env_weighted_sum,
+    RewardConstants, RewardTerms, StepReadouts, StepTicks, env_objectives, env_readouts, env_reward_terms,
+    env_weighted_sum,
 )
 from timegap_env.envs.totals import add_step_env
 from timegap_env.monitoring.charts import ChartMemory, ChartState, count_excursions_env
@@ -74,6 +75,8 @@ class StepState(NamedTuple):
     term_rows: np.ndarray  # (n_terms, n_envs) the reward terms, REWARD_TERMS order
     terms: tuple  # RewardTerms: the rows of term_rows, by name
     reward: np.ndarray  # (n_envs,)
+    objectives: tuple  # RewardTerms: each term's objective in its natural unit, by the term's name, rows (n_envs,)
+    cost: np.ndarray  # (n_envs,) the step's cost, >= 0
     terminated: np.ndarray  # (n_envs,) a collision ended the episode [bool]
     truncated: np.ndarray  # (n_envs,) the episode ran out of time or leader profile [bool]
     observation: np.ndarray  # (n_envs, n_followers, n_features) float32
@@ -144,7 +147,7 @@ def fused_step(state, rules, action):  # noqa: ANN001, ANN201
     chart, moments = ChartMemory(*chart_memory), Moments(*posterior)
     follower = FollowerState(moments.mean_tau, moments.var_tau, center, chart.side, chart.exceedances_in_window,
                              chart.run_length, platoon.setting, platoon.v[:, 1:], platoon.v2v)
-    terms, readouts = RewardTerms(*state.terms), StepReadouts(*state.readouts)
+    terms, readouts, objectives = RewardTerms(*state.terms), StepReadouts(*state.readouts), RewardTerms(*state.objectives)
     constants = RewardConstants(*rules.reward)
     faults_start, faults_end = state.faults[0], state.faults[1]
     last = n_ticks - 1
@@ -172,6 +175,7 @@ def fused_step(state, rules, action):  # noqa: ANN001, ANN201
             collided = collided or platoon.collided[e, f]
         env_reward_terms(readouts, platoon.setting, state.changed, constants, terms, e)
         env_weighted_sum(state.term_rows, rules.weights, state.reward, e)
+        env_objectives(readouts, platoon.setting, state.changed, terms, constants, objectives, state.cost, e)
         add_step_env(state.totals, state.readouts, platoon.setting, state.changed, constants.gap_per_vehicle, e)
         state.terminated[e] = collided
         state.truncated[e] = platoon.ticks[e] >= state.episode_ticks[e] and not collided

@@ -30,7 +30,7 @@ from timegap_env.envs.info import TRUTH_PREFIX, prefixed
 from timegap_env.envs.observation import FEATURES, FollowerState, ObservationScales, observe_into
 from timegap_env.envs.rendering import DEFAULT_TIME_WINDOW, RenderFrame
 from timegap_env.envs.reward import (
-    REWARD_TERMS, RewardConstants, StepReadouts, StepTicks, score_step, step_objectives, weights_of,
+    REWARD_TERMS, RewardConstants, StepReadouts, StepTicks, score_step, weights_of,
 )
 from timegap_env.envs.step_kernel import StepRules, StepState, fused_step
 from timegap_env.envs.totals import EpisodeTotals
@@ -44,6 +44,8 @@ class StepResult:
 
     reward: np.ndarray  # (n_envs,)
     term_rows: np.ndarray  # (n_terms, n_envs) the reward terms in REWARD_TERMS order, each <= 0
+    objective_rows: np.ndarray  # (n_terms, n_envs) each term's objective in its natural unit (reward.OBJECTIVES)
+    cost: np.ndarray  # (n_envs,) the step's cost (reward.COST_TERMS), >= 0
     terminated: np.ndarray  # (n_envs,) a collision ended the episode
     truncated: np.ndarray  # (n_envs,) the episode ran out of time or leader profile
 
@@ -130,6 +132,7 @@ class PlatoonTask:
         self.trace: Trace | None = None
         # what a step writes, refilled by every step
         self._result = StepResult(reward=np.zeros(n_envs), term_rows=np.zeros((len(REWARD_TERMS), n_envs)),
+                                  objective_rows=np.zeros((len(REWARD_TERMS), n_envs)), cost=np.zeros(n_envs),
                                   terminated=np.zeros(n_envs, dtype=bool), truncated=np.zeros(n_envs, dtype=bool))
         self._changed = np.zeros((n_envs, self.n_followers), dtype=bool)
         self._observation = np.zeros((n_envs, self.n_followers, len(FEATURES)), dtype=np.float32)
@@ -195,6 +198,7 @@ class PlatoonTask:
             monitor=loop.monitor.kernel_args, chart=loop.chart.kernel_args, readouts=tuple(self._readouts),
             previous_accel=self._previous_accel, envelope=self._accel_envelope, totals=tuple(self.totals),
             changed=self._changed, term_rows=result.term_rows, terms=tuple(result.term_rows), reward=result.reward,
+            objectives=tuple(result.objective_rows), cost=result.cost,
             terminated=result.terminated, truncated=result.truncated, observation=self._observation,
         ))
 
@@ -243,6 +247,7 @@ class PlatoonTask:
         self._previous_accel[:] = physics.accel[-1]
         result = self._result
         result.reward[:], result.term_rows[:], self._changed[:] = score.reward, score.terms, changed
+        result.objective_rows[:], result.cost[:] = score.objectives, score.cost
         np.any(platoon.collided, axis=1, out=result.terminated)
         result.truncated[:] = (loop.ticks >= self.episodes.episode_ticks) & ~result.terminated
         observe_into(self._follower_state(), self._scales, self._observation, np.ones(self.n_envs, dtype=bool))
@@ -286,12 +291,10 @@ class PlatoonTask:
             "skipped_measurements": monitor.skipped.copy(),  # since reset [-]
         }
 
-    def objectives(self) -> dict[str, np.ndarray] | None:
-        """The last step's objectives in natural units, each (n_envs,)
-        (:func:`~timegap_env.envs.reward.step_objectives`), with ``info_keys`` "v1"; else None."""
-        if self.config.info_keys == "v0":
-            return None
-        return step_objectives(self._readouts, self.loop.platoon.setting, self._changed, self._reward_constants)
+    def objectives(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """With ``info_keys`` "v1", the last step's objectives in natural units (n_terms, n_envs) and its cost
+        (n_envs,) (the task's own arrays, see :class:`StepResult`); else None."""
+        return None if self.config.info_keys == "v0" else (self._result.objective_rows, self._result.cost)
 
     def step_info(self) -> dict[str, np.ndarray]:
         """Every env's info now, flat (:mod:`~timegap_env.envs.info`): :meth:`monitor_info` and the ground truth as

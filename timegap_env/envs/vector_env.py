@@ -197,12 +197,12 @@ class TimeGapMonitorVectorEnv(VectorEnv):
         self._steps += 1
         done = (result.terminated | result.truncated | (self._steps >= self.max_episode_steps)) & ~restarting
         terminated, truncated = result.terminated & done, ~result.terminated & done
-        reward, terms, objectives = result.reward.copy(), result.terms, self.task.objectives()
+        reward, terms, objectives = result.reward.copy(), result.term_rows.copy(), _copied(self.task.objectives())
         if restarting.any():  # next_step: their step above ran past the episode's end and is dropped
             self._reset_task(restarting, None)
             self._steps[restarting] = 0
-            reward = np.where(restarting, 0.0, reward)
-            terms, objectives = _zeroed(terms, restarting), objectives and _zeroed(objectives, restarting)
+            reward[restarting] = 0.0
+            _zero(terms, objectives, restarting)
         everyone = np.ones(self.num_envs, dtype=bool)
         infos: dict[str, Any] = {}
         if self.autoreset_mode == AutoresetMode.SAME_STEP and done.any():
@@ -216,8 +216,8 @@ class TimeGapMonitorVectorEnv(VectorEnv):
                      "final_info": with_masks(final_info, done), "_final_info": done.copy()}
             self._reset_task(done, None)
             self._steps[done] = 0
-            terms, objectives = _zeroed(terms, done), objectives and _zeroed(objectives, done)  # the reset's, as
-            # reset() gives
+            terms, objectives = terms.copy(), _copied(objectives)  # final_info keeps the step's; the envs just
+            _zero(terms, objectives, done)  # reset get the reset's, as reset() gives
         if self.step_diagnostics:
             infos.update(with_masks({**self.task.step_info(), **step_scores(terms, objectives)}, everyone))
         if self.autoreset_mode != AutoresetMode.SAME_STEP:
@@ -237,9 +237,17 @@ class TimeGapMonitorVectorEnv(VectorEnv):
         return self.task.observation().reshape(self.num_envs, -1)
 
 
-def _zeroed(values: dict[str, np.ndarray], mask: np.ndarray) -> dict[str, np.ndarray]:
-    """``values`` (name -> (num_envs,)) with 0 where ``mask``."""
-    return {name: np.where(mask, 0.0, value) for name, value in values.items()}
+def _copied(objectives: tuple[np.ndarray, np.ndarray] | None) -> tuple[np.ndarray, np.ndarray] | None:
+    """A copy of the objectives and cost of ``PlatoonTask.objectives`` (None stays None)."""
+    return None if objectives is None else (objectives[0].copy(), objectives[1].copy())
+
+
+def _zero(terms: np.ndarray, objectives: tuple[np.ndarray, np.ndarray] | None, mask: np.ndarray) -> None:
+    """The scores of the envs of ``mask`` set to 0 in place: the terms (n_terms, num_envs), the objectives and cost."""
+    terms[:, mask] = 0.0
+    if objectives is not None:
+        objectives[0][:, mask] = 0.0
+        objectives[1][mask] = 0.0
 
 
 __all__ = ["TimeGapMonitorVectorEnv"]
