@@ -52,7 +52,7 @@ def _say_when_compiling() -> None:
 _say_when_compiling()  # before the imports below, some of which compile a kernel
 
 from timegap_env.config import (
-    MONITOR_PRESETS, AggressiveCyclesConfig, ChartConfig, DegradationConfig, EnvConfig, HardBrakingConfig,
+    ENV_IDS, MONITOR_PRESETS, AggressiveCyclesConfig, ChartConfig, DegradationConfig, EnvConfig, HardBrakingConfig,
     HumanLeaderConfig, LeaderConfig, MonitorConfig, PlatoonConfig, RewardScales, RewardWeights, SensorConfig,
     SinusoidConfig, StochasticHumanConfig,
 )
@@ -66,8 +66,7 @@ from timegap_env.sim import (
     COMMERCIAL_ACC, Trajectory, acc_platoon, acc_presets, platoon_string_stability, simulate, string_stability,
 )
 
-ENV_ID = "TimeGapMonitor-v0"  # the first task, kept bit for bit; the id the rollout harness builds its configs in
-ENV_IDS = {0: ENV_ID, 1: "TimeGapMonitor-v1"}  # env version -> id; each version's defaults: config.TASK_VERSIONS
+ENV_ID = ENV_IDS[0]  # the first task, kept bit for bit; a config given as a dict overrides its defaults
 LATEST_ENV_ID = ENV_IDS[max(ENV_IDS)]  # the default task (docs/task.md says how it was chosen)
 MO_ENV_ID = "mo-TimeGapMonitor-v1"  # LATEST_ENV_ID with the reward terms as a vector (MO-Gymnasium's API)
 

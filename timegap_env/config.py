@@ -848,6 +848,7 @@ class EnvConfig(ConfigMixin):
 
 
 INFO_KEYS = ("v0", "v1")  # EnvConfig.info_keys's values
+ENV_IDS: dict[int, str] = {0: "TimeGapMonitor-v0", 1: "TimeGapMonitor-v1"}  # env version -> its registered id
 TASK_VERSIONS: dict[int, dict[str, Any]] = {  # env version -> its defaults, as overrides of EnvConfig's (docs/task.md)
     0: {},  # TimeGapMonitor-v0: EnvConfig's own defaults
     1: {  # TimeGapMonitor-v1: the weighting the criterion chose, traffic that changes within an episode among the

@@ -192,7 +192,7 @@ def main() -> None:
     figure(rows, work / "map.png")
     front_figure(fronts, work / "map_fronts.png")
     start = time.perf_counter()
-    v1_rows, v1_fronts = v1_headroom(plan, backend)
+    v1_rows, v1_fronts, _ = v1_headroom(plan, backend)
     runtime = f"{time.perf_counter() - start:.0f} s ({backend.name} backend)"
     write_csv(v1_rows, work / "v1.csv")
     write_csv(v1_fronts, work / "v1_fronts.csv")

@@ -1,4 +1,5 @@
-"""Train PPO (Stable-Baselines3) on ``TimeGapMonitor-v0``, every platoon in one native vector env.
+"""Train PPO (Stable-Baselines3) on ``TimeGapMonitor-v0`` or ``-v1`` (``--env-id``), every platoon in one native
+vector env.
 
     python -m train.train_ppo                                    # the committed model in results/ppo/
     python -m train.train_ppo --timesteps 20000 --out /tmp/ppo   # a short run elsewhere (no warm-up: see below)
@@ -76,8 +77,8 @@ from stable_baselines3.common.vec_env import VecEnv, VecFrameStack, VecNormalize
 
 from timegap_env.agents.learned import LearnedPolicy, ObservationNormalizer, RunFileError, load_model, load_vecnormalize
 from timegap_env.agents.policies import seconds
-from timegap_env.agents.protocol import ENV_FILE, EVAL_SEED_START, MODEL_FILE, VECNORMALIZE_FILE
-from timegap_env import ENV_ID, cli
+from timegap_env.agents.protocol import ENV_FILE, EVAL_SEED_START, MODEL_FILE, VECNORMALIZE_FILE, env_version
+from timegap_env import ENV_ID, ENV_IDS, cli
 from timegap_env.config import EnvConfig
 from timegap_env.envs.action import action_space
 from timegap_env.envs.info import summary_of, truth_of
@@ -98,6 +99,8 @@ SUMMARY_KEYS = {"collision", "mean_setting", "switches", "time_out_of_control"} 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(prog="python -m train.train_ppo", description=__doc__.split("\n")[0])
+    parser.add_argument("--env-id", default=ENV_ID, choices=list(ENV_IDS.values()),
+                        help="the env, and the section of --hyperparams and --warmup to read (default: %(default)s)")
     parser.add_argument("--timesteps", type=int, default=None,
                         help="total environment steps of the run, warm-up included (default: n_timesteps of the yml)")
     parser.add_argument("--seed", type=int, default=0,
@@ -131,21 +134,21 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     return parser.parse_args(argv)
 
 
-def load_warmup(path: Path) -> tuple[int, dict[str, Any]]:
-    """The warm-up in ``path``'s ``ENV_ID`` section: its steps and its env's gym.make keyword arguments."""
+def load_warmup(path: Path, env_id: str = ENV_ID) -> tuple[int, dict[str, Any]]:
+    """The warm-up in ``path``'s ``env_id`` section: its steps and its env's gym.make keyword arguments."""
     with open(path) as file:
         document = yaml.safe_load(file)
-    if not isinstance(document, dict) or not isinstance(document.get(ENV_ID), dict):
-        raise ValueError(f"warmup = {str(path)!r}: needs a top-level key {ENV_ID!r} holding {sorted(WARMUP_KEYS)}")
-    warmup = document[ENV_ID]
+    if not isinstance(document, dict) or not isinstance(document.get(env_id), dict):
+        raise ValueError(f"warmup = {str(path)!r}: needs a top-level key {env_id!r} holding {sorted(WARMUP_KEYS)}")
+    warmup = document[env_id]
     if set(warmup) != WARMUP_KEYS:
-        raise ValueError(f"warmup {ENV_ID} = {warmup!r} in {path}: needs exactly the keys {sorted(WARMUP_KEYS)}")
+        raise ValueError(f"warmup {env_id} = {warmup!r} in {path}: needs exactly the keys {sorted(WARMUP_KEYS)}")
     steps, env_kwargs = warmup["n_timesteps"], warmup["env_kwargs"]
     if (isinstance(steps, bool) or not isinstance(steps, (int, float)) or not math.isfinite(steps) or steps != int(steps)
             or steps < 1):
-        raise ValueError(f"warmup {ENV_ID}.n_timesteps = {steps!r} in {path}: must be an integer >= 1")
+        raise ValueError(f"warmup {env_id}.n_timesteps = {steps!r} in {path}: must be an integer >= 1")
     if not isinstance(env_kwargs, dict):
-        raise ValueError(f"warmup {ENV_ID}.env_kwargs = {env_kwargs!r} in {path}: must be a mapping")
+        raise ValueError(f"warmup {env_id}.env_kwargs = {env_kwargs!r} in {path}: must be a mapping")
     return int(steps), env_kwargs
 
 
@@ -296,11 +299,11 @@ def check_out(out: Path, resume: bool) -> None:
                          "directory when it ends, so give a new directory (or one holding a run)")
 
 
-def check_config(env_kwargs: dict[str, Any], source: str, overrides: dict[str, Any]) -> EnvConfig:
-    """``env_kwargs``' config as an EnvConfig; a ValueError naming where it came from (and the field) if it is
-    not one."""
+def check_config(env_kwargs: dict[str, Any], source: str, overrides: dict[str, Any], version: int) -> EnvConfig:
+    """``env_kwargs``' config over env version ``version``'s defaults, as an EnvConfig; a ValueError naming where it
+    came from (and the field) if it is not one."""
     try:
-        return EnvConfig.from_dict(env_kwargs.get("config"))
+        return EnvConfig.from_dict(env_kwargs.get("config"), version)
     except ValueError as error:
         given = f"--env-config {json.dumps(overrides)} merged into {source}" if overrides else source
         raise ValueError(f"{given}: {error}") from error
@@ -327,7 +330,8 @@ def share_text(reference: CurveReference, learned: float) -> str:
 def main(argv: list[str] | None = None) -> None:
     started = time.perf_counter()
     args = parse_args(argv)
-    hyperparams = load_hyperparams(args.hyperparams)  # what is left after the pops below goes to PPO
+    version = env_version(args.env_id)
+    hyperparams = load_hyperparams(args.hyperparams, args.env_id)  # what is left after the pops below goes to PPO
     n_envs = args.n_envs or int(hyperparams["n_envs"])
     total_timesteps = args.timesteps or int(hyperparams["n_timesteps"])
     del hyperparams["n_envs"], hyperparams["n_timesteps"]
@@ -335,7 +339,7 @@ def main(argv: list[str] | None = None) -> None:
     normalize = hyperparams.pop("normalize", False)
     frame_stack = hyperparams.pop("frame_stack", 1) if args.frame_stack is None else args.frame_stack
     env_kwargs = with_env_config(hyperparams.pop("env_kwargs", None) or {}, args.env_config)
-    warmup = load_warmup(args.warmup) if args.warmup is not None else None
+    warmup = load_warmup(args.warmup, args.env_id) if args.warmup is not None else None
     if warmup is not None and warmup[0] >= total_timesteps:
         print(f"note: timesteps = {total_timesteps} is no more than the warm-up's {warmup[0]} ({args.warmup}): "
               "the run trains without a warm-up")
@@ -355,13 +359,13 @@ def main(argv: list[str] | None = None) -> None:
         raise ValueError(f"seed = {args.seed}: sub-env seeds seed .. seed + {len(phases) * n_envs - 1} "
                          f"must lie in [0, {EVAL_SEED_START})")
     if isinstance(frame_stack, bool) or not isinstance(frame_stack, int) or frame_stack < 1:
-        raise ValueError(f"hyperparams {ENV_ID}.frame_stack = {frame_stack!r}: must be an integer >= 1")
+        raise ValueError(f"hyperparams {args.env_id}.frame_stack = {frame_stack!r}: must be an integer >= 1")
     if not isinstance(normalize, (bool, dict)):
-        raise ValueError(f"hyperparams {ENV_ID}.normalize = {normalize!r}: "
+        raise ValueError(f"hyperparams {args.env_id}.normalize = {normalize!r}: "
                          "must be true, false or a dict of VecNormalize arguments")
-    evaluated = check_config(env_kwargs, f"{args.hyperparams} env_kwargs", args.env_config)
+    evaluated = check_config(env_kwargs, f"{args.hyperparams} env_kwargs", args.env_config, version)
     if warmup:
-        check_config(phases[0][1], f"{args.warmup} env_kwargs (the warm-up)", args.env_config)
+        check_config(phases[0][1], f"{args.warmup} env_kwargs (the warm-up)", args.env_config, version)
     check_out(args.out, args.resume)
     # One thread: the network is tiny, the 2 cores are better left to the env (two threads measured 7x slower).
     torch.set_num_threads(1)
@@ -412,7 +416,8 @@ def main(argv: list[str] | None = None) -> None:
     env: VecEnv | None = None  # the phase's env, normalised; the model steps it through VecFrameStack if frame_stack > 1
     try:
         (work / ENV_FILE).write_text(json.dumps({"env_kwargs": env_kwargs, "frame_stack": frame_stack,
-                                                 "normalize": bool(normalize)}, indent=1, sort_keys=True) + "\n")
+                                                 "normalize": bool(normalize), "env_id": args.env_id},
+                                                indent=1, sort_keys=True) + "\n")
         if model is not None:
             model.tensorboard_log = str(tensorboard)
         reference = CurveReference.measure(evaluated)
@@ -420,7 +425,7 @@ def main(argv: list[str] | None = None) -> None:
         for phase, (phase_end, phase_env_kwargs) in enumerate(phases):
             if model is not None and model.num_timesteps >= phase_end:
                 continue
-            phase_env: VecEnv = TimeGapVecEnv(n_envs, **phase_env_kwargs)
+            phase_env: VecEnv = TimeGapVecEnv(n_envs, **phase_env_kwargs, version=version)
             if saved_statistics is not None and env is None:
                 saved_statistics.set_venv(phase_env)
                 phase_env = saved_statistics
@@ -467,7 +472,7 @@ def main(argv: list[str] | None = None) -> None:
                                f"{steps / seconds:,.0f} steps/s |" for label, steps, seconds in timings)
         files = ", ".join(f"`{name}`" for name in (MODEL_FILE, ENV_FILE, CURVE_FILE, CURVE_FIGURE)) + (
             f", `{VECNORMALIZE_FILE}`" if isinstance(env, VecNormalize) else "")
-        report = f"""# PPO on {ENV_ID}
+        report = f"""# PPO on {args.env_id}
 
 Command: `{command}` ({f"resumed from a checkpoint at {steps_before:,} steps" if args.resume else "fresh run"})
 

@@ -112,9 +112,12 @@ def test_regime_oracle_reads_the_regime_and_raises_to_its_floor():
 
 
 def test_v1_headroom_is_a_row_of_its_own_weighting():
-    rows, fronts = v1_headroom(Plan(train=1, selection=2, held_out=3))
+    rows, fronts, policy_rows = v1_headroom(Plan(train=1, selection=2, held_out=3), policies={"fixed_1.0": constant(2)})
     assert len(rows) == 1 and rows[0]["weighting"] == "variation_first"
     assert {key: rows[0][key] for key in V1_CELL} == V1_CELL
     for reference in REFERENCES:
         assert rows[0][f"{reference}_gain_low"] <= rows[0][f"{reference}_gain"] <= rows[0][f"{reference}_gain_high"]
     assert isinstance(rows[0]["full_oracle_meets_target"], bool) and fronts
+    assert [row["policy"] for row in policy_rows] == ["fixed_1.0"]
+    if rows[0]["best_blind"] == "1 s":  # the same constant: no gain
+        assert policy_rows[0]["gain"] == 0 and policy_rows[0]["return"] == rows[0]["best_blind_return"]

@@ -20,8 +20,8 @@ from stable_baselines3.common.logger import configure
 from stable_baselines3.common.vec_env import VecNormalize
 
 from timegap_env.agents.learned import LearnedPolicy, RunFileError
-from timegap_env.agents.protocol import EVAL_SEED_START
-from timegap_env import ENV_ID
+from timegap_env.agents.protocol import EVAL_SEED_START, read_env_file
+from timegap_env import ENV_ID, ENV_IDS
 from timegap_env.envs.sb3 import TimeGapVecEnv
 from timegap_env.experiments import training
 from train import train_ppo
@@ -32,15 +32,15 @@ ROOT = Path(__file__).resolve().parents[2]
 def test_hyperparams_have_rl_zoo3_layout() -> None:
     with open(ROOT / "hyperparams" / "ppo.yml") as file:
         document = yaml.safe_load(file)
-    assert list(document) == [ENV_ID]
-    hyperparams = document[ENV_ID]
-    for key in ("n_envs", "n_timesteps", "policy", "normalize", "n_steps", "batch_size", "gamma", "learning_rate",
-                "ent_coef", "policy_kwargs"):
-        assert key in hyperparams, key
-    assert isinstance(hyperparams["policy_kwargs"], str)
-    assert hyperparams["n_steps"] * hyperparams["n_envs"] % hyperparams["batch_size"] == 0
-    loaded = train_ppo.load_hyperparams(ROOT / "hyperparams" / "ppo.yml")
-    assert isinstance(loaded["policy_kwargs"], dict)
+    assert list(document) == list(ENV_IDS.values())  # a section per env version
+    for env_id, hyperparams in document.items():
+        for key in ("n_envs", "n_timesteps", "policy", "normalize", "n_steps", "batch_size", "gamma", "learning_rate",
+                    "ent_coef", "policy_kwargs"):
+            assert key in hyperparams, key
+        assert isinstance(hyperparams["policy_kwargs"], str)
+        assert hyperparams["n_steps"] * hyperparams["n_envs"] % hyperparams["batch_size"] == 0
+        loaded = train_ppo.load_hyperparams(ROOT / "hyperparams" / "ppo.yml", env_id)
+        assert isinstance(loaded["policy_kwargs"], dict)
 
 
 # What rl-zoo3 (2.9, ExperimentManager._preprocess_hyperparams) takes out of a hyperparameter entry before passing
@@ -107,7 +107,7 @@ def test_tiny_training_run_saves_loads_and_resumes(tmp_path: Path) -> None:
     assert sorted(p.name for p in out.iterdir()) == ["curve.csv", "curve.png", "env.json", "model.zip", "training.md",
                                                      "vecnormalize.pkl"]
     assert json.loads((out / "env.json").read_text()) == {"env_kwargs": {"config": {"episode_duration": 10.0}},
-                                                          "frame_stack": 1, "normalize": True}
+                                                          "frame_stack": 1, "normalize": True, "env_id": ENV_ID}
     assert LearnedPolicy.load(out).action_mode == "platoon"
     model = PPO.load(out / "model.zip", device="cpu")
     assert model.num_timesteps == 128
@@ -251,3 +251,25 @@ def test_the_command_line_names_a_corrupted_checkpoint_without_a_traceback(tmp_p
     assert done.returncode == 1
     assert "Traceback" not in done.stderr and f"{tmp_path / 'run' / 'model.zip'}" in done.stderr
     assert "not a readable PPO model zip" in done.stderr
+
+
+def test_a_run_names_its_env_and_loading_builds_that_version(tmp_path: Path) -> None:
+    """A v1 run's env.json names TimeGapMonitor-v1, and its config is v1's defaults with the run's overrides; an
+    env.json naming an unknown id is refused, naming it."""
+    v1 = ENV_IDS[1]
+    hyperparams = tmp_path / "ppo.yml"
+    hyperparams.write_text(yaml.safe_dump({v1: {
+        "n_envs": 2, "n_timesteps": 32, "policy": "MlpPolicy", "normalize": False, "n_steps": 16, "batch_size": 32,
+        "n_epochs": 1, "policy_kwargs": "dict(net_arch=[8])", "env_kwargs": {"config": {"episode_duration": 10.0}},
+    }}))
+    out = tmp_path / "run"
+    train_ppo.main(["--env-id", v1, "--hyperparams", str(hyperparams), "--no-warmup", "--out", str(out),
+                    "--no-progress-bar", "--curve-freq", "0"])
+    assert json.loads((out / "env.json").read_text())["env_id"] == v1
+    config = read_env_file(out / "env.json").config
+    assert config == gym.make(v1, config={"episode_duration": 10.0}).unwrapped.config
+    assert config.reward_weights.preference == 0.0 and config.info_keys == "v1"
+    assert LearnedPolicy.load(out).action_mode == "platoon"
+    (out / "env.json").write_text(json.dumps({"env_kwargs": {}, "frame_stack": 1, "env_id": "TimeGapMonitor-v9"}))
+    with pytest.raises(RunFileError, match="env_id = 'TimeGapMonitor-v9'"):
+        read_env_file(out / "env.json")

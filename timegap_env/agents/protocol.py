@@ -12,7 +12,9 @@ evaluation episode was seen in training. A trained run is a directory holding ``
 - ``normalize``: true if the model reads observations normalised by ``VECNORMALIZE_FILE``, false if
   it reads them as the env gives them. Runs written before the field existed leave it out; then
   ``VECNORMALIZE_FILE`` beside the model says the run normalised, and its absence is an error
-  (the model cannot be told apart from one whose statistics were lost).
+  (the model cannot be told apart from one whose statistics were lost);
+- ``env_id``: the registered id of the env (``TimeGapMonitor-v1``, ...), whose version's defaults the ``config``
+  overrides; runs written before the field existed leave it out and were trained in ``TimeGapMonitor-v0``.
 
 :func:`read_env_file` reads and checks it, :func:`check_spaces` checks a model against it; a file
 that is missing, unreadable or does not fit the model is an error naming it, never a default.
@@ -29,7 +31,8 @@ EVAL_SEED_START = 10_000  # evaluation seeds are >= this, training seeds < this 
 MODEL_FILE = "model.zip"  # the SB3 model of a run
 VECNORMALIZE_FILE = "vecnormalize.pkl"  # SB3 VecNormalize statistics of a run, if it normalised
 ENV_FILE = "env.json"  # the env a run was trained in, its frame stacking and normalisation (JSON)
-ENV_FILE_KEYS = {"env_kwargs", "frame_stack", "normalize"}  # "normalize" may be absent in older runs
+ENV_FILE_KEYS = {"env_kwargs", "frame_stack", "normalize", "env_id"}  # "normalize", "env_id" may be absent in older runs
+OLDER_RUNS_ENV_ID = "TimeGapMonitor-v0"  # the env of a run whose ENV_FILE names none
 
 
 class RunFileError(ValueError):
@@ -45,18 +48,30 @@ class RunEnv:
     env_kwargs: dict[str, Any]  # gym.make's keyword arguments
     frame_stack: int  # observations the model reads at once
     normalize: bool | None  # observations normalised by VECNORMALIZE_FILE; None: not recorded (an older run)
+    env_id: str = OLDER_RUNS_ENV_ID  # the registered env
 
     @property
     def config(self) -> Any:
-        """The env's ``EnvConfig`` (checked by :func:`read_env_file`)."""
+        """The env's ``EnvConfig``: its version's defaults with ``env_kwargs``' config (checked by
+        :func:`read_env_file`)."""
         from timegap_env.config import EnvConfig
 
-        return EnvConfig.from_dict(self.env_kwargs.get("config"))
+        return EnvConfig.from_dict(self.env_kwargs.get("config"), env_version(self.env_id))
 
     @property
     def action_mode(self) -> str:
         """What the model's actions mean: the config's ``action_mode``."""
         return self.config.action_mode
+
+
+def env_version(env_id: str) -> int:
+    """The version of ``env_id``, one of ``timegap_env.ENV_IDS``; ``ValueError`` naming it otherwise."""
+    from timegap_env.config import ENV_IDS
+
+    versions = {name: version for version, name in ENV_IDS.items()}
+    if env_id not in versions:
+        raise ValueError(f"env_id = {env_id!r}: not an id of this env; known: {list(versions)}")
+    return versions[env_id]
 
 
 def read_env_file(path: str | Path) -> RunEnv:
@@ -77,6 +92,7 @@ def read_env_file(path: str | Path) -> RunEnv:
         raise RunFileError(f"{path}: must be a JSON object with the keys env_kwargs, frame_stack and optionally "
                            f"normalize; holds {run!r}"[:400])
     env_kwargs, frame_stack, normalize = run["env_kwargs"], run["frame_stack"], run.get("normalize")
+    env_id = run.get("env_id", OLDER_RUNS_ENV_ID)
     if not isinstance(env_kwargs, dict) or not isinstance(env_kwargs.get("config", {}) or {}, dict):
         raise RunFileError(f"{path}: env_kwargs = {env_kwargs!r}: must be an object (gym.make's keyword arguments, "
                            "the env's config among them)")
@@ -85,10 +101,14 @@ def read_env_file(path: str | Path) -> RunEnv:
     if normalize is not None and not isinstance(normalize, bool):
         raise RunFileError(f"{path}: normalize = {normalize!r}: must be true or false")
     try:
-        EnvConfig.from_dict(env_kwargs.get("config"))
+        version = env_version(env_id) if isinstance(env_id, str) else env_version(repr(env_id))
+    except ValueError as error:
+        raise RunFileError(f"{path}: {error}") from error
+    try:
+        EnvConfig.from_dict(env_kwargs.get("config"), version)
     except ValueError as error:
         raise RunFileError(f"{path}: env_kwargs.config is not a config of this env: {error}") from error
-    return RunEnv(path, env_kwargs, frame_stack, normalize)
+    return RunEnv(path, env_kwargs, frame_stack, normalize, env_id)
 
 
 def check_spaces(run: RunEnv, action_space: Any, observation_shape: tuple[int, ...], model: str | Path) -> None:

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import math
 from collections.abc import Mapping, Sequence
 from typing import Any
 
@@ -207,16 +208,20 @@ def front_rows(constants: np.ndarray, references: dict[str, np.ndarray], levels:
 def map_cell(severity: str, traffic: str, plan: Plan, backend: Backend
              ) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
     """The rows of one cell of the map under every weighting (:func:`cell_rows`)."""
-    return cell_rows(cell_config(severity, traffic), {"severity": severity, "traffic": traffic}, WEIGHTINGS, plan,
-                     backend)
+    rows, fronts, _ = cell_rows(cell_config(severity, traffic), {"severity": severity, "traffic": traffic}, WEIGHTINGS,
+                                plan, backend)
+    return rows, fronts
 
 
 def cell_rows(config: EnvConfig, cell: dict[str, Any], weightings: dict[str, RewardPreset], plan: Plan,
-              backend: Backend) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
+              backend: Backend, policies: Mapping[str, Any] | None = None
+              ) -> tuple[list[dict[str, Any]], list[dict[str, Any]], list[dict[str, Any]]]:
     """Per weighting, the best blind constant and each reference on the held-out seeds of ``config`` (a row that
-    starts with ``cell``'s entries; each gain also without the collision term, which one episode can dominate); and
-    per weighting, the Pareto points (:func:`front_rows`) of the constants and
-    the references. ``config`` must put the regime in the info (``info_keys="v1"``)."""
+    starts with ``cell``'s entries; each gain also without the collision term, which one episode can dominate); per
+    weighting, the Pareto points (:func:`front_rows`) of the constants and the references; and per weighting and
+    policy of ``policies`` (name -> any policy the rollout harness plays), a row of its gain over the best blind
+    constant on the same held-out episodes and the share of the full oracle's gain it captures. ``config`` must put
+    the regime in the info (``info_keys="v1"``)."""
     train, selection, held_out = plan.seeds()
     levels = config.setting_levels
     n_levels = len(levels)
@@ -228,7 +233,9 @@ def cell_rows(config: EnvConfig, cell: dict[str, Any], weightings: dict[str, Rew
     regimes = regime_tables(config, train, weightings, backend)
     stability = [StabilityOracle(config, margin) for margin in MARGINS]
     stability_sel = backend.map(oracle_terms, [(config, selection, oracle) for oracle in stability])
-    rows, fronts = [], []
+    policies = dict(policies or {})
+    policies_held = dict(zip(policies, backend.map(term_sums, [(config, held_out, policy) for policy in policies.values()])))
+    rows, fronts, policy_rows = [], [], []
     for name, weighting in weightings.items():
         blind = int(np.argmax(weigh(constants_sel, weighting).mean(axis=1)))
         blind_return = weigh(constants_held[blind], weighting)
@@ -272,19 +279,28 @@ def cell_rows(config: EnvConfig, cell: dict[str, Any], weightings: dict[str, Rew
         for key, reference in (("meets_target", "degradation_aware"), ("full_oracle_meets_target", "full_oracle")):
             row[key] = bool(row[f"{reference}_share"] >= TARGET_SHARE and row[f"{reference}_gain_low"] > 0 and blind_safe)
         rows.append(row)
-    return rows, fronts
+        for policy, (terms, collided) in policies_held.items():
+            returns = weigh(terms, weighting)
+            mean, low, high = bootstrap_mean(returns - blind_return)
+            gap = row["full_oracle_gain"]
+            policy_rows.append({"weighting": name, **cell, "policy": policy, "return": float(returns.mean()),
+                                "gain": mean, "gain_low": low, "gain_high": high,
+                                "share_of_oracle_gain": mean / gap if gap > 0 else math.nan,
+                                "collisions": int(collided.sum()), "episodes": len(held_out)})
+    return rows, fronts, policy_rows
 
 
 V1_CELL = {"severity": "default", "traffic": "v1"}  # how TimeGapMonitor-v1's rows name their cell
 
 
-def v1_headroom(plan: Plan = Plan(), backend: Backend | None = None
-                ) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
-    """``TimeGapMonitor-v1``'s own row (its weighting) and Pareto points, as a cell of the map (:func:`cell_rows`)."""
+def v1_headroom(plan: Plan = Plan(), backend: Backend | None = None, policies: Mapping[str, Any] | None = None
+                ) -> tuple[list[dict[str, Any]], list[dict[str, Any]], list[dict[str, Any]]]:
+    """``TimeGapMonitor-v1``'s own row (its weighting), Pareto points and ``policies``' rows, as a cell of the map
+    (:func:`cell_rows`)."""
     config = EnvConfig.from_dict(version=1)
     weighting = next(name for name, preset in WEIGHTINGS.items() if preset.weights == config.reward_weights)
     assert TASK_VERSIONS[1]["reward_weights"] == weighting
-    return cell_rows(config, V1_CELL, {weighting: WEIGHTINGS[weighting]}, plan, backend or Backend())
+    return cell_rows(config, V1_CELL, {weighting: WEIGHTINGS[weighting]}, plan, backend or Backend(), policies)
 
 
 def task_map(plan: Plan = Plan(), backend: Backend | None = None) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:

@@ -21,31 +21,31 @@ RUN_KEYS = {"n_envs", "n_timesteps", "policy", "normalize", "frame_stack", "env_
 STRING_KWARGS = ("policy_kwargs", "normalize")  # may be Python expressions as in rl-zoo3: "dict(net_arch=[64])"
 
 
-def load_hyperparams(path: Path) -> dict[str, Any]:
-    """The ``ENV_ID`` section of an rl-zoo3-style yml, expressions in ``STRING_KWARGS`` evaluated."""
+def load_hyperparams(path: Path, env_id: str = ENV_ID) -> dict[str, Any]:
+    """The ``env_id`` section of an rl-zoo3-style yml, expressions in ``STRING_KWARGS`` evaluated."""
     import torch  # only here: the library steps the env without torch
     from stable_baselines3 import PPO
 
     with open(path) as file:
         document = yaml.safe_load(file)
-    if not isinstance(document, dict) or ENV_ID not in document:
-        raise ValueError(f"hyperparams = {str(path)!r}: needs a top-level key {ENV_ID!r}")
-    hyperparams = dict(document[ENV_ID])
+    if not isinstance(document, dict) or env_id not in document:
+        raise ValueError(f"hyperparams = {str(path)!r}: needs a top-level key {env_id!r}")
+    hyperparams = dict(document[env_id])
     allowed = RUN_KEYS | (set(inspect.signature(PPO).parameters) - {"env", "seed", "tensorboard_log", "device"})
     for key, value in hyperparams.items():
         if key == "warmup":
-            raise ValueError(f"hyperparams {ENV_ID}.warmup in {path}: the warm-up moved to its own file (rl-zoo3 "
+            raise ValueError(f"hyperparams {env_id}.warmup in {path}: the warm-up moved to its own file (rl-zoo3 "
                              "refuses the key): put it in hyperparams/ppo_warmup.yml's layout and pass --warmup FILE")
         if key not in allowed:
-            raise ValueError(f"hyperparams {ENV_ID}.{key} = {value!r}: unknown; allowed: {sorted(allowed)}")
+            raise ValueError(f"hyperparams {env_id}.{key} = {value!r}: unknown; allowed: {sorted(allowed)}")
         if key in STRING_KWARGS and isinstance(value, str):
             try:
                 hyperparams[key] = eval(value, {"__builtins__": {}}, {"dict": dict, "nn": torch.nn})
             except Exception as error:
-                raise ValueError(f"hyperparams {ENV_ID}.{key} = {value!r}: not an expression ({error})") from error
+                raise ValueError(f"hyperparams {env_id}.{key} = {value!r}: not an expression ({error})") from error
     for key in ("n_envs", "n_timesteps", "policy"):
         if key not in hyperparams:
-            raise ValueError(f"hyperparams {ENV_ID}.{key}: missing")
+            raise ValueError(f"hyperparams {env_id}.{key}: missing")
     return hyperparams
 
 
