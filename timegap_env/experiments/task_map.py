@@ -214,14 +214,15 @@ def map_cell(severity: str, traffic: str, plan: Plan, backend: Backend
 
 
 def cell_rows(config: EnvConfig, cell: dict[str, Any], weightings: dict[str, RewardPreset], plan: Plan,
-              backend: Backend, policies: Mapping[str, Any] | None = None
+              backend: Backend, policies: Mapping[str, Any] | None = None, baseline: str | None = None
               ) -> tuple[list[dict[str, Any]], list[dict[str, Any]], list[dict[str, Any]]]:
     """Per weighting, the best blind constant and each reference on the held-out seeds of ``config`` (a row that
     starts with ``cell``'s entries; each gain also without the collision term, which one episode can dominate); per
     weighting, the Pareto points (:func:`front_rows`) of the constants and the references; and per weighting and
     policy of ``policies`` (name -> any policy the rollout harness plays), a row of its gain over the best blind
-    constant on the same held-out episodes and the share of the full oracle's gain it captures. ``config`` must put
-    the regime in the info (``info_keys="v1"``)."""
+    constant on the same held-out episodes and the share of the full oracle's gain it captures (and, with
+    ``baseline`` one of their names, its gain over that policy, paired). ``config`` must put the regime in the info
+    (``info_keys="v1"``)."""
     train, selection, held_out = plan.seeds()
     levels = config.setting_levels
     n_levels = len(levels)
@@ -283,24 +284,29 @@ def cell_rows(config: EnvConfig, cell: dict[str, Any], weightings: dict[str, Rew
             returns = weigh(terms, weighting)
             mean, low, high = bootstrap_mean(returns - blind_return)
             gap = row["full_oracle_gain"]
-            policy_rows.append({"weighting": name, **cell, "policy": policy, "return": float(returns.mean()),
-                                "gain": mean, "gain_low": low, "gain_high": high,
-                                "share_of_oracle_gain": mean / gap if gap > 0 else math.nan,
-                                "collisions": int(collided.sum()), "episodes": len(held_out)})
+            policy_row = {"weighting": name, **cell, "policy": policy, "return": float(returns.mean()),
+                          "gain": mean, "gain_low": low, "gain_high": high,
+                          "share_of_oracle_gain": mean / gap if gap > 0 else math.nan,
+                          "collisions": int(collided.sum()), "episodes": len(held_out)}
+            if baseline is not None:
+                versus = bootstrap_mean(returns - weigh(policies_held[baseline][0], weighting))
+                policy_row |= dict(zip(("gain_over_baseline", "gain_over_baseline_low", "gain_over_baseline_high"),
+                                       versus))
+            policy_rows.append(policy_row)
     return rows, fronts, policy_rows
 
 
 V1_CELL = {"severity": "default", "traffic": "v1"}  # how TimeGapMonitor-v1's rows name their cell
 
 
-def v1_headroom(plan: Plan = Plan(), backend: Backend | None = None, policies: Mapping[str, Any] | None = None
-                ) -> tuple[list[dict[str, Any]], list[dict[str, Any]], list[dict[str, Any]]]:
+def v1_headroom(plan: Plan = Plan(), backend: Backend | None = None, policies: Mapping[str, Any] | None = None,
+                baseline: str | None = None) -> tuple[list[dict[str, Any]], list[dict[str, Any]], list[dict[str, Any]]]:
     """``TimeGapMonitor-v1``'s own row (its weighting), Pareto points and ``policies``' rows, as a cell of the map
     (:func:`cell_rows`)."""
     config = EnvConfig.from_dict(version=1)
     weighting = next(name for name, preset in WEIGHTINGS.items() if preset.weights == config.reward_weights)
     assert TASK_VERSIONS[1]["reward_weights"] == weighting
-    return cell_rows(config, V1_CELL, {weighting: WEIGHTINGS[weighting]}, plan, backend or Backend(), policies)
+    return cell_rows(config, V1_CELL, {weighting: WEIGHTINGS[weighting]}, plan, backend or Backend(), policies, baseline)
 
 
 def task_map(plan: Plan = Plan(), backend: Backend | None = None) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:

@@ -1,0 +1,28 @@
+"""train.evaluate_task: policies on TimeGapMonitor-v1's held-out episodes against its references (issue 25)."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import pytest
+
+from timegap_env.config import EnvConfig
+from train import evaluate_task
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def test_a_model_of_another_env_is_refused_naming_it():
+    with pytest.raises(ValueError, match="trained in TimeGapMonitor-v0, not TimeGapMonitor-v1"):
+        evaluate_task.learned(ROOT / "results" / "ppo", EnvConfig.from_dict(version=1))
+
+
+def test_a_tiny_evaluation_writes_its_table(tmp_path, monkeypatch, capsys):
+    out = tmp_path / "eval"
+    monkeypatch.setattr(sys, "argv", ["evaluate_task", "--train", "1", "--selection", "2", "--held-out", "3",
+                                      "--policies", "rule_platoon", "fixed_1.0", "--out", str(out)])
+    evaluate_task.main()
+    table = (out / "policies.md").read_text()
+    assert "| rule_platoon |" in table and "| fixed_1.0 |" in table and "0.0 [0.0, 0.0]" in table  # rule vs itself
+    assert sorted(path.name for path in out.iterdir()) == ["policies.csv", "policies.md"]

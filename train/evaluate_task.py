@@ -1,0 +1,111 @@
+"""Policies on the default task, ``TimeGapMonitor-v1``, against its best blind constant and its full oracle (issue 25).
+
+    python -m train.evaluate_task [--policies rule_platoon chart_step v2v_aware] [--model RUN ...]
+                                  [--selection 32] [--held-out 100] [--out results/task/policies]
+
+Every policy of ``--policies`` (the policy registry's names) and every trained run of ``--model`` (loaded as it was
+trained: its ``env.json`` must name ``TimeGapMonitor-v1``) plays the same held-out episodes of v1 (seeds from
+10 000) as the references of ``results/task/v1.md`` (``timegap_env.experiments.task_map.v1_headroom``: the best blind
+constant chosen on selection seeds from 5 000, the oracles' tables on training seeds 0..15). Per policy: its return,
+its gain over the best blind constant and over the paper's rule (the first of ``--policies``), paired, with 95 %
+bootstrap intervals, the share of the full oracle's gain it captures, and its collisions. Writes ``policies.md`` and
+``policies.csv`` to ``--out`` (through a partial directory: a failed run overwrites nothing).
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import math
+import time
+from pathlib import Path
+from typing import Any
+
+import torch
+
+from timegap_env import ENV_IDS, cli
+from timegap_env.agents.protocol import ENV_FILE, read_env_file
+from timegap_env.config import EnvConfig
+from timegap_env.experiments.backends import Backend, add_arguments
+from timegap_env.experiments.registry import load_learned
+from timegap_env.experiments.registry import make as make_policy
+from timegap_env.experiments.task_map import REFERENCES, Plan, v1_headroom
+
+DEFAULT_POLICIES = ("rule_platoon", "chart_step", "v2v_aware")
+
+
+def count(text: str) -> int:
+    value = int(text)
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"{text!r}: must be an integer >= 1")
+    return value
+
+
+def learned(path: Path, config: EnvConfig) -> Any:
+    """The run at ``path``, which must have been trained in TimeGapMonitor-v1; ``ValueError`` naming it otherwise."""
+    run = read_env_file(path / ENV_FILE)
+    if run.env_id != ENV_IDS[1]:
+        raise ValueError(f"--model {path}: trained in {run.env_id}, not {ENV_IDS[1]} (its env.json)")
+    return load_learned(path, config)
+
+
+def share(value: float) -> str:
+    """A share as a percentage; "n/a" where the oracle gains nothing (no gap to share)."""
+    return "n/a" if math.isnan(value) else f"{100 * value:.0f} %"
+
+
+def markdown(reference: dict[str, Any], rows: list[dict[str, Any]], plan: Plan, runtime: str) -> str:
+    lines = ["# Policies on TimeGapMonitor-v1", "",
+             f"Written by `python -m train.evaluate_task`. {plan.held_out} held-out episodes (seeds from 10000), the same "
+             f"for every policy and reference; best blind constant ({reference['best_blind']}, return "
+             f"{reference['best_blind_return']:.1f}, {reference['best_blind_collisions']} collisions) chosen on "
+             f"{plan.selection} selection seeds from 5000; the oracles' tables on training seeds 0-{plan.train - 1}. "
+             "Gains: mean per episode, paired, [95 % bootstrap interval]; share: the policy's gain over the best blind "
+             f"constant / the full oracle's ({reference['full_oracle_gain']:.1f}, `{reference['full_oracle_chosen']}`).",
+             "", "| policy | return | gain over best blind [CI] | gain over the rule [CI] | share of the oracle's gain "
+             "| collisions |", "|---|---|---|---|---|---|"]
+    for row in rows:
+        lines.append(f"| {row['policy']} | {row['return']:.1f} | {row['gain']:.1f} [{row['gain_low']:.1f}, "
+                     f"{row['gain_high']:.1f}] | {row['gain_over_baseline']:.1f} [{row['gain_over_baseline_low']:.1f}, "
+                     f"{row['gain_over_baseline_high']:.1f}] | {share(row['share_of_oracle_gain'])} | "
+                     f"{row['collisions']}/{row['episodes']} |")
+    lines += ["", "References (gain over the best blind constant): " + "; ".join(
+        f"{ref} {reference[f'{ref}_gain']:.1f} [{reference[f'{ref}_gain_low']:.1f}, {reference[f'{ref}_gain_high']:.1f}]"
+        for ref in REFERENCES) + ".", "", f"Runtime: {runtime}", ""]
+    return "\n".join(lines)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    defaults = Plan()
+    parser.add_argument("--policies", nargs="+", default=list(DEFAULT_POLICIES),
+                        help="registry policies; the first is the baseline of 'gain over the rule' (default: %(default)s)")
+    parser.add_argument("--model", type=Path, nargs="*", default=[], help="trained runs (directories) of v1")
+    parser.add_argument("--train", type=count, default=defaults.train, help="training seeds per condition")
+    parser.add_argument("--selection", type=count, default=defaults.selection, help="selection seeds")
+    parser.add_argument("--held-out", type=count, default=defaults.held_out, help="held-out seeds")
+    parser.add_argument("--out", default="results/task/policies", help="directory for policies.md and policies.csv")
+    add_arguments(parser)
+    args = parser.parse_args()
+    cli.output_dir(args.out)
+    torch.set_num_threads(1)
+    config = EnvConfig.from_dict(version=1)
+    policies = {name: make_policy(name, config) for name in args.policies}
+    policies |= {path.name: learned(path, config) for path in args.model}
+    plan, backend = Plan(args.train, args.selection, args.held_out), Backend.from_args(args)
+    work = cli.work_directory(args.out)
+    start = time.perf_counter()
+    (reference,), _, rows = v1_headroom(plan, backend, policies, baseline=args.policies[0])
+    runtime = f"{time.perf_counter() - start:.0f} s ({backend.name} backend)"
+    with open(work / "policies.csv", "w", newline="", encoding="utf-8") as file:
+        writer = csv.DictWriter(file, fieldnames=list(rows[0]))
+        writer.writeheader()
+        writer.writerows({key: f"{value:.6g}" if isinstance(value, float) else value for key, value in row.items()}
+                         for row in rows)
+    (work / "policies.md").write_text(markdown(reference, rows, plan, runtime), encoding="utf-8")
+    cli.publish(work, args.out)
+    print((Path(args.out) / "policies.md").read_text(encoding="utf-8"))
+
+
+if __name__ == "__main__":
+    cli.run(main, "python -m train.evaluate_task")
