@@ -1,14 +1,17 @@
 """Policies on the default task, ``TimeGapMonitor-v1``, against its best blind constant and its full oracle (issue 25).
 
     python -m train.evaluate_task [--policies rule_platoon chart_step v2v_aware] [--model RUN ...]
-                                  [--selection 32] [--held-out 100] [--out results/task/policies]
+                                  [--selection 32] [--held-out 100] [--split held_out|selection]
+                                  [--out results/task/policies]
 
 Every policy of ``--policies`` (the policy registry's names) and every trained run of ``--model`` (loaded as it was
 trained: its ``env.json`` must name ``TimeGapMonitor-v1``) plays the same held-out episodes of v1 (seeds from
 10 000) as the references of ``results/task/v1.md`` (``timegap_env.experiments.task_map.v1_headroom``: the best blind
 constant chosen on selection seeds from 5 000, the oracles' tables on training seeds 0..15). Per policy: its return,
 its gain over the best blind constant and over the paper's rule (the first of ``--policies``), paired, with 95 %
-bootstrap intervals, the share of the full oracle's gain it captures, and its collisions. Writes ``policies.md`` and
+bootstrap intervals (also without the collision term, which one episode can carry), the share of the full oracle's
+gain it captures, and its collisions. ``--split selection`` plays seeds from 6 000 instead (below every held-out
+one), where learned recipes are chosen; the held-out seeds only report. Writes ``policies.md`` and
 ``policies.csv`` to ``--out`` (through a partial directory: a failed run overwrites nothing).
 """
 
@@ -24,12 +27,12 @@ from typing import Any
 import torch
 
 from timegap_env import ENV_IDS, cli
-from timegap_env.agents.protocol import ENV_FILE, read_env_file
+from timegap_env.agents.protocol import ENV_FILE, EVAL_SEED_START, read_env_file
 from timegap_env.config import EnvConfig
 from timegap_env.experiments.backends import Backend, add_arguments
 from timegap_env.experiments.registry import load_learned
 from timegap_env.experiments.registry import make as make_policy
-from timegap_env.experiments.task_map import REFERENCES, Plan, v1_headroom
+from timegap_env.experiments.task_map import RECIPE_SEED_START, REFERENCES, Plan, v1_headroom
 
 DEFAULT_POLICIES = ("rule_platoon", "chart_step", "v2v_aware")
 
@@ -55,18 +58,22 @@ def share(value: float) -> str:
 
 
 def markdown(reference: dict[str, Any], rows: list[dict[str, Any]], plan: Plan, runtime: str) -> str:
+    split = ("held-out episodes (seeds from 10000)" if plan.held_out_start == EVAL_SEED_START else
+             f"recipe-selection episodes (seeds from {plan.held_out_start}; not held out: for choosing among recipes)")
     lines = ["# Policies on TimeGapMonitor-v1", "",
-             f"Written by `python -m train.evaluate_task`. {plan.held_out} held-out episodes (seeds from 10000), the same "
+             f"Written by `python -m train.evaluate_task`. {plan.held_out} {split}, the same "
              f"for every policy and reference; best blind constant ({reference['best_blind']}, return "
              f"{reference['best_blind_return']:.1f}, {reference['best_blind_collisions']} collisions) chosen on "
              f"{plan.selection} selection seeds from 5000; the oracles' tables on training seeds 0-{plan.train - 1}. "
              "Gains: mean per episode, paired, [95 % bootstrap interval]; share: the policy's gain over the best blind "
              f"constant / the full oracle's ({reference['full_oracle_gain']:.1f}, `{reference['full_oracle_chosen']}`).",
-             "", "| policy | return | gain over best blind [CI] | gain over the rule [CI] | share of the oracle's gain "
-             "| collisions |", "|---|---|---|---|---|---|"]
+             "", "| policy | return | gain over best blind [CI] | the same without the collision term [CI] "
+             "| gain over the rule [CI] | share of the oracle's gain | collisions |", "|---|---|---|---|---|---|---|"]
     for row in rows:
         lines.append(f"| {row['policy']} | {row['return']:.1f} | {row['gain']:.1f} [{row['gain_low']:.1f}, "
-                     f"{row['gain_high']:.1f}] | {row['gain_over_baseline']:.1f} [{row['gain_over_baseline_low']:.1f}, "
+                     f"{row['gain_high']:.1f}] | {row['gain_without_collisions']:.1f} "
+                     f"[{row['gain_without_collisions_low']:.1f}, {row['gain_without_collisions_high']:.1f}] | "
+                     f"{row['gain_over_baseline']:.1f} [{row['gain_over_baseline_low']:.1f}, "
                      f"{row['gain_over_baseline_high']:.1f}] | {share(row['share_of_oracle_gain'])} | "
                      f"{row['collisions']}/{row['episodes']} |")
     lines += ["", "References (gain over the best blind constant): " + "; ".join(
@@ -84,6 +91,9 @@ def main() -> None:
     parser.add_argument("--train", type=count, default=defaults.train, help="training seeds per condition")
     parser.add_argument("--selection", type=count, default=defaults.selection, help="selection seeds")
     parser.add_argument("--held-out", type=count, default=defaults.held_out, help="held-out seeds")
+    parser.add_argument("--split", choices=["held_out", "selection"], default="held_out",
+                        help="the episodes: held out (seeds from 10000), or the recipe-selection seeds (from "
+                             f"{RECIPE_SEED_START}), where recipes are chosen (default: %(default)s)")
     parser.add_argument("--out", default="results/task/policies", help="directory for policies.md and policies.csv")
     add_arguments(parser)
     args = parser.parse_args()
@@ -92,7 +102,8 @@ def main() -> None:
     config = EnvConfig.from_dict(version=1)
     policies = {name: make_policy(name, config) for name in args.policies}
     policies |= {path.name: learned(path, config) for path in args.model}
-    plan, backend = Plan(args.train, args.selection, args.held_out), Backend.from_args(args)
+    start_seed = EVAL_SEED_START if args.split == "held_out" else RECIPE_SEED_START
+    plan, backend = Plan(args.train, args.selection, args.held_out, start_seed), Backend.from_args(args)
     work = cli.work_directory(args.out)
     start = time.perf_counter()
     (reference,), _, rows = v1_headroom(plan, backend, policies, baseline=args.policies[0])

@@ -82,7 +82,7 @@ from timegap_env import ENV_ID, ENV_IDS, cli
 from timegap_env.config import EnvConfig
 from timegap_env.envs.action import action_space
 from timegap_env.envs.info import summary_of, truth_of
-from timegap_env.envs.observation import observation_space
+from timegap_env.envs.observation import MONITOR_FEATURES, feature_columns, observation_space
 from timegap_env.envs.sb3 import TimeGapVecEnv
 from timegap_env.experiments.training import (
     EVAL_EPISODES, EVAL_SEED, load_hyperparams, with_env_config,
@@ -110,6 +110,14 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--env-config", type=cli.json_object, default={},
                         help="EnvConfig overrides as JSON, merged into the config of env_kwargs and of the warm-up's "
                              "(default: none), e.g. '{\"action_mode\": \"platoon\"}'")
+    parser.add_argument("--hide-features", nargs="+", default=[], metavar="FEATURE",
+                        help="observation features the policy never sees (read as 0; an ablation): names of "
+                             "timegap_env.envs.observation.FEATURES, or 'monitor' for the monitor's six (default: none)")
+    parser.add_argument("--cost-budget", type=float, default=None,
+                        help="constrained PPO: the mean step cost (info['cost']) allowed; a Lagrange multiplier on the "
+                             "cost, raised by dual ascent while the cost exceeds it (default: unconstrained)")
+    parser.add_argument("--lagrange-rate", type=float, default=1.0,
+                        help="the multiplier's step per unit of cost over the budget, per rollout (default: %(default)s)")
     parser.add_argument("--frame-stack", type=int, default=None,
                         help="observations the policy reads at once (default: frame_stack of the yml, else 1)")
     parser.add_argument("--hyperparams", type=Path, default=Path("hyperparams/ppo.yml"),
@@ -192,6 +200,41 @@ class EpisodeSummaries(BaseCallback):
         return True
 
 
+class LagrangeMultiplier(BaseCallback):
+    """Constrained PPO by dual ascent on the env's step cost (``info["cost"]``'s, reward.COST_TERMS): the rewards PPO
+    learns from are the env's minus ``multiplier`` times the cost, and after every rollout ``multiplier`` <-
+    max(0, multiplier + ``rate`` (the rollout's mean cost per step - ``budget``)); logged as ``lagrange/*``."""
+
+    def __init__(self, budget: float, rate: float) -> None:
+        super().__init__()
+        self.budget, self.rate = budget, rate
+        self.multiplier = 0.0
+        self.cost_sum, self.steps = 0.0, 0
+
+    def adapter(self) -> TimeGapVecEnv:
+        adapter = self.training_env.unwrapped
+        assert isinstance(adapter, TimeGapVecEnv)  # train_ppo trains in one
+        return adapter
+
+    def _on_training_start(self) -> None:
+        self.adapter().cost_weight = self.multiplier  # a new phase's env starts where the last one's ended
+
+    def _on_rollout_start(self) -> None:
+        self.cost_sum, self.steps = 0.0, 0
+
+    def _on_step(self) -> bool:
+        cost = self.adapter().venv.step_cost
+        self.cost_sum, self.steps = self.cost_sum + float(cost.sum()), self.steps + cost.size
+        return True
+
+    def _on_rollout_end(self) -> None:
+        mean_cost = self.cost_sum / max(self.steps, 1)
+        self.multiplier = max(0.0, self.multiplier + self.rate * (mean_cost - self.budget))
+        self.adapter().cost_weight = self.multiplier
+        self.logger.record("lagrange/mean_cost", mean_cost)
+        self.logger.record("lagrange/multiplier", self.multiplier)
+
+
 @dataclasses.dataclass(frozen=True)
 class CurveReference:
     """What the learning curve compares with, on the check episodes (seeds ``seeds``)."""
@@ -227,10 +270,11 @@ class LearningCurve(BaseCallback):
     ``config``'s env; written to ``out``'s curve.csv and curve.png each time."""
 
     def __init__(self, every: int, config: EnvConfig, reference: CurveReference, out: Path,
-                 points: list[tuple[int, float]], frame_stack: int) -> None:  # every = 0: only when add_point is called
+                 points: list[tuple[int, float]], frame_stack: int,
+                 hidden_features: tuple[str, ...] = ()) -> None:  # every = 0: only when add_point is called
         super().__init__()
         self.every, self.config, self.reference, self.out = every, config, reference, out
-        self.frame_stack = frame_stack
+        self.frame_stack, self.hidden_features = frame_stack, hidden_features
         self.points = points  # (timesteps, mean return), shared across the phases of a run
         self.last = 0
 
@@ -247,7 +291,8 @@ class LearningCurve(BaseCallback):
         """Measure the policy now and rewrite the curve's files."""
         statistics = self.model.get_vec_normalize_env()
         policy = LearnedPolicy(self.model, ObservationNormalizer.of(statistics) if statistics else None,
-                               action_mode=self.config.action_mode, frame_stack=self.frame_stack)
+                               action_mode=self.config.action_mode, frame_stack=self.frame_stack,
+                               hidden_features=self.hidden_features)
         state = None  # the frame stack, carried from step to step; every episode starts together
 
         def choose(obs: np.ndarray, infos: dict[str, Any]) -> np.ndarray:
@@ -331,6 +376,14 @@ def main(argv: list[str] | None = None) -> None:
     started = time.perf_counter()
     args = parse_args(argv)
     version = env_version(args.env_id)
+    if args.cost_budget is not None and not (math.isfinite(args.cost_budget) and args.cost_budget >= 0):
+        raise ValueError(f"cost_budget = {args.cost_budget}: must be a finite number >= 0")
+    if not (math.isfinite(args.lagrange_rate) and args.lagrange_rate > 0):
+        raise ValueError(f"lagrange_rate = {args.lagrange_rate}: must be a finite number > 0")
+    lagrange = LagrangeMultiplier(args.cost_budget, args.lagrange_rate) if args.cost_budget is not None else None
+    hidden_features = tuple(dict.fromkeys(feature for name in args.hide_features
+                                          for feature in (MONITOR_FEATURES if name == "monitor" else (name,))))
+    feature_columns(hidden_features)
     hyperparams = load_hyperparams(args.hyperparams, args.env_id)  # what is left after the pops below goes to PPO
     n_envs = args.n_envs or int(hyperparams["n_envs"])
     total_timesteps = args.timesteps or int(hyperparams["n_timesteps"])
@@ -416,7 +469,8 @@ def main(argv: list[str] | None = None) -> None:
     env: VecEnv | None = None  # the phase's env, normalised; the model steps it through VecFrameStack if frame_stack > 1
     try:
         (work / ENV_FILE).write_text(json.dumps({"env_kwargs": env_kwargs, "frame_stack": frame_stack,
-                                                 "normalize": bool(normalize), "env_id": args.env_id},
+                                                 "normalize": bool(normalize), "env_id": args.env_id,
+                                                 "hidden_features": list(hidden_features)},
                                                 indent=1, sort_keys=True) + "\n")
         if model is not None:
             model.tensorboard_log = str(tensorboard)
@@ -425,7 +479,8 @@ def main(argv: list[str] | None = None) -> None:
         for phase, (phase_end, phase_env_kwargs) in enumerate(phases):
             if model is not None and model.num_timesteps >= phase_end:
                 continue
-            phase_env: VecEnv = TimeGapVecEnv(n_envs, **phase_env_kwargs, version=version)
+            phase_env: VecEnv = TimeGapVecEnv(n_envs, **phase_env_kwargs, version=version,
+                                              hidden_features=hidden_features)
             if saved_statistics is not None and env is None:
                 saved_statistics.set_venv(phase_env)
                 phase_env = saved_statistics
@@ -446,7 +501,8 @@ def main(argv: list[str] | None = None) -> None:
             stepped.seed(args.seed + phase * n_envs)
             phase_start, clock = model.num_timesteps, time.perf_counter()
             callbacks = [checkpoint, EpisodeSummaries(),
-                         LearningCurve(args.curve_freq, evaluated, reference, work, curve, frame_stack)]
+                         LearningCurve(args.curve_freq, evaluated, reference, work, curve, frame_stack, hidden_features),
+                         *([lagrange] if lagrange else [])]
             model.learn(
                 total_timesteps=phase_end - model.num_timesteps,
                 callback=callbacks,
@@ -459,7 +515,7 @@ def main(argv: list[str] | None = None) -> None:
         assert model is not None and env is not None  # the last phase always trains: total_timesteps > steps_before
         save_run(model, work)
         checkpoint.saved_at = model.num_timesteps  # the finished model: whatever fails from here on keeps it
-        final = LearningCurve(args.curve_freq, evaluated, reference, work, curve, frame_stack)
+        final = LearningCurve(args.curve_freq, evaluated, reference, work, curve, frame_stack, hidden_features)
         final.init_callback(model)
         final.add_point()  # the end of the run
 
@@ -472,6 +528,10 @@ def main(argv: list[str] | None = None) -> None:
                                f"{steps / seconds:,.0f} steps/s |" for label, steps, seconds in timings)
         files = ", ".join(f"`{name}`" for name in (MODEL_FILE, ENV_FILE, CURVE_FILE, CURVE_FIGURE)) + (
             f", `{VECNORMALIZE_FILE}`" if isinstance(env, VecNormalize) else "")
+        lagrange_row = "" if lagrange is None else (
+            f"\n| constrained: mean step cost budget, rate; the multiplier at the end | {lagrange.budget:g}, "
+            f"{lagrange.rate:g}; {lagrange.multiplier:.3f} |")
+        hidden_row = f"\n| hidden features (read as 0) | {', '.join(hidden_features)} |" if hidden_features else ""
         report = f"""# PPO on {args.env_id}
 
 Command: `{command}` ({f"resumed from a checkpoint at {steps_before:,} steps" if args.resume else "fresh run"})
@@ -482,7 +542,7 @@ Command: `{command}` ({f"resumed from a checkpoint at {steps_before:,} steps" if
 | platoons (n_envs), seed | {n_envs}, {args.seed} (phase k, sub-env i: seed + k n_envs + i) |
 | hyperparameters, warm-up | `{args.hyperparams}`, {f"`{args.warmup}`" if warmup else "none"} |
 | wall time, whole command after imports | {time.perf_counter() - started:.0f} s |
-{phase_rows}
+{phase_rows}{lagrange_row}{hidden_row}
 | final mean episode return, last {len(episodes)} training episodes (stochastic policy) | {final_return} |
 | mean return, deterministic policy, {EVAL_EPISODES} episodes seeded {EVAL_SEED}+ | {learned:.1f} |
 | mean return, best constant ({seconds(reference.blind_setting)} s), same episodes | {reference.blind_return:.1f} |

@@ -22,6 +22,7 @@ from stable_baselines3.common.vec_env import VecNormalize
 from timegap_env.agents.learned import LearnedPolicy, RunFileError
 from timegap_env.agents.protocol import EVAL_SEED_START, read_env_file
 from timegap_env import ENV_ID, ENV_IDS
+from timegap_env.envs.observation import FEATURES, MONITOR_FEATURES
 from timegap_env.envs.sb3 import TimeGapVecEnv
 from timegap_env.experiments import training
 from train import train_ppo
@@ -107,7 +108,8 @@ def test_tiny_training_run_saves_loads_and_resumes(tmp_path: Path) -> None:
     assert sorted(p.name for p in out.iterdir()) == ["curve.csv", "curve.png", "env.json", "model.zip", "training.md",
                                                      "vecnormalize.pkl"]
     assert json.loads((out / "env.json").read_text()) == {"env_kwargs": {"config": {"episode_duration": 10.0}},
-                                                          "frame_stack": 1, "normalize": True, "env_id": ENV_ID}
+                                                          "frame_stack": 1, "normalize": True, "env_id": ENV_ID,
+                                                          "hidden_features": []}
     assert LearnedPolicy.load(out).action_mode == "platoon"
     model = PPO.load(out / "model.zip", device="cpu")
     assert model.num_timesteps == 128
@@ -273,3 +275,60 @@ def test_a_run_names_its_env_and_loading_builds_that_version(tmp_path: Path) -> 
     (out / "env.json").write_text(json.dumps({"env_kwargs": {}, "frame_stack": 1, "env_id": "TimeGapMonitor-v9"}))
     with pytest.raises(RunFileError, match="env_id = 'TimeGapMonitor-v9'"):
         read_env_file(out / "env.json")
+
+
+def test_hidden_features_are_hidden_in_training_and_when_loaded(tmp_path: Path) -> None:
+    """--hide-features monitor: env.json names the six monitor features, the training env reads them as 0, and the
+    loaded policy hides them too, so its actions do not depend on them."""
+    hyperparams = tmp_path / "ppo.yml"
+    hyperparams.write_text(yaml.safe_dump({ENV_ID: {
+        "n_envs": 2, "n_timesteps": 32, "policy": "MlpPolicy", "normalize": True, "n_steps": 16, "batch_size": 32,
+        "n_epochs": 1, "policy_kwargs": "dict(net_arch=[8])", "env_kwargs": {"config": {"episode_duration": 10.0}},
+    }}))
+    out = tmp_path / "run"
+    train_ppo.main(["--hyperparams", str(hyperparams), "--no-warmup", "--out", str(out), "--no-progress-bar",
+                    "--curve-freq", "0", "--hide-features", "monitor", "speed"])
+    assert json.loads((out / "env.json").read_text())["hidden_features"] == [*MONITOR_FEATURES, "speed"]
+    policy = LearnedPolicy.load(out)
+    assert policy.hidden_features == (*MONITOR_FEATURES, "speed")
+    env = TimeGapVecEnv(2, config={"episode_duration": 10.0}, hidden_features=policy.hidden_features)
+    obs = env.reset().reshape(2, -1, len(FEATURES))
+    assert np.all(obs[..., [FEATURES.index(name) for name in policy.hidden_features]] == 0)
+    assert np.any(obs[..., FEATURES.index("setting")] != 0)
+    rng = np.random.default_rng(0)
+    columns = [FEATURES.index(name) for name in policy.hidden_features]
+    for _ in range(5):  # what a hidden feature holds never changes the action
+        seen = rng.uniform(0, 1, (2, 5, len(FEATURES))).astype(np.float32)
+        other = seen.copy()
+        other[..., columns] = rng.uniform(0, 1, (2, 5, len(columns)))
+        assert np.array_equal(policy.predict(seen.reshape(2, -1))[0], policy.predict(other.reshape(2, -1))[0])
+    with pytest.raises(ValueError, match="hidden_features = \\['radar'\\]"):
+        TimeGapVecEnv(1, hidden_features=("radar",))
+
+
+def test_a_cost_budget_trains_with_a_lagrange_multiplier(tmp_path: Path) -> None:
+    """--cost-budget 0: every rollout's cost exceeds it, so the multiplier grows and takes the cost off the rewards."""
+    hyperparams = tmp_path / "ppo.yml"
+    hyperparams.write_text(yaml.safe_dump({ENV_IDS[1]: {
+        "n_envs": 2, "n_timesteps": 64, "policy": "MlpPolicy", "normalize": False, "n_steps": 16, "batch_size": 32,
+        "n_epochs": 1, "policy_kwargs": "dict(net_arch=[8])", "env_kwargs": {"config": {"episode_duration": 10.0}},
+    }}))
+    out = tmp_path / "run"
+    train_ppo.main(["--env-id", ENV_IDS[1], "--hyperparams", str(hyperparams), "--no-warmup", "--out", str(out),
+                    "--no-progress-bar", "--curve-freq", "0", "--cost-budget", "0", "--lagrange-rate", "2"])
+    row = next(line for line in (out / "training.md").read_text().splitlines() if line.startswith("| constrained"))
+    assert float(row.rsplit(";", 1)[1].strip(" |")) > 0
+    with pytest.raises(ValueError, match="cost_budget = -1.0"):
+        train_ppo.main(["--cost-budget", "-1", "--out", str(tmp_path / "other")])
+
+
+def test_the_adapter_takes_the_weighted_cost_off_its_rewards() -> None:
+    envs = {weight: TimeGapVecEnv(2, config={"episode_duration": 10.0}, version=1) for weight in (0.0, 3.0)}
+    envs[3.0].cost_weight = 3.0
+    for env in envs.values():
+        env.seed(4)
+        env.reset()
+    for _ in range(10):
+        steps = {weight: env.step(np.array([4, 4])) for weight, env in envs.items()}
+        cost = envs[3.0].venv.step_cost
+        np.testing.assert_allclose(steps[3.0][1], (steps[0.0][1] - 3.0 * cost).astype(np.float32), rtol=1e-6)

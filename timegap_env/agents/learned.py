@@ -33,6 +33,7 @@ from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.vec_env import VecNormalize
 
 from timegap_env.agents.protocol import ENV_FILE, MODEL_FILE, VECNORMALIZE_FILE, RunFileError, check_spaces, read_env_file
+from timegap_env.envs.observation import feature_columns, hidden
 
 __all__ = ["LearnedPolicy", "ObservationNormalizer", "RunFileError", "load_model", "load_vecnormalize"]
 
@@ -151,11 +152,12 @@ class LearnedPolicy:
     ``Discrete`` -> "platoon", ``MultiDiscrete`` -> "per_vehicle". ``frame_stack`` k > 1: the model
     reads the last k normalised observations side by side, oldest first, zeros before the first (as
     SB3's ``VecFrameStack``); ``predict`` then carries them as its ``state``: pass back the state it
-    returned, None at the episodes' start.
+    returned, None at the episodes' start. ``hidden_features``: observation features read as 0 before the model
+    sees them (a run trained without them, an ablation).
     """
 
     def __init__(self, model: BaseAlgorithm, normalizer: ObservationNormalizer | None = None, name: str = "PPO",
-                 action_mode: str | None = None, frame_stack: int = 1) -> None:
+                 action_mode: str | None = None, frame_stack: int = 1, hidden_features: tuple[str, ...] = ()) -> None:
         expected = {"platoon": spaces.Discrete, "relative": spaces.Discrete, "per_vehicle": spaces.MultiDiscrete}
         if action_mode is None:
             action_mode = "per_vehicle" if isinstance(model.action_space, spaces.MultiDiscrete) else "platoon"
@@ -166,8 +168,10 @@ class LearnedPolicy:
         if _shape(model.observation_space)[-1] % frame_stack:
             raise ValueError(f"frame_stack = {frame_stack}: does not divide the model's observation width "
                              f"{_shape(model.observation_space)[-1]}")
+        feature_columns(hidden_features)
         self.action_mode = action_mode
         self.frame_stack = frame_stack
+        self.hidden_features = tuple(hidden_features)  # read as 0 before the model sees an observation, as in training
         self.model = model
         self.normalizer = normalizer
         self.name = name
@@ -218,7 +222,7 @@ class LearnedPolicy:
             torch.set_num_threads(threads)
         model = load_model(model_path, algorithm, device="cpu")
         try:
-            policy = cls(model, normalizer, name, run.action_mode, run.frame_stack)
+            policy = cls(model, normalizer, name, run.action_mode, run.frame_stack, run.hidden_features)
         except ValueError as error:  # the action mode or frame stack of env.json does not fit the model
             raise RunFileError(f"{run.path} does not fit the model {model_path}: {error}") from error
         check_spaces(run, model.action_space, _shape(model.observation_space), model_path)
@@ -242,7 +246,7 @@ class LearnedPolicy:
     ) -> tuple[np.ndarray, Any]:
         """The model's action for one observation (obs_dim,) or a batch (n_envs, obs_dim), observations normalised first;
         with frame stacking, ``state`` is the stack so far (None: a new episode) and the new stack is returned."""
-        obs = np.asarray(observation, dtype=np.float32)
+        obs = hidden(observation, self.hidden_features) if self.hidden_features else np.asarray(observation, np.float32)
         if self.normalizer is not None:
             obs = self.normalizer(obs)
         if self.frame_stack == 1:
@@ -257,5 +261,6 @@ class LearnedPolicy:
         return action, stack
 
     def __repr__(self) -> str:
+        hiding = f", hidden_features={list(self.hidden_features)}" if self.hidden_features else ""
         return (f"LearnedPolicy({self.name!r}, action_mode={self.action_mode!r}, normalized={self.normalizer is not None}, "
-                f"frame_stack={self.frame_stack})")
+                f"frame_stack={self.frame_stack}{hiding})")

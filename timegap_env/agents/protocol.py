@@ -13,6 +13,8 @@ evaluation episode was seen in training. A trained run is a directory holding ``
   it reads them as the env gives them. Runs written before the field existed leave it out; then
   ``VECNORMALIZE_FILE`` beside the model says the run normalised, and its absence is an error
   (the model cannot be told apart from one whose statistics were lost);
+- ``hidden_features``: the observation's features the model never saw (read as 0, an ablation), a list of names
+  of ``timegap_env.envs.observation.FEATURES``; absent: none;
 - ``env_id``: the registered id of the env (``TimeGapMonitor-v1``, ...), whose version's defaults the ``config``
   overrides; runs written before the field existed leave it out and were trained in ``TimeGapMonitor-v0``.
 
@@ -31,7 +33,8 @@ EVAL_SEED_START = 10_000  # evaluation seeds are >= this, training seeds < this 
 MODEL_FILE = "model.zip"  # the SB3 model of a run
 VECNORMALIZE_FILE = "vecnormalize.pkl"  # SB3 VecNormalize statistics of a run, if it normalised
 ENV_FILE = "env.json"  # the env a run was trained in, its frame stacking and normalisation (JSON)
-ENV_FILE_KEYS = {"env_kwargs", "frame_stack", "normalize", "env_id"}  # "normalize", "env_id" may be absent in older runs
+ENV_FILE_KEYS = {"env_kwargs", "frame_stack", "normalize", "env_id", "hidden_features"}  # all but the first two may be
+# absent
 OLDER_RUNS_ENV_ID = "TimeGapMonitor-v0"  # the env of a run whose ENV_FILE names none
 
 
@@ -49,6 +52,7 @@ class RunEnv:
     frame_stack: int  # observations the model reads at once
     normalize: bool | None  # observations normalised by VECNORMALIZE_FILE; None: not recorded (an older run)
     env_id: str = OLDER_RUNS_ENV_ID  # the registered env
+    hidden_features: tuple[str, ...] = ()  # read as 0 in the observations the model saw
 
     @property
     def config(self) -> Any:
@@ -92,7 +96,7 @@ def read_env_file(path: str | Path) -> RunEnv:
         raise RunFileError(f"{path}: must be a JSON object with the keys env_kwargs, frame_stack and optionally "
                            f"normalize; holds {run!r}"[:400])
     env_kwargs, frame_stack, normalize = run["env_kwargs"], run["frame_stack"], run.get("normalize")
-    env_id = run.get("env_id", OLDER_RUNS_ENV_ID)
+    env_id, hidden_features = run.get("env_id", OLDER_RUNS_ENV_ID), run.get("hidden_features", [])
     if not isinstance(env_kwargs, dict) or not isinstance(env_kwargs.get("config", {}) or {}, dict):
         raise RunFileError(f"{path}: env_kwargs = {env_kwargs!r}: must be an object (gym.make's keyword arguments, "
                            "the env's config among them)")
@@ -108,7 +112,15 @@ def read_env_file(path: str | Path) -> RunEnv:
         EnvConfig.from_dict(env_kwargs.get("config"), version)
     except ValueError as error:
         raise RunFileError(f"{path}: env_kwargs.config is not a config of this env: {error}") from error
-    return RunEnv(path, env_kwargs, frame_stack, normalize, env_id)
+    from timegap_env.envs.observation import feature_columns
+
+    try:
+        if not isinstance(hidden_features, list) or not all(isinstance(name, str) for name in hidden_features):
+            raise ValueError(f"hidden_features = {hidden_features!r}: must be a list of feature names")
+        feature_columns(hidden_features)
+    except ValueError as error:
+        raise RunFileError(f"{path}: {error}") from error
+    return RunEnv(path, env_kwargs, frame_stack, normalize, env_id, tuple(hidden_features))
 
 
 def check_spaces(run: RunEnv, action_space: Any, observation_shape: tuple[int, ...], model: str | Path) -> None:

@@ -47,6 +47,27 @@ def exceedance_scale(config: EnvConfig) -> int:
     return 2 * config.chart.switch_exceedances
 
 
+MONITOR_FEATURES = FEATURES[:6]  # what the monitor and its chart give; the rest (setting, speed, V2V) a car knows
+
+
+def hidden(observations: np.ndarray, features: tuple[str, ...]) -> np.ndarray:
+    """``observations`` (..., n_followers * len(FEATURES)) with ``features`` (names of FEATURES) read as 0 for every
+    follower, a copy: what a policy sees when an ablation hides them (a run's ``hidden_features``)."""
+    columns = feature_columns(features)
+    out = np.array(observations, dtype=np.float32)
+    if columns:
+        out.reshape(*out.shape[:-1], -1, len(FEATURES))[..., columns] = 0.0
+    return out
+
+
+def feature_columns(features: tuple[str, ...] | list[str]) -> list[int]:
+    """Each feature's column in a follower's row; ``ValueError`` naming a name not in FEATURES (or one twice)."""
+    unknown = [name for name in features if name not in FEATURES]
+    if unknown or len(set(features)) != len(features):
+        raise ValueError(f"hidden_features = {list(features)!r}: must be distinct names of {list(FEATURES)}")
+    return [FEATURES.index(name) for name in features]
+
+
 def observation_space(config: EnvConfig) -> spaces.Box:
     """Box (n_followers * len(FEATURES),) float32: follower 1's features, then follower 2's, ..."""
     n = config.platoon.n_followers

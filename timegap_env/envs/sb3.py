@@ -31,6 +31,7 @@ from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices, VecEnvStepReturn
 
 from timegap_env.envs.info import of_env
+from timegap_env.envs.observation import feature_columns, hidden
 from timegap_env.envs.vector_env import TimeGapMonitorVectorEnv
 
 
@@ -38,7 +39,10 @@ class TimeGapVecEnv(VecEnv):
     """``n_envs`` platoons of ``TimeGapMonitor-v0`` behind SB3's ``VecEnv`` API.
 
     ``config`` overrides the env's :class:`~timegap_env.config.EnvConfig` as in ``gym.make`` of env version
-    ``version`` (0: ``TimeGapMonitor-v0``'s defaults, 1: ``-v1``'s);
+    ``version`` (0: ``TimeGapMonitor-v0``'s defaults, 1: ``-v1``'s); ``hidden_features`` (names of the
+    observation's features) are read as 0 in every observation, an ablation of what a policy may see; a
+    ``cost_weight`` (attribute, default 0) takes that many times the env's step cost (``venv.step_cost``) off every
+    reward, for a Lagrangian learner;
     ``max_episode_steps``, optional, cuts episodes shorter than ``episode_duration``.
 
     The sub-envs are rows of one native vector env, not objects of their own:
@@ -50,8 +54,9 @@ class TimeGapVecEnv(VecEnv):
 
     def __init__(
         self, n_envs: int = 1, config: Mapping[str, Any] | None = None, max_episode_steps: int | None = None,
-        version: int = 0,
+        version: int = 0, hidden_features: tuple[str, ...] = (),
     ) -> None:
+        feature_columns(hidden_features)  # checked before any work
         self.venv = TimeGapMonitorVectorEnv(num_envs=n_envs, config=config, max_episode_steps=max_episode_steps,
                                             step_diagnostics=False, autoreset_mode="same_step", version=version)
         super().__init__(n_envs, self.venv.single_observation_space, self.venv.single_action_space)
@@ -60,6 +65,8 @@ class TimeGapVecEnv(VecEnv):
         self._returns = np.zeros(n_envs)  # of the running episodes [-]
         self._lengths = np.zeros(n_envs, dtype=np.int64)  # of the running episodes [steps]
         self._t_start = time.time()  # [s]
+        self.hidden_features = tuple(hidden_features)  # read as 0 in every observation (an ablation)
+        self.cost_weight = 0.0  # the rewards returned are the env's minus this times its step cost (a Lagrangian)
 
     def reset(self) -> np.ndarray:
         seeds = None if all(seed is None for seed in self._seeds) else list(self._seeds)
@@ -71,7 +78,7 @@ class TimeGapVecEnv(VecEnv):
         self._reset_options()
         self._returns[:] = 0.0
         self._lengths[:] = 0
-        return obs
+        return hidden(obs, self.hidden_features) if self.hidden_features else obs
 
     def step_async(self, actions: np.ndarray) -> None:
         self._actions = actions
@@ -82,21 +89,23 @@ class TimeGapVecEnv(VecEnv):
         obs, reward, terminated, truncated, info = self.venv.step(self._actions)
         self._actions = None
         dones = terminated | truncated
-        self._returns += reward
+        self._returns += reward  # the env's: the episode statistics stay the env's whatever the cost weight
         self._lengths += 1
         infos: list[dict[str, Any]] = [{} for _ in range(self.num_envs)]
         if dones.any():
             elapsed = round(time.time() - self._t_start, 6)
             for i in np.flatnonzero(dones):
                 infos[i] = {
-                    "terminal_observation": np.asarray(info["final_obs"][i], dtype=np.float32),
+                    "terminal_observation": hidden(info["final_obs"][i], self.hidden_features),
                     "TimeLimit.truncated": bool(truncated[i] and not terminated[i]),
                     "episode": {"r": round(float(self._returns[i]), 6), "l": int(self._lengths[i]), "t": elapsed},
                     **{key: value.item() for key, value in of_env(info["final_info"], int(i)).items()},
                 }
             self._returns[dones] = 0.0
             self._lengths[dones] = 0
-        return obs, reward.astype(np.float32), dones, infos
+        if self.cost_weight:
+            reward = reward - self.cost_weight * self.venv.step_cost
+        return hidden(obs, self.hidden_features) if self.hidden_features else obs, reward.astype(np.float32), dones, infos
 
     def close(self) -> None:
         self.venv.close()

@@ -121,6 +121,8 @@ class TimeGapMonitorVectorEnv(VectorEnv):
         self._was_reset = False  # step() before the first reset() raises gymnasium's ResetNeeded
         self._ended = np.zeros(self.num_envs, dtype=bool)  # episodes that ended and are not reset yet
         self._half_reset = np.zeros(self.num_envs, dtype=bool)  # sub-envs whose last reset raised: step() refuses
+        self.step_cost = np.zeros(self.num_envs)  # the last step's cost per sub-env (reward.COST_TERMS; 0 for a
+        # next-step autoreset), whatever step_diagnostics and the info keys: for constrained learners
 
     @property
     def scenario(self) -> np.ndarray:
@@ -198,10 +200,11 @@ class TimeGapMonitorVectorEnv(VectorEnv):
         done = (result.terminated | result.truncated | (self._steps >= self.max_episode_steps)) & ~restarting
         terminated, truncated = result.terminated & done, ~result.terminated & done
         reward, terms, objectives = result.reward.copy(), result.term_rows.copy(), _copied(self.task.objectives())
+        self.step_cost = result.cost.copy()
         if restarting.any():  # next_step: their step above ran past the episode's end and is dropped
             self._reset_task(restarting, None)
             self._steps[restarting] = 0
-            reward[restarting] = 0.0
+            reward[restarting] = self.step_cost[restarting] = 0.0
             _zero(terms, objectives, restarting)
         everyone = np.ones(self.num_envs, dtype=bool)
         infos: dict[str, Any] = {}

@@ -58,6 +58,7 @@ TRAFFIC: dict[str, dict[str, float]] = {  # EnvConfig.scenario_weights
 REFERENCES = ("v2v_pair", "regime_aware", "degradation_aware", "full_oracle", "hindsight")
 FRONT_OBJECTIVES = ("efficiency", "string_stability", "tracking")  # capacity, string stability, time-gap variation:
 # the reward terms (each summed over the episode, higher is better) whose Pareto fronts the map compares
+RECIPE_SEED_START = 6_000  # seeds that choose among learned recipes (train.evaluate_task --split selection) [-]
 TARGET_SHARE = 0.15  # the criterion: the degradation-aware oracle (the issue: the full oracle) beats the best blind
 # constant by this share [-]
 MAX_BLIND_COLLISION_RATE = 0.01  # ... with the best blind constant colliding in at most this share of episodes [-]
@@ -69,14 +70,20 @@ class Plan:
 
     train: int = 16  # per pinned condition, for the lookup tables: seeds 0..train-1
     selection: int = 32  # seeds from SELECTION_SEED_START: the choices (best blind constant, pair, oracle)
-    held_out: int = 100  # seeds from EVAL_SEED_START: every number of the map
+    held_out: int = 100  # seeds from held_out_start: every number of the map
+    held_out_start: int = EVAL_SEED_START  # RECIPE_SEED_START: the recipe-selection seeds stand in for the held-out
 
     def seeds(self) -> tuple[list[int], list[int], list[int]]:
-        """Training, selection and held-out seeds, disjoint."""
+        """Training, selection and held-out (or recipe-selection) seeds, disjoint."""
+        if self.held_out_start not in (EVAL_SEED_START, RECIPE_SEED_START):
+            raise ValueError(f"held_out_start = {self.held_out_start}: must be {EVAL_SEED_START} (held out) or "
+                             f"{RECIPE_SEED_START} (recipe selection)")
         train = list(range(self.train))
         selection = list(range(SELECTION_SEED_START, SELECTION_SEED_START + self.selection))
-        held_out = list(range(EVAL_SEED_START, EVAL_SEED_START + self.held_out))
-        assert train[-1] < selection[0] and selection[-1] < held_out[0]
+        held_out = list(range(self.held_out_start, self.held_out_start + self.held_out))
+        assert train[-1] < selection[0] and selection[-1] < held_out[0] and held_out[-1] < EVAL_SEED_START + 10**6
+        if self.held_out_start == RECIPE_SEED_START:
+            assert held_out[-1] < EVAL_SEED_START, "recipe-selection seeds must stay below the held-out ones"
         return train, selection, held_out
 
 
@@ -284,10 +291,12 @@ def cell_rows(config: EnvConfig, cell: dict[str, Any], weightings: dict[str, Rew
             returns = weigh(terms, weighting)
             mean, low, high = bootstrap_mean(returns - blind_return)
             gap = row["full_oracle_gain"]
+            rest = bootstrap_mean(weigh(terms, no_collision) - weigh(constants_held[blind], no_collision))
             policy_row = {"weighting": name, **cell, "policy": policy, "return": float(returns.mean()),
                           "gain": mean, "gain_low": low, "gain_high": high,
                           "share_of_oracle_gain": mean / gap if gap > 0 else math.nan,
-                          "collisions": int(collided.sum()), "episodes": len(held_out)}
+                          "collisions": int(collided.sum()), "episodes": len(held_out),
+                          **dict(zip([f"gain_without_collisions{end}" for end in ("", "_low", "_high")], rest))}
             if baseline is not None:
                 versus = bootstrap_mean(returns - weigh(policies_held[baseline][0], weighting))
                 policy_row |= dict(zip(("gain_over_baseline", "gain_over_baseline_low", "gain_over_baseline_high"),
@@ -328,6 +337,6 @@ def choose_default(rows: Sequence[dict[str, Any]]) -> dict[str, Any]:
     return max(candidates, key=lambda row: row["degradation_aware_share"])
 
 
-__all__ = ["FRONT_OBJECTIVES", "MAX_BLIND_COLLISION_RATE", "REFERENCES", "SEVERITIES", "TARGET_SHARE", "TRAFFIC", "V1_CELL",
+__all__ = ["FRONT_OBJECTIVES", "MAX_BLIND_COLLISION_RATE", "RECIPE_SEED_START", "REFERENCES", "SEVERITIES", "TARGET_SHARE", "TRAFFIC", "V1_CELL",
            "WEIGHTINGS", "Plan", "cell_config", "cell_rows", "choose_default", "front_rows", "hypervolume", "map_cell",
            "regime_contexts", "task_map", "v1_headroom", "weigh"]
