@@ -71,13 +71,15 @@ import matplotlib.pyplot as plt
 import numpy as np
 import torch
 import yaml
-from stable_baselines3 import PPO
+from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.vec_env import VecEnv, VecFrameStack, VecNormalize
 
-from timegap_env.agents.learned import LearnedPolicy, ObservationNormalizer, RunFileError, load_model, load_vecnormalize
+from timegap_env.agents.learned import (
+    LearnedPolicy, ObservationNormalizer, RunFileError, algorithm_class, load_model, load_vecnormalize,
+)
 from timegap_env.agents.policies import seconds
-from timegap_env.agents.protocol import ENV_FILE, EVAL_SEED_START, MODEL_FILE, VECNORMALIZE_FILE, env_version
+from timegap_env.agents.protocol import ALGORITHMS, ENV_FILE, EVAL_SEED_START, MODEL_FILE, VECNORMALIZE_FILE, env_version
 from timegap_env import ENV_ID, ENV_IDS, cli
 from timegap_env.config import EnvConfig
 from timegap_env.envs.action import action_space
@@ -99,6 +101,9 @@ SUMMARY_KEYS = {"collision", "mean_setting", "switches", "time_out_of_control"} 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(prog="python -m train.train_ppo", description=__doc__.split("\n")[0])
+    parser.add_argument("--algo", default="ppo", choices=list(ALGORITHMS),
+                        help="ppo (stable-baselines3) or ppo_lstm (sb3-contrib's RecurrentPPO); the default "
+                             "--hyperparams is hyperparams/<algo>.yml (default: %(default)s)")
     parser.add_argument("--env-id", default=ENV_ID, choices=list(ENV_IDS.values()),
                         help="the env, and the section of --hyperparams and --warmup to read (default: %(default)s)")
     parser.add_argument("--timesteps", type=int, default=None,
@@ -120,8 +125,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                         help="the multiplier's step per unit of cost over the budget, per rollout (default: %(default)s)")
     parser.add_argument("--frame-stack", type=int, default=None,
                         help="observations the policy reads at once (default: frame_stack of the yml, else 1)")
-    parser.add_argument("--hyperparams", type=Path, default=Path("hyperparams/ppo.yml"),
-                        help="rl-zoo3-style yml keyed by env id (default: %(default)s)")
+    parser.add_argument("--hyperparams", type=Path, default=None,
+                        help="rl-zoo3-style yml keyed by env id (default: hyperparams/<algo>.yml)")
     parser.add_argument("--warmup", type=Path, default=Path("hyperparams/ppo_warmup.yml"),
                         help="yml keyed by env id: the warm-up's n_timesteps and env_kwargs (default: %(default)s)")
     parser.add_argument("--no-warmup", dest="warmup", action="store_const", const=None,
@@ -139,7 +144,10 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                         help=f"TensorBoard log directory (default: <out>/{TENSORBOARD_DIR})")
     parser.add_argument("--progress-bar", action=argparse.BooleanOptionalAction, default=True,
                         help="show SB3's progress bar (default: on)")
-    return parser.parse_args(argv)
+    args = parser.parse_args(argv)
+    if args.hyperparams is None:
+        args.hyperparams = Path(f"hyperparams/{args.algo}.yml")
+    return args
 
 
 def load_warmup(path: Path, env_id: str = ENV_ID) -> tuple[int, dict[str, Any]]:
@@ -160,7 +168,7 @@ def load_warmup(path: Path, env_id: str = ENV_ID) -> tuple[int, dict[str, Any]]:
     return int(steps), env_kwargs
 
 
-def save_run(model: PPO, out: Path) -> None:
+def save_run(model: BaseAlgorithm, out: Path) -> None:
     """Write model.zip (and vecnormalize.pkl) in ``out``, each replaced atomically."""
     model.save(out / f"{MODEL_FILE}.tmp.zip")
     os.replace(out / f"{MODEL_FILE}.tmp.zip", out / MODEL_FILE)
@@ -384,7 +392,8 @@ def main(argv: list[str] | None = None) -> None:
     hidden_features = tuple(dict.fromkeys(feature for name in args.hide_features
                                           for feature in (MONITOR_FEATURES if name == "monitor" else (name,))))
     feature_columns(hidden_features)
-    hyperparams = load_hyperparams(args.hyperparams, args.env_id)  # what is left after the pops below goes to PPO
+    algorithm = algorithm_class(args.algo)
+    hyperparams = load_hyperparams(args.hyperparams, args.env_id, algorithm)  # what is left after the pops goes to it
     n_envs = args.n_envs or int(hyperparams["n_envs"])
     total_timesteps = args.timesteps or int(hyperparams["n_timesteps"])
     del hyperparams["n_envs"], hyperparams["n_timesteps"]
@@ -413,6 +422,9 @@ def main(argv: list[str] | None = None) -> None:
                          f"must lie in [0, {EVAL_SEED_START})")
     if isinstance(frame_stack, bool) or not isinstance(frame_stack, int) or frame_stack < 1:
         raise ValueError(f"hyperparams {args.env_id}.frame_stack = {frame_stack!r}: must be an integer >= 1")
+    if args.algo == "ppo_lstm" and frame_stack != 1:
+        raise ValueError(f"frame_stack = {frame_stack} with --algo ppo_lstm: a recurrent policy reads one observation "
+                         "at a time")
     if not isinstance(normalize, (bool, dict)):
         raise ValueError(f"hyperparams {args.env_id}.normalize = {normalize!r}: "
                          "must be true, false or a dict of VecNormalize arguments")
@@ -425,7 +437,7 @@ def main(argv: list[str] | None = None) -> None:
 
     # ---------------------------------------------------------------- model
     model_path, stats_path = args.out / MODEL_FILE, args.out / VECNORMALIZE_FILE
-    model: PPO | None = None
+    model: BaseAlgorithm | None = None
     saved_statistics: VecNormalize | None = None  # --resume's, given the first phase's env below
     curve: list[tuple[int, float]] = []  # (timesteps, mean return) of the learning curve, a resumed run's first
     if args.resume:  # every file checked before anything is written
@@ -436,7 +448,7 @@ def main(argv: list[str] | None = None) -> None:
         if not normalize and stats_path.is_file():
             raise ValueError(f"--resume with normalize = {normalize!r}: {stats_path} says the run normalised its "
                              f"observations; resume with the hyperparameters it was trained with")
-        model = load_model(model_path, PPO, device="cpu")
+        model = load_model(model_path, algorithm, device="cpu")
         model.set_random_seed(args.seed)
         if model.num_timesteps >= total_timesteps:
             raise ValueError(f"--resume: {model_path} has trained {model.num_timesteps} steps, "
@@ -470,7 +482,7 @@ def main(argv: list[str] | None = None) -> None:
     try:
         (work / ENV_FILE).write_text(json.dumps({"env_kwargs": env_kwargs, "frame_stack": frame_stack,
                                                  "normalize": bool(normalize), "env_id": args.env_id,
-                                                 "hidden_features": list(hidden_features)},
+                                                 "hidden_features": list(hidden_features), "algo": args.algo},
                                                 indent=1, sort_keys=True) + "\n")
         if model is not None:
             model.tensorboard_log = str(tensorboard)
@@ -494,8 +506,8 @@ def main(argv: list[str] | None = None) -> None:
             env = phase_env
             stepped = VecFrameStack(env, frame_stack) if frame_stack > 1 else env
             if model is None:
-                model = PPO(policy, stepped, seed=args.seed, device="cpu", tensorboard_log=str(tensorboard),
-                            **hyperparams)
+                model = algorithm(policy, stepped, seed=args.seed, device="cpu", tensorboard_log=str(tensorboard),
+                                  **hyperparams)
             else:
                 model.set_env(stepped)
             stepped.seed(args.seed + phase * n_envs)
@@ -532,7 +544,7 @@ def main(argv: list[str] | None = None) -> None:
             f"\n| constrained: mean step cost budget, rate; the multiplier at the end | {lagrange.budget:g}, "
             f"{lagrange.rate:g}; {lagrange.multiplier:.3f} |")
         hidden_row = f"\n| hidden features (read as 0) | {', '.join(hidden_features)} |" if hidden_features else ""
-        report = f"""# PPO on {args.env_id}
+        report = f"""# {type(model).__name__} on {args.env_id}
 
 Command: `{command}` ({f"resumed from a checkpoint at {steps_before:,} steps" if args.resume else "fresh run"})
 

@@ -109,7 +109,7 @@ def test_tiny_training_run_saves_loads_and_resumes(tmp_path: Path) -> None:
                                                      "vecnormalize.pkl"]
     assert json.loads((out / "env.json").read_text()) == {"env_kwargs": {"config": {"episode_duration": 10.0}},
                                                           "frame_stack": 1, "normalize": True, "env_id": ENV_ID,
-                                                          "hidden_features": []}
+                                                          "hidden_features": [], "algo": "ppo"}
     assert LearnedPolicy.load(out).action_mode == "platoon"
     model = PPO.load(out / "model.zip", device="cpu")
     assert model.num_timesteps == 128
@@ -332,3 +332,27 @@ def test_the_adapter_takes_the_weighted_cost_off_its_rewards() -> None:
         steps = {weight: env.step(np.array([4, 4])) for weight, env in envs.items()}
         cost = envs[3.0].venv.step_cost
         np.testing.assert_allclose(steps[3.0][1], (steps[0.0][1] - 3.0 * cost).astype(np.float32), rtol=1e-6)
+
+
+def test_a_recurrent_run_trains_and_loads_as_recurrent(tmp_path: Path) -> None:
+    """--algo ppo_lstm: RecurrentPPO, env.json's algo, and a loaded policy that carries its LSTM state."""
+    from sb3_contrib import RecurrentPPO
+
+    hyperparams = tmp_path / "ppo_lstm.yml"
+    hyperparams.write_text(yaml.safe_dump({ENV_IDS[1]: {
+        "n_envs": 2, "n_timesteps": 32, "policy": "MlpLstmPolicy", "normalize": True, "n_steps": 16, "batch_size": 32,
+        "n_epochs": 1, "policy_kwargs": "dict(net_arch=[8], lstm_hidden_size=8)",
+        "env_kwargs": {"config": {"episode_duration": 10.0}},
+    }}))
+    out = tmp_path / "run"
+    train_ppo.main(["--algo", "ppo_lstm", "--env-id", ENV_IDS[1], "--hyperparams", str(hyperparams), "--no-warmup",
+                    "--out", str(out), "--no-progress-bar", "--curve-freq", "0"])
+    assert json.loads((out / "env.json").read_text())["algo"] == "ppo_lstm"
+    policy = LearnedPolicy.load(out)
+    assert isinstance(policy.model, RecurrentPPO)
+    obs = np.zeros((2, 5 * len(FEATURES)), dtype=np.float32)
+    _, state = policy.predict(obs)
+    assert state is not None and len(state) == 2  # the LSTM's (hidden, cell), carried to the next step
+    with pytest.raises(ValueError, match="frame_stack = 2 with --algo ppo_lstm"):
+        train_ppo.main(["--algo", "ppo_lstm", "--env-id", ENV_IDS[1], "--hyperparams", str(hyperparams),
+                        "--frame-stack", "2", "--out", str(tmp_path / "other")])

@@ -32,10 +32,26 @@ from stable_baselines3 import PPO
 from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.vec_env import VecNormalize
 
-from timegap_env.agents.protocol import ENV_FILE, MODEL_FILE, VECNORMALIZE_FILE, RunFileError, check_spaces, read_env_file
+from timegap_env.agents.protocol import (
+    ALGORITHMS, ENV_FILE, MODEL_FILE, VECNORMALIZE_FILE, RunFileError, check_spaces, read_env_file,
+)
 from timegap_env.envs.observation import feature_columns, hidden
 
 __all__ = ["LearnedPolicy", "ObservationNormalizer", "RunFileError", "load_model", "load_vecnormalize"]
+
+
+def algorithm_class(algo: str) -> type[BaseAlgorithm]:
+    """The class of ``algo`` (protocol.ALGORITHMS): ``ppo`` -> PPO, ``ppo_lstm`` -> sb3-contrib's RecurrentPPO (an
+    ``ImportError`` naming the package without it)."""
+    if algo == "ppo":
+        return PPO
+    if algo == "ppo_lstm":
+        try:
+            from sb3_contrib import RecurrentPPO
+        except ImportError as error:
+            raise ImportError("algo = 'ppo_lstm' needs sb3-contrib: pip install 'timegap_env[train]'") from error
+        return RecurrentPPO
+    raise ValueError(f"algo = {algo!r}: must be one of {list(ALGORITHMS)}")
 
 
 def load_model(path: str | Path, algorithm: type[BaseAlgorithm] = PPO, **kwargs: Any) -> BaseAlgorithm:
@@ -181,14 +197,15 @@ class LearnedPolicy:
         cls,
         path: str | Path,
         vecnormalize: str | Path | None = None,
-        algorithm: type[BaseAlgorithm] = PPO,
+        algorithm: type[BaseAlgorithm] | None = None,
         name: str = "PPO",
         threads: int | None = 1,
     ) -> LearnedPolicy:
         """Load a run, ``path`` (its directory, or the model zip in it), on the CPU, as it was trained.
 
         ``env.json`` beside the model gives the action mode (checked against the model's action space), the frame
-        stack and whether observations were normalised. ``vecnormalize``: the ``VecNormalize`` pickle; by default
+        stack, whether observations were normalised and the algorithm (``algorithm``, if given, overrides it).
+        ``vecnormalize``: the ``VecNormalize`` pickle; by default
         ``vecnormalize.pkl`` beside the model, required when the run normalised (``normalize: true``, or not
         recorded), refused when it did not. ``threads``: torch's threads from now on (None: leave them). A missing
         model zip raises FileNotFoundError; a missing ``env.json``, missing or extra statistics, or a file that
@@ -220,7 +237,7 @@ class LearnedPolicy:
             normalizer = ObservationNormalizer.from_vecnormalize(stats_path)
         if threads is not None:
             torch.set_num_threads(threads)
-        model = load_model(model_path, algorithm, device="cpu")
+        model = load_model(model_path, algorithm or algorithm_class(run.algo), device="cpu")
         try:
             policy = cls(model, normalizer, name, run.action_mode, run.frame_stack, run.hidden_features)
         except ValueError as error:  # the action mode or frame stack of env.json does not fit the model

@@ -15,6 +15,8 @@ evaluation episode was seen in training. A trained run is a directory holding ``
   (the model cannot be told apart from one whose statistics were lost);
 - ``hidden_features``: the observation's features the model never saw (read as 0, an ablation), a list of names
   of ``timegap_env.envs.observation.FEATURES``; absent: none;
+- ``algo``: the learning algorithm, rl-zoo3's name: ``ppo`` (stable-baselines3's PPO) or ``ppo_lstm``
+  (sb3-contrib's RecurrentPPO); absent: ``ppo``;
 - ``env_id``: the registered id of the env (``TimeGapMonitor-v1``, ...), whose version's defaults the ``config``
   overrides; runs written before the field existed leave it out and were trained in ``TimeGapMonitor-v0``.
 
@@ -33,8 +35,9 @@ EVAL_SEED_START = 10_000  # evaluation seeds are >= this, training seeds < this 
 MODEL_FILE = "model.zip"  # the SB3 model of a run
 VECNORMALIZE_FILE = "vecnormalize.pkl"  # SB3 VecNormalize statistics of a run, if it normalised
 ENV_FILE = "env.json"  # the env a run was trained in, its frame stacking and normalisation (JSON)
-ENV_FILE_KEYS = {"env_kwargs", "frame_stack", "normalize", "env_id", "hidden_features"}  # all but the first two may be
-# absent
+ENV_FILE_KEYS = {"env_kwargs", "frame_stack", "normalize", "env_id", "hidden_features", "algo"}  # all but the first
+# two may be absent
+ALGORITHMS = ("ppo", "ppo_lstm")  # ENV_FILE's algo: stable-baselines3's PPO, sb3-contrib's RecurrentPPO
 OLDER_RUNS_ENV_ID = "TimeGapMonitor-v0"  # the env of a run whose ENV_FILE names none
 
 
@@ -53,6 +56,7 @@ class RunEnv:
     normalize: bool | None  # observations normalised by VECNORMALIZE_FILE; None: not recorded (an older run)
     env_id: str = OLDER_RUNS_ENV_ID  # the registered env
     hidden_features: tuple[str, ...] = ()  # read as 0 in the observations the model saw
+    algo: str = "ppo"  # one of ALGORITHMS
 
     @property
     def config(self) -> Any:
@@ -97,6 +101,12 @@ def read_env_file(path: str | Path) -> RunEnv:
                            f"normalize; holds {run!r}"[:400])
     env_kwargs, frame_stack, normalize = run["env_kwargs"], run["frame_stack"], run.get("normalize")
     env_id, hidden_features = run.get("env_id", OLDER_RUNS_ENV_ID), run.get("hidden_features", [])
+    algo = run.get("algo", "ppo")
+    if algo not in ALGORITHMS:
+        raise RunFileError(f"{path}: algo = {algo!r}: must be one of {list(ALGORITHMS)}")
+    if algo == "ppo_lstm" and frame_stack != 1:
+        raise RunFileError(f"{path}: algo = 'ppo_lstm' with frame_stack = {frame_stack}: a recurrent policy reads one "
+                           "observation at a time")
     if not isinstance(env_kwargs, dict) or not isinstance(env_kwargs.get("config", {}) or {}, dict):
         raise RunFileError(f"{path}: env_kwargs = {env_kwargs!r}: must be an object (gym.make's keyword arguments, "
                            "the env's config among them)")
@@ -120,7 +130,7 @@ def read_env_file(path: str | Path) -> RunEnv:
         feature_columns(hidden_features)
     except ValueError as error:
         raise RunFileError(f"{path}: {error}") from error
-    return RunEnv(path, env_kwargs, frame_stack, normalize, env_id, tuple(hidden_features))
+    return RunEnv(path, env_kwargs, frame_stack, normalize, env_id, tuple(hidden_features), algo)
 
 
 def check_spaces(run: RunEnv, action_space: Any, observation_shape: tuple[int, ...], model: str | Path) -> None:

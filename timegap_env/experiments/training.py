@@ -21,17 +21,20 @@ RUN_KEYS = {"n_envs", "n_timesteps", "policy", "normalize", "frame_stack", "env_
 STRING_KWARGS = ("policy_kwargs", "normalize")  # may be Python expressions as in rl-zoo3: "dict(net_arch=[64])"
 
 
-def load_hyperparams(path: Path, env_id: str = ENV_ID) -> dict[str, Any]:
-    """The ``env_id`` section of an rl-zoo3-style yml, expressions in ``STRING_KWARGS`` evaluated."""
+def load_hyperparams(path: Path, env_id: str = ENV_ID, algorithm: Any = None) -> dict[str, Any]:
+    """The ``env_id`` section of an rl-zoo3-style yml, expressions in ``STRING_KWARGS`` evaluated, its keys checked
+    against ``algorithm``'s arguments (default: stable-baselines3's PPO)."""
     import torch  # only here: the library steps the env without torch
     from stable_baselines3 import PPO
+
+    algorithm = algorithm or PPO
 
     with open(path) as file:
         document = yaml.safe_load(file)
     if not isinstance(document, dict) or env_id not in document:
         raise ValueError(f"hyperparams = {str(path)!r}: needs a top-level key {env_id!r}")
     hyperparams = dict(document[env_id])
-    allowed = RUN_KEYS | (set(inspect.signature(PPO).parameters) - {"env", "seed", "tensorboard_log", "device"})
+    allowed = RUN_KEYS | (set(inspect.signature(algorithm).parameters) - {"env", "seed", "tensorboard_log", "device"})
     for key, value in hyperparams.items():
         if key == "warmup":
             raise ValueError(f"hyperparams {env_id}.warmup in {path}: the warm-up moved to its own file (rl-zoo3 "
