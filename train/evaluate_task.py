@@ -44,6 +44,18 @@ def count(text: str) -> int:
     return value
 
 
+def tuned_chart_step(path: Path) -> dict[str, float]:
+    """The best cell of a ``train.tune_rule`` run's tuning.csv: ``k_up``, ``quiet_time`` [s], ``min_setting`` [s];
+    ``ValueError`` naming the file if it has none."""
+    try:
+        with open(path, newline="", encoding="utf-8") as file:
+            best = [row for row in csv.DictReader(file) if row.get("best") == "1"]
+        (row,) = best
+        return {"k_up": int(row["k_up"]), "quiet_time": float(row["quiet_time"]), "min_setting": float(row["min_setting"])}
+    except (OSError, ValueError, KeyError, TypeError) as error:
+        raise ValueError(f"--chart-step-tuning {path}: not a tune_rule tuning.csv with one best cell ({error})") from error
+
+
 def learned(path: Path, config: EnvConfig) -> Any:
     """The run at ``path``, which must have been trained in TimeGapMonitor-v1; ``ValueError`` naming it otherwise."""
     run = read_env_file(path / ENV_FILE)
@@ -57,7 +69,7 @@ def share(value: float) -> str:
     return "n/a" if math.isnan(value) else f"{100 * value:.0f} %"
 
 
-def markdown(reference: dict[str, Any], rows: list[dict[str, Any]], plan: Plan, runtime: str) -> str:
+def markdown(reference: dict[str, Any], rows: list[dict[str, Any]], plan: Plan, runtime: str, notes: list[str]) -> str:
     split = ("held-out episodes (seeds from 10000)" if plan.held_out_start == EVAL_SEED_START else
              f"recipe-selection episodes (seeds from {plan.held_out_start}; not held out: for choosing among recipes)")
     lines = ["# Policies on TimeGapMonitor-v1", "",
@@ -78,7 +90,7 @@ def markdown(reference: dict[str, Any], rows: list[dict[str, Any]], plan: Plan, 
                      f"{row['collisions']}/{row['episodes']} |")
     lines += ["", "References (gain over the best blind constant): " + "; ".join(
         f"{ref} {reference[f'{ref}_gain']:.1f} [{reference[f'{ref}_gain_low']:.1f}, {reference[f'{ref}_gain_high']:.1f}]"
-        for ref in REFERENCES) + ".", "", f"Runtime: {runtime}", ""]
+        for ref in REFERENCES) + ".", "", *notes, f"Runtime: {runtime}", ""]
     return "\n".join(lines)
 
 
@@ -88,6 +100,9 @@ def main() -> None:
     parser.add_argument("--policies", nargs="+", default=list(DEFAULT_POLICIES),
                         help="registry policies; the first is the baseline of 'gain over the rule' (default: %(default)s)")
     parser.add_argument("--model", type=Path, nargs="*", default=[], help="trained runs (directories) of v1")
+    parser.add_argument("--chart-step-tuning", type=Path, default=None,
+                        help="a tune_rule --env-id TimeGapMonitor-v1 run's tuning.csv: chart_step takes its best cell "
+                             "(default: the registered parameters, tuned for v0)")
     parser.add_argument("--train", type=count, default=defaults.train, help="training seeds per condition")
     parser.add_argument("--selection", type=count, default=defaults.selection, help="selection seeds")
     parser.add_argument("--held-out", type=count, default=defaults.held_out, help="held-out seeds")
@@ -100,7 +115,8 @@ def main() -> None:
     cli.output_dir(args.out)
     torch.set_num_threads(1)
     config = EnvConfig.from_dict(version=1)
-    policies = {name: make_policy(name, config) for name in args.policies}
+    tuned = tuned_chart_step(args.chart_step_tuning) if args.chart_step_tuning else {}
+    policies = {name: make_policy(name, config, **(tuned if name == "chart_step" else {})) for name in args.policies}
     policies |= {path.name: learned(path, config) for path in args.model}
     start_seed = EVAL_SEED_START if args.split == "held_out" else RECIPE_SEED_START
     plan, backend = Plan(args.train, args.selection, args.held_out, start_seed), Backend.from_args(args)
@@ -113,7 +129,9 @@ def main() -> None:
         writer.writeheader()
         writer.writerows({key: f"{value:.6g}" if isinstance(value, float) else value for key, value in row.items()}
                          for row in rows)
-    (work / "policies.md").write_text(markdown(reference, rows, plan, runtime), encoding="utf-8")
+    notes = [f"- {name}: {policy!r}" for name, policy in policies.items()]
+    notes.append(f"- chart_step's parameters: {'the best cell of ' + str(args.chart_step_tuning) if tuned else 'registered (tuned for v0)'}")
+    (work / "policies.md").write_text(markdown(reference, rows, plan, runtime, [*notes, ""]), encoding="utf-8")
     cli.publish(work, args.out)
     print((Path(args.out) / "policies.md").read_text(encoding="utf-8"))
 

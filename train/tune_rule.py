@@ -1,10 +1,10 @@
 """Tune the chart step rule (``timegap_env.agents.policies.ChartStepPolicy``) on training seeds: a small grid, mean return per cell.
 
-    python -m train.tune_rule [--episodes 256] [--out results/rule]
+    python -m train.tune_rule [--episodes 256] [--out results/rule] [--env-id TimeGapMonitor-v0|-v1]
                               [--k-up 1 2 3 4 6] [--quiet-time 10 20 35] [--min-setting 1.0 1.2 1.4 1.6]
 
 Every cell of the grid k_up x quiet_time x min_setting runs the platoon-wide rule on the same episodes of
-the default env (leader families and degradation mix; seeds ``TUNING_SEED_START`` on: training seeds below
+the task of ``--env-id`` (its leader families, degradation mix and reward; seeds ``TUNING_SEED_START`` on: training seeds below
 ``EVAL_SEED_START``, apart from ``train.value_of_information``'s lookup seeds 0-15 and selection seeds
 5000-5047), beside the paper's rule and fixed 1.6 s and 1.0 s for reference, all in one native vector env.
 The best cell has the largest mean return (the first in grid order on a tie). Writes ``tuning.md`` and
@@ -24,8 +24,8 @@ from pathlib import Path
 import numpy as np
 
 from timegap_env.agents.policies import ChartStepPolicy, FixedPolicy, NamedPolicy, seconds
-from timegap_env.agents.protocol import EVAL_SEED_START
-from timegap_env import cli
+from timegap_env.agents.protocol import EVAL_SEED_START, env_version
+from timegap_env import ENV_IDS, cli
 from timegap_env.config import EnvConfig
 from timegap_env.experiments.registry import fixed_name
 from timegap_env.experiments.registry import make as make_policy
@@ -42,11 +42,11 @@ REFERENCE_SETTINGS = (1.6, 1.0)  # fixed settings beside the grid, the first the
 SUMMARY = ("collision", "mean_setting", "switches", "min_ttc")  # episode summary read-outs kept per episode
 
 
-def run(seeds: Sequence[int], policies: Sequence[NamedPolicy]) -> dict[str, np.ndarray]:
-    """Every policy on every seed in one native vector env of the default config (the rollout harness, policies side
-    by side): return, ``SUMMARY``, arrays
-    (n_policies, n_seeds), and the kind of degradation of each seed's episode (n_seeds,)."""
-    batches = rollout_side_by_side(policies, None, seeds, step_diagnostics=False)
+def run(seeds: Sequence[int], policies: Sequence[NamedPolicy], config: EnvConfig | None = None) -> dict[str, np.ndarray]:
+    """Every policy on every seed in one native vector env of ``config`` (default: v0's; the rollout harness, policies
+    side by side): return, ``SUMMARY``, arrays (n_policies, n_seeds), and the kind of degradation of each seed's
+    episode (n_seeds,)."""
+    batches = rollout_side_by_side(policies, config, seeds, step_diagnostics=False)
     table = {name: np.array([[record.summary[name] for record in batch.records] for batch in batches], dtype=float)
              for name in SUMMARY}
     return {"return": np.array([[record.episode_return for record in batch.records] for batch in batches]), **table,
@@ -58,6 +58,8 @@ def main(argv: Sequence[str] | None = None) -> None:
     parser.add_argument("--episodes", type=int, default=DEFAULT_EPISODES,
                         help=f"tuning episodes, seeds {TUNING_SEED_START} on (default %(default)s)")
     parser.add_argument("--out", type=Path, default=DEFAULT_OUT, help="output directory (default %(default)s)")
+    parser.add_argument("--env-id", default=ENV_IDS[0], choices=list(ENV_IDS.values()),
+                        help="the task the rule is tuned for (default: %(default)s)")
     parser.add_argument("--k-up", type=int, nargs="+", default=K_UP, help="grid of k_up (default %(default)s)")
     parser.add_argument("--quiet-time", type=float, nargs="+", default=QUIET_TIMES,
                         help="grid of quiet_time [s] (default %(default)s)")
@@ -69,7 +71,7 @@ def main(argv: Sequence[str] | None = None) -> None:
         parser.error(f"--episodes {args.episodes}: must be in [1, {SELECTION_SEED_START - TUNING_SEED_START}], "
                      f"the seeds below the selection seeds")
     started = time.perf_counter()
-    config = EnvConfig()
+    config = EnvConfig.from_dict(version=env_version(args.env_id))
     seeds = list(range(TUNING_SEED_START, TUNING_SEED_START + args.episodes))
     assert seeds[-1] < min(SELECTION_SEED_START, EVAL_SEED_START)
     grid = list(itertools.product(args.k_up, args.quiet_time, args.min_setting))
@@ -77,12 +79,12 @@ def main(argv: Sequence[str] | None = None) -> None:
              for k_up, quiet, floor in grid]
     references = [make_policy("rule_platoon", config), *(make_policy(fixed_name(setting), config)
                                                          for setting in REFERENCE_SETTINGS)]
-    results = run(seeds, [*cells, *references])
+    results = run(seeds, [*cells, *references], config)
     best = int(np.argmax(results["return"][:len(cells)].mean(axis=1)))
 
     args.out.mkdir(parents=True, exist_ok=True)
     write_csv(args.out / "tuning.csv", config, [*cells, *references], results, best)
-    report = write_report(args.out / "tuning.md", config, seeds, cells, references, results, best)
+    report = write_report(args.out / "tuning.md", config, seeds, cells, references, results, best, args.env_id)
     print(report)
     print(f"Best: k_up = {cells[best].k_up}, quiet_time = {seconds(cells[best].quiet_time)} s, "
           f"min_setting = {seconds(cells[best].min_setting)} s; mean return {results['return'][best].mean():.1f}")
@@ -125,7 +127,8 @@ def write_csv(path: Path, config: EnvConfig, policies: Sequence[NamedPolicy], re
 
 
 def write_report(path: Path, config: EnvConfig, seeds: Sequence[int], cells: Sequence[ChartStepPolicy],
-                 references: Sequence[NamedPolicy], results: dict[str, np.ndarray], best: int) -> str:
+                 references: Sequence[NamedPolicy], results: dict[str, np.ndarray], best: int,
+                 env_id: str = ENV_IDS[0]) -> str:
     """tuning.md: the references, the grid by mean return, the best cell per degradation kind."""
     policies = [*cells, *references]
     yardstick = next(i for i, policy in enumerate(policies) if isinstance(policy, FixedPolicy))  # the first constant
@@ -143,11 +146,12 @@ def write_report(path: Path, config: EnvConfig, seeds: Sequence[int], cells: Seq
     header = [f"| policy | k_up | quiet time [s] | floor [s] | mean return | vs {policies[yardstick].name} (95 %) | "
               f"collisions | mean setting [s] | follower switches per episode | episodes with TTC < "
               f"{config.reward_scales.ttc_threshold:g} s |", "|" + "---|" * 10]
+    defaults = ", the defaults of `ChartStepPolicy`" if env_id == ENV_IDS[0] else ""  # v0's committed grid set them
     lines = [
         "# Tuning the chart step rule (`python -m train.tune_rule`)", "",
-        f"{len(seeds)} training episodes of the default env (seeds {seeds[0]}-{seeds[-1]}, below the evaluation's "
-        f"{EVAL_SEED_START} and apart from the value-of-information lookup and selection seeds; the default leader "
-        "families and degradation mix), platoon-wide action, every policy on the same episodes. Returns are "
+        f"{len(seeds)} training episodes of {env_id} (seeds {seeds[0]}-{seeds[-1]}, below the evaluation's "
+        f"{EVAL_SEED_START} and apart from the value-of-information lookup and selection seeds; its leader "
+        "families, degradation mix and reward), platoon-wide action, every policy on the same episodes. Returns are "
         "undiscounted sums of the reward; differences are paired per episode, with a 95 % normal interval.", "",
         "The rule (`timegap_env.agents.policies.ChartStepPolicy`), per follower at each decision: at least `k_up` exceedances "
         f"within the chart's {seconds(config.chart.exceedance_window)} s window -> one ladder level up; otherwise no "
@@ -156,7 +160,7 @@ def write_report(path: Path, config: EnvConfig, seeds: Sequence[int], cells: Seq
         "## References", "", *header, *(row(i) for i in range(len(cells), len(policies))), "",
         f"## The grid, by mean return ({len(cells)} cells; the best in bold)", "", *header, *(row(i) for i in grid), "",
         f"Best: k_up = {cells[best].k_up}, quiet time = {seconds(cells[best].quiet_time)} s, floor = "
-        f"{seconds(cells[best].min_setting)} s, the defaults of `ChartStepPolicy`. It was picked on these episodes, "
+        f"{seconds(cells[best].min_setting)} s{defaults}. It was picked on these episodes, "
         f"so its return here is optimistic; only held-out episodes (seeds >= {EVAL_SEED_START}) can judge it.", "",
         "## The best cell per degradation kind", "", "Mean return (collisions) per kind.", "",
         "| kind | episodes | " + " | ".join(policies[i].name for i in (best, *range(len(cells), len(policies))))

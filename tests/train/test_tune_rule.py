@@ -31,3 +31,22 @@ def test_the_policy_s_defaults_are_the_committed_best_cell():
     policy = ChartStepPolicy()
     assert (policy.k_up, policy.quiet_time, policy.min_setting) == (
         int(best[0]["k_up"]), float(best[0]["quiet_time"]), float(best[0]["min_setting"]))
+
+
+def test_tuning_for_v1_runs_v1_and_its_best_cell_reaches_evaluate_task(tmp_path):
+    from train import evaluate_task
+
+    out = tmp_path / "v1"
+    tune_rule.main(["--episodes", "2", "--k-up", "2", "3", "--quiet-time", "20", "--min-setting", "1.2",
+                    "--out", str(out), "--env-id", "TimeGapMonitor-v1"])
+    report = (out / "tuning.md").read_text()
+    assert "training episodes of TimeGapMonitor-v1" in report and "the defaults of `ChartStepPolicy`" not in report
+    best = evaluate_task.tuned_chart_step(out / "tuning.csv")
+    assert best["k_up"] in (2, 3) and best["quiet_time"] == 20.0 and best["min_setting"] == 1.2
+    (tmp_path / "bad.csv").write_text("policy,best\nx,0\n")
+    try:
+        evaluate_task.tuned_chart_step(tmp_path / "bad.csv")
+    except ValueError as error:
+        assert "bad.csv" in str(error)
+    else:
+        raise AssertionError("a tuning.csv without a best cell was taken")
