@@ -26,8 +26,11 @@ demo: $(STAMP)
 	MPLBACKEND=Agg $(PY) -m train.value_of_information
 	MPLBACKEND=Agg $(PY) -m train.detection_benchmark
 	MPLBACKEND=Agg $(PY) -m train.tune_rule
+	MPLBACKEND=Agg $(PY) -m train.tune_rule --env-id TimeGapMonitor-v1 --out results/rule/v1
 	MPLBACKEND=Agg $(PY) -m train.evaluate
 	MPLBACKEND=Agg $(PY) -m train.task_map
+	MPLBACKEND=Agg $(PY) -m train.evaluate_task --chart-step-tuning results/rule/v1/tuning.csv --model results/ppo_v1 results/ppo_v1_nomonitor
+	MPLBACKEND=Agg $(PY) -m train.evaluate_task --policies rule_platoon --model results/ppo_v1 results/ppo_v1_nomonitor --baseline ppo_v1_nomonitor --out results/task/ablation
 
 test: $(STAMP)
 	MPLBACKEND=Agg $(PY) -m pytest -q
@@ -41,8 +44,10 @@ package: $(STAMP)  # pip install . / the wheel / the sdist, core only, in a thro
 clients:  # the env through SB3, sb3-contrib, rl-zoo3, RLlib, TorchRL, Tianshou, gymnasium's wrappers (own venv)
 	bash .ci/clients
 
-train: $(STAMP)
+train: $(STAMP)  # the committed runs: v0's PPO; v1's PPO and its monitor ablation (same seed and budget)
 	$(PY) -m train.train_ppo
+	$(PY) -m train.train_ppo --env-id TimeGapMonitor-v1 --out results/ppo_v1
+	$(PY) -m train.train_ppo --env-id TimeGapMonitor-v1 --hide-features monitor --out results/ppo_v1_nomonitor
 
 bench: $(STAMP)
 	MPLBACKEND=Agg $(PY) -m train.bench

@@ -8,7 +8,8 @@ Every policy of ``--policies`` (the policy registry's names) and every trained r
 trained: its ``env.json`` must name ``TimeGapMonitor-v1``) plays the same held-out episodes of v1 (seeds from
 10 000) as the references of ``results/task/v1.md`` (``timegap_env.experiments.task_map.v1_headroom``: the best blind
 constant chosen on selection seeds from 5 000, the oracles' tables on training seeds 0..15). Per policy: its return,
-its gain over the best blind constant and over the paper's rule (the first of ``--policies``), paired, with 95 %
+its gain over the best blind constant and over a baseline (``--baseline``; default the paper's rule, the first of
+``--policies``), paired, with 95 %
 bootstrap intervals (also without the collision term, which one episode can carry), the share of the full oracle's
 gain it captures, and its collisions. ``--split selection`` plays seeds from 6 000 instead (below every held-out
 one), where learned recipes are chosen; the held-out seeds only report. Writes ``policies.md`` and
@@ -69,7 +70,8 @@ def share(value: float) -> str:
     return "n/a" if math.isnan(value) else f"{100 * value:.0f} %"
 
 
-def markdown(reference: dict[str, Any], rows: list[dict[str, Any]], plan: Plan, runtime: str, notes: list[str]) -> str:
+def markdown(reference: dict[str, Any], rows: list[dict[str, Any]], plan: Plan, runtime: str, notes: list[str],
+             baseline: str) -> str:
     split = ("held-out episodes (seeds from 10000)" if plan.held_out_start == EVAL_SEED_START else
              f"recipe-selection episodes (seeds from {plan.held_out_start}; not held out: for choosing among recipes)")
     lines = ["# Policies on TimeGapMonitor-v1", "",
@@ -80,7 +82,7 @@ def markdown(reference: dict[str, Any], rows: list[dict[str, Any]], plan: Plan, 
              "Gains: mean per episode, paired, [95 % bootstrap interval]; share: the policy's gain over the best blind "
              f"constant / the full oracle's ({reference['full_oracle_gain']:.1f}, `{reference['full_oracle_chosen']}`).",
              "", "| policy | return | gain over best blind [CI] | the same without the collision term [CI] "
-             "| gain over the rule [CI] | share of the oracle's gain | collisions |", "|---|---|---|---|---|---|---|"]
+             f"| gain over {baseline} [CI] | share of the oracle's gain | collisions |", "|---|---|---|---|---|---|---|"]
     for row in rows:
         lines.append(f"| {row['policy']} | {row['return']:.1f} | {row['gain']:.1f} [{row['gain_low']:.1f}, "
                      f"{row['gain_high']:.1f}] | {row['gain_without_collisions']:.1f} "
@@ -98,8 +100,11 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     defaults = Plan()
     parser.add_argument("--policies", nargs="+", default=list(DEFAULT_POLICIES),
-                        help="registry policies; the first is the baseline of 'gain over the rule' (default: %(default)s)")
+                        help="registry policies; the first is the default --baseline (default: %(default)s)")
     parser.add_argument("--model", type=Path, nargs="*", default=[], help="trained runs (directories) of v1")
+    parser.add_argument("--baseline", default=None,
+                        help="the policy 'gain over the baseline' is paired against: a name of --policies or a --model "
+                             "run's directory name (default: the first of --policies, the paper's rule)")
     parser.add_argument("--chart-step-tuning", type=Path, default=None,
                         help="a tune_rule --env-id TimeGapMonitor-v1 run's tuning.csv: chart_step takes its best cell "
                              "(default: the registered parameters, tuned for v0)")
@@ -122,7 +127,10 @@ def main() -> None:
     plan, backend = Plan(args.train, args.selection, args.held_out, start_seed), Backend.from_args(args)
     work = cli.work_directory(args.out)
     start = time.perf_counter()
-    (reference,), _, rows = v1_headroom(plan, backend, policies, baseline=args.policies[0])
+    baseline = args.baseline or args.policies[0]
+    if baseline not in policies:
+        raise ValueError(f"--baseline {baseline!r}: not one of the policies played {list(policies)}")
+    (reference,), _, rows = v1_headroom(plan, backend, policies, baseline=baseline)
     runtime = f"{time.perf_counter() - start:.0f} s ({backend.name} backend)"
     with open(work / "policies.csv", "w", newline="", encoding="utf-8") as file:
         writer = csv.DictWriter(file, fieldnames=list(rows[0]))
@@ -131,7 +139,7 @@ def main() -> None:
                          for row in rows)
     notes = [f"- {name}: {policy!r}" for name, policy in policies.items()]
     notes.append(f"- chart_step's parameters: {'the best cell of ' + str(args.chart_step_tuning) if tuned else 'registered (tuned for v0)'}")
-    (work / "policies.md").write_text(markdown(reference, rows, plan, runtime, [*notes, ""]), encoding="utf-8")
+    (work / "policies.md").write_text(markdown(reference, rows, plan, runtime, [*notes, ""], baseline), encoding="utf-8")
     cli.publish(work, args.out)
     print((Path(args.out) / "policies.md").read_text(encoding="utf-8"))
 

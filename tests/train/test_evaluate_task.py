@@ -26,3 +26,17 @@ def test_a_tiny_evaluation_writes_its_table(tmp_path, monkeypatch, capsys):
     table = (out / "policies.md").read_text()
     assert "| rule_platoon |" in table and "| fixed_1.0 |" in table and "0.0 [0.0, 0.0]" in table  # rule vs itself
     assert sorted(path.name for path in out.iterdir()) == ["policies.csv", "policies.md"]
+
+
+def test_an_unknown_baseline_is_refused(tmp_path, monkeypatch):
+    monkeypatch.setattr(sys, "argv", ["evaluate_task", "--train", "1", "--selection", "2", "--held-out", "2",
+                                      "--policies", "rule_platoon", "--baseline", "ppo", "--out", str(tmp_path / "e")])
+    with pytest.raises(ValueError, match="--baseline 'ppo': not one of the policies played"):
+        evaluate_task.main()
+    assert not (tmp_path / "e").exists()
+
+
+def test_the_committed_v1_runs_load_as_v1():
+    config = EnvConfig.from_dict(version=1)
+    assert evaluate_task.learned(ROOT / "results" / "ppo_v1", config).hidden_features == ()
+    assert len(evaluate_task.learned(ROOT / "results" / "ppo_v1_nomonitor", config).hidden_features) == 6
