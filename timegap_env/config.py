@@ -514,8 +514,9 @@ class RewardWeights(ConfigMixin):
 
     @classmethod
     def of(cls, value: Any, field: str = "reward_weights") -> RewardWeights:
-        """``value`` as weights: RewardWeights, a preset's name (:data:`REWARD_PRESETS`), a dict of fields, or a
-        sequence of one weight per field in field order; ``ValueError`` naming ``field`` and the value otherwise."""
+        """``value`` as weights: RewardWeights, a preset's name (:data:`REWARD_PRESETS`) or a sequence of one weight
+        per field in field order; ``ValueError`` naming ``field`` and the value otherwise. (A dict of some weights
+        overrides the version's: :meth:`EnvConfig.from_dict` and :meth:`EnvConfig.nested_overrides` take it.)"""
         names = [f.name for f in dataclasses.fields(cls)]
         if isinstance(value, cls):
             return value
@@ -523,15 +524,11 @@ class RewardWeights(ConfigMixin):
             if value not in REWARD_PRESETS:
                 raise ValueError(f"{field} = {value!r}: unknown preset; known: {list(REWARD_PRESETS)}")
             return REWARD_PRESETS[value].weights
-        if isinstance(value, Mapping):
-            try:
-                return cls().with_overrides(value)
-            except ValueError as error:
-                raise ValueError(f"{field}: {error}") from error
-        items = _items(value)
+        items = None if isinstance(value, Mapping) else _items(value)
         if items is None:
-            raise ValueError(f"{field} = {shown(value)}: must be a preset's name {list(REWARD_PRESETS)}, a dict of "
-                             f"weights or a sequence of {len(names)} weights in the order {names}")
+            raise ValueError(f"{field} = {shown(value)}: must be a preset's name {list(REWARD_PRESETS)}, a sequence of "
+                             f"{len(names)} weights in the order {names}, or (through EnvConfig.from_dict) a dict of "
+                             "weights")
         if len(items) != len(names):
             raise ValueError(f"{field} = {shown(value)}: has {len(items)} weights; needs {len(names)}, one per term "
                              f"in the order {names}")

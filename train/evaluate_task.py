@@ -51,9 +51,11 @@ def tuned_chart_step(path: Path) -> dict[str, float]:
     try:
         with open(path, newline="", encoding="utf-8") as file:
             best = [row for row in csv.DictReader(file) if row.get("best") == "1"]
-        (row,) = best
+        if len(best) != 1:
+            raise ValueError(f"{len(best)} rows with best = 1")
+        row = best[0]
         return {"k_up": int(row["k_up"]), "quiet_time": float(row["quiet_time"]), "min_setting": float(row["min_setting"])}
-    except (OSError, ValueError, KeyError, TypeError) as error:
+    except (OSError, UnicodeDecodeError, csv.Error, ValueError, KeyError, TypeError) as error:
         raise ValueError(f"--chart-step-tuning {path}: not a tune_rule tuning.csv with one best cell ({error})") from error
 
 
@@ -122,7 +124,10 @@ def main() -> None:
     config = EnvConfig.from_dict(version=1)
     tuned = tuned_chart_step(args.chart_step_tuning) if args.chart_step_tuning else {}
     policies = {name: make_policy(name, config, **(tuned if name == "chart_step" else {})) for name in args.policies}
-    policies |= {path.name: learned(path, config) for path in args.model}
+    for path in args.model:
+        if path.name in policies:
+            raise ValueError(f"--model {path}: its name {path.name!r} is taken by another policy; rename the directory")
+        policies[path.name] = learned(path, config)
     start_seed = EVAL_SEED_START if args.split == "held_out" else RECIPE_SEED_START
     plan, backend = Plan(args.train, args.selection, args.held_out, start_seed), Backend.from_args(args)
     work = cli.work_directory(args.out)

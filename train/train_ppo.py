@@ -79,7 +79,9 @@ from timegap_env.agents.learned import (
     LearnedPolicy, ObservationNormalizer, RunFileError, algorithm_class, load_model, load_vecnormalize,
 )
 from timegap_env.agents.policies import seconds
-from timegap_env.agents.protocol import ALGORITHMS, ENV_FILE, EVAL_SEED_START, MODEL_FILE, VECNORMALIZE_FILE, env_version
+from timegap_env.agents.protocol import (
+    ALGORITHMS, ENV_FILE, EVAL_SEED_START, MODEL_FILE, VECNORMALIZE_FILE, env_version, read_env_file,
+)
 from timegap_env import ENV_ID, ENV_IDS, cli
 from timegap_env.config import EnvConfig
 from timegap_env.envs.action import action_space
@@ -443,6 +445,15 @@ def main(argv: list[str] | None = None) -> None:
     if args.resume:  # every file checked before anything is written
         if not model_path.is_file():
             raise FileNotFoundError(f"--resume: no checkpoint {model_path}")
+        if lagrange is not None:
+            raise ValueError("--resume with --cost-budget: the Lagrange multiplier is not saved with the checkpoint; "
+                             "train a constrained run in one go")
+        saved = read_env_file(args.out / ENV_FILE)
+        for what, was, now in (("--env-id", saved.env_id, args.env_id), ("--algo", saved.algo, args.algo),
+                               ("--hide-features", list(saved.hidden_features), list(hidden_features))):
+            if was != now:
+                raise ValueError(f"--resume: {what} {now!r}, but {args.out / ENV_FILE} says the run was trained with "
+                                 f"{was!r}; resume it as it was trained")
         if normalize and not stats_path.is_file():
             raise FileNotFoundError(f"--resume with normalize = {normalize!r}: no statistics {stats_path}")
         if not normalize and stats_path.is_file():

@@ -57,7 +57,8 @@ def main(argv: Sequence[str] | None = None) -> None:
     parser = argparse.ArgumentParser(prog="python -m train.tune_rule", description=__doc__.split("\n")[0])
     parser.add_argument("--episodes", type=int, default=DEFAULT_EPISODES,
                         help=f"tuning episodes, seeds {TUNING_SEED_START} on (default %(default)s)")
-    parser.add_argument("--out", type=Path, default=DEFAULT_OUT, help="output directory (default %(default)s)")
+    parser.add_argument("--out", type=Path, default=None,
+                        help=f"output directory (default {DEFAULT_OUT} for v0, {DEFAULT_OUT}/v1 for v1)")
     parser.add_argument("--env-id", default=ENV_IDS[0], choices=list(ENV_IDS.values()),
                         help="the task the rule is tuned for (default: %(default)s)")
     parser.add_argument("--k-up", type=int, nargs="+", default=K_UP, help="grid of k_up (default %(default)s)")
@@ -66,6 +67,8 @@ def main(argv: Sequence[str] | None = None) -> None:
     parser.add_argument("--min-setting", type=float, nargs="+", default=MIN_SETTINGS,
                         help="grid of min_setting [s] (default %(default)s)")
     args = parser.parse_args(argv)
+    if args.out is None:
+        args.out = DEFAULT_OUT if args.env_id == ENV_IDS[0] else DEFAULT_OUT / f"v{env_version(args.env_id)}"
     cli.output_dir(args.out)
     if not 1 <= args.episodes <= SELECTION_SEED_START - TUNING_SEED_START:
         parser.error(f"--episodes {args.episodes}: must be in [1, {SELECTION_SEED_START - TUNING_SEED_START}], "

@@ -58,7 +58,8 @@ def test_the_scalar_reward_is_the_weights_times_the_vector(scenario):
         assert reward == pytest.approx(float(weights @ vector), abs=1e-12)
         terms = rewards_of(info)
         assert np.array_equal(vector, [terms[name] for name in REWARD_TERMS])
-        assert info[COST] == pytest.approx(-sum(terms[name] for name in COST_TERMS)) and info[COST] >= 0
+        clipped = {name: max(-1.0, float(terms[name])) for name in COST_TERMS}
+        assert info[COST] == pytest.approx(-sum(clipped.values())) and 0 <= info[COST] <= 3
         costs.append(info[COST])
         if terminated or truncated:
             break
@@ -157,8 +158,8 @@ def test_bad_task_input_names_the_field_and_value(bad, message):
 
 
 def test_an_unknown_objective_or_version_is_refused():
-    with pytest.raises(ValueError, match=r"unknown objective\(s\) \['capacity'\]"):
-        gym.make(timegap_env.MO_ENV_ID, objectives=["tracking", "capacity"])
+    with pytest.raises(ValueError, match=r"unknown objective\(s\) \[.radar.\]"):
+        gym.make(timegap_env.MO_ENV_ID, objectives=["tracking", "radar"])
     with pytest.raises(ValueError, match="each may appear once"):
         gym.make(timegap_env.MO_ENV_ID, objectives=["tracking", "tracking"])
     with pytest.raises(ValueError, match="env version = 7: unknown"):
@@ -170,3 +171,20 @@ def test_presets_by_name_or_vector_equal_their_weights():
         assert EnvConfig.from_dict({"reward_weights": name}).reward_weights == preset.weights
         vector = [getattr(preset.weights, term) for term in REWARD_TERMS]
         assert EnvConfig.from_dict({"reward_weights": vector}).reward_weights == preset.weights
+
+
+def test_the_cost_stays_in_its_range_through_a_collision():
+    env = gym.make("TimeGapMonitor-v1", config={"episode_duration": 60.0})
+    env.reset(seed=0, options={"scenario": "emergency_braking", "degradation": {"kind": "lag", "size": 1.2}})
+    for _ in range(60):
+        _, _, terminated, truncated, info = env.step(0)
+        assert 0 <= info[COST] <= 3
+        if terminated or truncated:
+            break
+
+
+def test_mo_objectives_by_term_or_objective_name():
+    env = gym.make(timegap_env.MO_ENV_ID, objectives=["capacity", "time_gap_variation", "string_stability"])
+    assert env.unwrapped.objectives == ("efficiency", "tracking", "string_stability")
+    with pytest.raises(ValueError, match="each may appear once"):
+        gym.make(timegap_env.MO_ENV_ID, objectives=["capacity", "efficiency"])

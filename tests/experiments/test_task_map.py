@@ -121,3 +121,10 @@ def test_v1_headroom_is_a_row_of_its_own_weighting():
     assert [row["policy"] for row in policy_rows] == ["fixed_1.0"]
     if rows[0]["best_blind"] == "1 s":  # the same constant: no gain
         assert policy_rows[0]["gain"] == 0 and policy_rows[0]["return"] == rows[0]["best_blind_return"]
+
+
+def test_an_alias_is_its_family_s_regime_and_bad_counts_are_named():
+    config = cell_config("default", "default").with_overrides({"scenario_weights": {"paper": 1.0}})
+    assert list(regime_contexts(config)) == ["aggressive_cycles"]
+    with pytest.raises(ValueError, match="selection = 2000: must be in"):
+        Plan(selection=2000).seeds()

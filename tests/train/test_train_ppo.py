@@ -272,6 +272,12 @@ def test_a_run_names_its_env_and_loading_builds_that_version(tmp_path: Path) -> 
     assert config == gym.make(v1, config={"episode_duration": 10.0}).unwrapped.config
     assert config.reward_weights.preference == 0.0 and config.info_keys == "v1"
     assert LearnedPolicy.load(out).action_mode == "platoon"
+    resume = ["--hyperparams", str(hyperparams), "--no-warmup", "--out", str(out), "--no-progress-bar", "--resume",
+              "--timesteps", "64"]
+    with pytest.raises(ValueError, match="--resume: --hide-features \\['speed'\\], but .* trained with \\[\\]"):
+        train_ppo.main(["--env-id", v1, "--hide-features", "speed", *resume])
+    with pytest.raises(ValueError, match="--resume with --cost-budget"):
+        train_ppo.main(["--env-id", v1, "--cost-budget", "0.1", *resume])
     (out / "env.json").write_text(json.dumps({"env_kwargs": {}, "frame_stack": 1, "env_id": "TimeGapMonitor-v9"}))
     with pytest.raises(RunFileError, match="env_id = 'TimeGapMonitor-v9'"):
         read_env_file(out / "env.json")

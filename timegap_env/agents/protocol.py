@@ -97,8 +97,10 @@ def read_env_file(path: str | Path) -> RunEnv:
     except (OSError, UnicodeDecodeError, json.JSONDecodeError, RecursionError) as error:  # (nested beyond Python's stack)
         raise RunFileError(f"{path}: not readable JSON ({type(error).__name__}: {error})") from error
     if not isinstance(run, dict) or not {"env_kwargs", "frame_stack"} <= set(run) or set(run) - ENV_FILE_KEYS:
-        raise RunFileError(f"{path}: must be a JSON object with the keys env_kwargs, frame_stack and optionally "
-                           f"normalize; holds {run!r}"[:400])
+        unknown = sorted(set(run) - ENV_FILE_KEYS) if isinstance(run, dict) else []
+        raise RunFileError((f"{path}: must be a JSON object with the keys env_kwargs, frame_stack and optionally "
+                            f"{', '.join(sorted(ENV_FILE_KEYS - {'env_kwargs', 'frame_stack'}))}"
+                            + (f"; unknown keys {unknown}" if unknown else "") + f"; holds {run!r}")[:400])
     env_kwargs, frame_stack, normalize = run["env_kwargs"], run["frame_stack"], run.get("normalize")
     env_id, hidden_features = run.get("env_id", OLDER_RUNS_ENV_ID), run.get("hidden_features", [])
     algo = run.get("algo", "ppo")
@@ -115,7 +117,9 @@ def read_env_file(path: str | Path) -> RunEnv:
     if normalize is not None and not isinstance(normalize, bool):
         raise RunFileError(f"{path}: normalize = {normalize!r}: must be true or false")
     try:
-        version = env_version(env_id) if isinstance(env_id, str) else env_version(repr(env_id))
+        if not isinstance(env_id, str):
+            raise ValueError(f"env_id = {env_id!r}: must be an env id (a string)")
+        version = env_version(env_id)
     except ValueError as error:
         raise RunFileError(f"{path}: {error}") from error
     try:

@@ -59,11 +59,6 @@ def prefixed(prefix: str, values: Mapping[str, np.ndarray]) -> dict[str, np.ndar
     return {prefix + name: value for name, value in values.items()}
 
 
-def no_rewards(n_envs: int) -> dict[str, np.ndarray]:
-    """``reward_<term>`` = 0 for each term, (n_envs,): what reset's info holds, so that step's keys are there too."""
-    return {REWARD_PREFIX + name: np.zeros(n_envs) for name in REWARD_TERMS}
-
-
 def step_scores(term_rows: np.ndarray, objectives: tuple[np.ndarray, np.ndarray] | None) -> dict[str, np.ndarray]:
     """A step's scores as the info holds them, from its reward terms (n_terms, n_envs): ``reward_<term>``; with
     ``objectives`` (given with ``info_keys`` "v1": the objectives (n_terms, n_envs) in natural units and the cost
@@ -130,5 +125,5 @@ def objectives_of(info: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
 
 
 __all__ = ["COST", "EPISODE_PREFIX", "KIND_NAMES", "OBJECTIVES_KEY", "REWARD_PREFIX", "TRUTH_PREFIX", "VECTOR_REWARD",
-           "no_rewards", "no_scores", "objectives_of", "of_env", "prefixed", "rewards_of", "step_diagnostics_flag",
+           "no_scores", "objectives_of", "of_env", "prefixed", "rewards_of", "step_diagnostics_flag",
            "step_scores", "summary_of", "truth_of", "with_masks"]

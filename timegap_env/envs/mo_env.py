@@ -17,21 +17,25 @@ import numpy as np
 
 from timegap_env.config import shown
 from timegap_env.envs.env import TimeGapMonitorEnv
-from timegap_env.envs.reward import REWARD_TERMS, term_lows
+from timegap_env.envs.reward import OBJECTIVES, REWARD_TERMS, term_lows
 
 def chosen_objectives(objectives: Sequence[str] | None) -> tuple[str, ...]:
-    """``objectives`` checked: None (every term), or distinct names of REWARD_TERMS; ``ValueError`` naming the value."""
+    """``objectives`` checked, as reward terms: None (every term), or distinct names of REWARD_TERMS or of their
+    objectives (``OBJECTIVES``: "capacity" is the efficiency term); ``ValueError`` naming the value."""
     if objectives is None:
         return REWARD_TERMS
-    if isinstance(objectives, str) or not isinstance(objectives, Sequence) or not objectives:
+    if isinstance(objectives, str) or not isinstance(objectives, (Sequence, np.ndarray)) or not len(objectives):
         raise ValueError(f"objectives = {shown(objectives)}: must be None (all) or a non-empty list of reward terms "
                          f"among {list(REWARD_TERMS)}")
-    unknown = [name for name in objectives if name not in REWARD_TERMS]
+    terms = {**{objective.name: term for term, objective in OBJECTIVES.items()}, **{term: term for term in REWARD_TERMS}}
+    unknown = [name for name in objectives if name not in terms]
     if unknown:
-        raise ValueError(f"objectives = {shown(objectives)}: unknown objective(s) {unknown}; known: {list(REWARD_TERMS)}")
-    if len(set(objectives)) != len(objectives):
+        raise ValueError(f"objectives = {shown(objectives)}: unknown objective(s) {unknown}; known: the reward terms "
+                         f"{list(REWARD_TERMS)} or their objectives {[o.name for o in OBJECTIVES.values()]}")
+    chosen = tuple(terms[str(name)] for name in objectives)
+    if len(set(chosen)) != len(chosen):
         raise ValueError(f"objectives = {shown(objectives)}: each may appear once")
-    return tuple(objectives)
+    return chosen
 
 
 class MOTimeGapMonitorEnv(TimeGapMonitorEnv):

@@ -64,7 +64,8 @@ def feature_columns(features: tuple[str, ...] | list[str]) -> list[int]:
     """Each feature's column in a follower's row; ``ValueError`` naming a name not in FEATURES (or one twice)."""
     unknown = [name for name in features if name not in FEATURES]
     if unknown or len(set(features)) != len(features):
-        raise ValueError(f"hidden_features = {list(features)!r}: must be distinct names of {list(FEATURES)}")
+        problem = f"unknown {unknown}" if unknown else "a name twice"
+        raise ValueError(f"hidden_features = {list(features)!r}: {problem}; must be distinct names of {list(FEATURES)}")
     return [FEATURES.index(name) for name in features]
 
 

@@ -185,9 +185,9 @@ OBJECTIVES: dict[str, Objective] = {
     "switching": Objective("switching", "-", "-switching: the share of followers whose setting changed"),
 }
 assert tuple(OBJECTIVES) == REWARD_TERMS
-COST_TERMS = ("string_stability", "safety", "collision")  # info["cost"] = -(the sum of these terms), in [0, 3]: a step's
-# string instability, TTC shortfall and collision, each in [0, 1] (Safety-Gymnasium's convention: >= 0, 0 when safe);
-# env_objectives writes it
+COST_TERMS = ("string_stability", "safety", "collision")  # info["cost"] = -(the sum of these terms, each clipped to
+# [-1, 0]), in [0, 3]: a step's string instability, TTC shortfall and collision (Safety-Gymnasium's convention: >= 0,
+# 0 when safe); env_objectives writes it
 
 
 def term_lows(config: EnvConfig) -> dict[str, float]:
@@ -368,7 +368,8 @@ def env_objectives(readouts, setting, changed, terms, constants, out, cost, e): 
     out.efficiency[e] = capacity / n_followers  # capacity [veh/h]
     out.preference[e] = preference / n_followers  # preference_deviation [s]
     out.switching[e] = switching / n_followers  # [-]
-    cost[e] = 0.0 - (terms.string_stability[e] + terms.safety[e] + terms.collision[e])  # 0.0 - : never -0.0
+    # each cost term in [0, 1]: the safety term falls below -1 once a gap is gone (a negative TTC); 0.0 - : never -0.0
+    cost[e] = 0.0 - (terms.string_stability[e] + max(-1.0, terms.safety[e]) + terms.collision[e])
 
 
 @numba.njit(cache=True, error_model="numpy")

@@ -1,4 +1,4 @@
-"""Stable-Baselines3 adapter: the native vector ``TimeGapMonitor-v0`` as an SB3 ``VecEnv``.
+"""Stable-Baselines3 adapter: the native vector ``TimeGapMonitor`` (v0 or v1) as an SB3 ``VecEnv``.
 
 ``TimeGapVecEnv(n_envs=16, config={...})`` steps all platoons in one batched NumPy
 call (the native vector env, as ``gym.make_vec(..., vectorization_mode="vector_entry_point")`` builds it) instead of
@@ -15,7 +15,7 @@ N Python envs in a ``DummyVecEnv``, and follows SB3's conventions:
   that loggers can write them). The native env's per-step diagnostics (reward terms, estimates,
   ...) are not passed on.
 
-Sub-env i seeded with ``s + i`` equals ``gym.make("TimeGapMonitor-v0")`` seeded
+Sub-env i seeded with ``s + i`` equals ``gym.make("TimeGapMonitor-v<version>")`` seeded
 with ``s + i`` in a ``DummyVecEnv``, step by step.
 """
 
@@ -36,7 +36,7 @@ from timegap_env.envs.vector_env import TimeGapMonitorVectorEnv
 
 
 class TimeGapVecEnv(VecEnv):
-    """``n_envs`` platoons of ``TimeGapMonitor-v0`` behind SB3's ``VecEnv`` API.
+    """``n_envs`` platoons of ``TimeGapMonitor`` (v0 or v1) behind SB3's ``VecEnv`` API.
 
     ``config`` overrides the env's :class:`~timegap_env.config.EnvConfig` as in ``gym.make`` of env version
     ``version`` (0: ``TimeGapMonitor-v0``'s defaults, 1: ``-v1``'s); ``hidden_features`` (names of the

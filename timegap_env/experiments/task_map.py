@@ -34,7 +34,7 @@ from timegap_env.agents.oracles import LookupOracle, RegimeOracle, StabilityOrac
 from timegap_env.agents.protocol import EVAL_SEED_START
 from timegap_env.config import REWARD_PRESETS, TASK_VERSIONS, EnvConfig, RewardPreset
 from timegap_env.envs.reward import REWARD_TERMS
-from timegap_env.leaders.scenarios import LEADER_FAMILIES, family_params
+from timegap_env.leaders.scenarios import LEADER_FAMILIES, SCENARIOS, family_params
 from timegap_env.experiments.backends import Backend
 from timegap_env.experiments.heldout import LARGER_DEGRADATIONS
 from timegap_env.experiments.rollout import rollout
@@ -78,12 +78,15 @@ class Plan:
         if self.held_out_start not in (EVAL_SEED_START, RECIPE_SEED_START):
             raise ValueError(f"held_out_start = {self.held_out_start}: must be {EVAL_SEED_START} (held out) or "
                              f"{RECIPE_SEED_START} (recipe selection)")
+        limits = {"train": SELECTION_SEED_START, "selection": RECIPE_SEED_START - SELECTION_SEED_START,
+                  "held_out": EVAL_SEED_START - RECIPE_SEED_START if self.held_out_start == RECIPE_SEED_START else 10**6}
+        for name, limit in limits.items():
+            if not 1 <= getattr(self, name) <= limit:
+                raise ValueError(f"{name} = {getattr(self, name)}: must be in [1, {limit}] (the seeds of each step must "
+                                 "not reach the next step's)")
         train = list(range(self.train))
         selection = list(range(SELECTION_SEED_START, SELECTION_SEED_START + self.selection))
         held_out = list(range(self.held_out_start, self.held_out_start + self.held_out))
-        assert train[-1] < selection[0] and selection[-1] < held_out[0] and held_out[-1] < EVAL_SEED_START + 10**6
-        if self.held_out_start == RECIPE_SEED_START:
-            assert held_out[-1] < EVAL_SEED_START, "recipe-selection seeds must stay below the held-out ones"
         return train, selection, held_out
 
 
@@ -104,7 +107,8 @@ def regime_contexts(config: EnvConfig) -> dict[str, tuple[EnvConfig, dict[str, A
     (its params' ``regime_weights`` pinned to that one); degradations are drawn as the mix draws them."""
     contexts: dict[str, tuple[EnvConfig, dict[str, Any]]] = {}
     params = family_params(config.leader_params)
-    for name, weight in config.scenario_weights.items():
+    for scenario, weight in config.scenario_weights.items():
+        name = SCENARIOS[scenario].leader_family  # an alias ("paper") is its family's regime
         family = LEADER_FAMILIES[name]
         if weight <= 0:
             continue
