@@ -448,18 +448,18 @@ def main(argv: list[str] | None = None) -> None:
         if lagrange is not None:
             raise ValueError("--resume with --cost-budget: the Lagrange multiplier is not saved with the checkpoint; "
                              "train a constrained run in one go")
-        saved = read_env_file(args.out / ENV_FILE)
-        for what, was, now in (("--env-id", saved.env_id, args.env_id), ("--algo", saved.algo, args.algo),
-                               ("--hide-features", list(saved.hidden_features), list(hidden_features))):
-            if was != now:
-                raise ValueError(f"--resume: {what} {now!r}, but {args.out / ENV_FILE} says the run was trained with "
-                                 f"{was!r}; resume it as it was trained")
         if normalize and not stats_path.is_file():
             raise FileNotFoundError(f"--resume with normalize = {normalize!r}: no statistics {stats_path}")
         if not normalize and stats_path.is_file():
             raise ValueError(f"--resume with normalize = {normalize!r}: {stats_path} says the run normalised its "
                              f"observations; resume with the hyperparameters it was trained with")
         model = load_model(model_path, algorithm, device="cpu")
+        saved = read_env_file(args.out / ENV_FILE)
+        for what, was, now in (("--env-id", saved.env_id, args.env_id), ("--algo", saved.algo, args.algo),
+                               ("--hide-features", list(saved.hidden_features), list(hidden_features))):
+            if was != now:
+                raise ValueError(f"--resume: {what} {now!r}, but {args.out / ENV_FILE} says the run was trained with "
+                                 f"{was!r}; resume it as it was trained")
         model.set_random_seed(args.seed)
         if model.num_timesteps >= total_timesteps:
             raise ValueError(f"--resume: {model_path} has trained {model.num_timesteps} steps, "
