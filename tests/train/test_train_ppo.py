@@ -362,3 +362,10 @@ def test_a_recurrent_run_trains_and_loads_as_recurrent(tmp_path: Path) -> None:
     with pytest.raises(ValueError, match="frame_stack = 2 with --algo ppo_lstm"):
         train_ppo.main(["--algo", "ppo_lstm", "--env-id", ENV_IDS[1], "--hyperparams", str(hyperparams),
                         "--frame-stack", "2", "--out", str(tmp_path / "other")])
+
+
+def test_the_shipped_recurrent_hyperparameters_load() -> None:
+    from sb3_contrib import RecurrentPPO
+
+    loaded = training.load_hyperparams(ROOT / "hyperparams" / "ppo_lstm.yml", ENV_IDS[1], RecurrentPPO)
+    assert loaded["policy"] == "MlpLstmPolicy" and loaded["policy_kwargs"]["lstm_hidden_size"] == 64
