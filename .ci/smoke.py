@@ -1,7 +1,7 @@
 """The core install's smoke test (run by .ci/package from outside the tree, in a venv without extras).
 
 python .ci/smoke.py LABEL: exits non-zero, saying why, unless the installed timegap_env makes, resets and steps
-TimeGapMonitor-v0 with none of the extras' packages importable.
+TimeGapMonitor-v1 with none of the extras' packages importable.
 """
 
 import importlib.metadata
@@ -26,18 +26,18 @@ for data in ("py.typed", "sim/acc_presets.json"):
     assert package.joinpath(data).is_file(), f"{data} is not installed"
 
 start = time.perf_counter()
-env = gym.make("TimeGapMonitor-v0")
+env = gym.make("TimeGapMonitor-v1")
 obs, info = env.reset(seed=0)
 assert env.observation_space.contains(obs)
 for _ in range(20):
     obs, reward, terminated, truncated, info = env.step(env.action_space.sample())
     assert np.isfinite(reward) and env.observation_space.contains(obs)
-vector = gym.make_vec("TimeGapMonitor-v0", num_envs=4, vectorization_mode="vector_entry_point")
+vector = gym.make_vec("TimeGapMonitor-v1", num_envs=4, vectorization_mode="vector_entry_point")
 vector.reset(seed=0)
 vector.step(vector.action_space.sample())
 stepped = time.perf_counter() - start
 
-rendering = gym.make("TimeGapMonitor-v0", render_mode="rgb_array")
+rendering = gym.make("TimeGapMonitor-v1", render_mode="rgb_array")
 rendering.reset(seed=0)
 try:
     rendering.render()
@@ -46,6 +46,6 @@ except ImportError as error:
 else:
     raise AssertionError("rendering without the render extra did not raise ImportError")
 
-print(f"== smoke ({label}): timegap_env {timegap_env.__version__} made, reset and stepped TimeGapMonitor-v0 "
+print(f"== smoke ({label}): timegap_env {timegap_env.__version__} made, reset and stepped TimeGapMonitor-v1 "
       f"(and its vector env) in {stepped:.1f} s (compiling included where nothing was cached); no torch, SB3, highway-env, pygame or "
       f"matplotlib; rendering asks for timegap_env[render]")
