@@ -33,7 +33,10 @@ from timegap_env.config import EnvConfig
 from timegap_env.experiments.backends import Backend, add_arguments
 from timegap_env.experiments.registry import load_learned
 from timegap_env.experiments.registry import make as make_policy
-from timegap_env.experiments.task_map import RECIPE_SEED_START, REFERENCES, Plan, v1_headroom
+from timegap_env.experiments.task_map import RECIPE_SEED_START, REFERENCES, V1_GROUPS, Plan, v1_headroom
+from timegap_env.leaders import default_ngsim_path, default_openacc_dir, openacc_paths
+from timegap_env.leaders.ngsim import PATH_VARIABLE as NGSIM_PATH_VARIABLE
+from timegap_env.leaders.openacc import PATH_VARIABLE as OPENACC_PATH_VARIABLE
 
 DEFAULT_POLICIES = ("rule_platoon", "chart_step", "v2v_aware")
 
@@ -59,6 +62,20 @@ def tuned_chart_step(path: Path) -> dict[str, float]:
         raise ValueError(f"--chart-step-tuning {path}: not a tune_rule tuning.csv with one best cell ({error})") from error
 
 
+def missing_data(group: str) -> str:
+    """Why ``group`` cannot run here ("" if it can): the NGSIM or OpenACC data it drives with is not found."""
+    if group == "ngsim_in_band" and not default_ngsim_path().is_file():
+        return f"no NGSIM data at {default_ngsim_path()} (${NGSIM_PATH_VARIABLE})"
+    if group == "openacc":
+        try:
+            found = bool(openacc_paths(default_openacc_dir()))
+        except OSError:
+            found = False
+        if not found:
+            return f"no OpenACC data in {default_openacc_dir()} (${OPENACC_PATH_VARIABLE})"
+    return ""
+
+
 def learned(path: Path, config: EnvConfig) -> Any:
     """The run at ``path``, which must have been trained in TimeGapMonitor-v1; ``ValueError`` naming it otherwise."""
     run = read_env_file(path / ENV_FILE)
@@ -72,18 +89,13 @@ def share(value: float) -> str:
     return "n/a" if math.isnan(value) else f"{100 * value:.0f} %"
 
 
-def markdown(reference: dict[str, Any], rows: list[dict[str, Any]], plan: Plan, runtime: str, notes: list[str],
-             baseline: str) -> str:
-    split = ("held-out episodes (seeds from 10000)" if plan.held_out_start == EVAL_SEED_START else
-             f"recipe-selection episodes (seeds from {plan.held_out_start}; not held out: for choosing among recipes)")
-    lines = ["# Policies on TimeGapMonitor-v1", "",
-             f"Written by `python -m train.evaluate_task`. {plan.held_out} {split}, the same "
-             f"for every policy and reference; best blind constant ({reference['best_blind']}, return "
-             f"{reference['best_blind_return']:.1f}, {reference['best_blind_collisions']} collisions) chosen on "
-             f"{plan.selection} selection seeds from 5000; the oracles' tables on training seeds 0-{plan.train - 1}. "
-             "Gains: mean per episode, paired, [95 % bootstrap interval]; share: the policy's gain over the best blind "
-             f"constant / the full oracle's ({reference['full_oracle_gain']:.1f}, `{reference['full_oracle_chosen']}`).",
-             "", "| policy | return | gain over best blind [CI] | the same without the collision term [CI] "
+def group_lines(group: str, reference: dict[str, Any], rows: list[dict[str, Any]], baseline: str) -> list[str]:
+    """One group's section: its best blind constant, its policies' table, its references."""
+    lines = [f"## {group}", "",
+             f"Best blind constant {reference['best_blind']} (return {reference['best_blind_return']:.1f}, "
+             f"{reference['best_blind_collisions']} collisions); the full oracle's gain over it "
+             f"{reference['full_oracle_gain']:.1f} (`{reference['full_oracle_chosen']}`).", "",
+             "| policy | return | gain over best blind [CI] | the same without the collision term [CI] "
              f"| gain over {baseline} [CI] | share of the oracle's gain | collisions |", "|---|---|---|---|---|---|---|"]
     for row in rows:
         lines.append(f"| {row['policy']} | {row['return']:.1f} | {row['gain']:.1f} [{row['gain_low']:.1f}, "
@@ -92,10 +104,24 @@ def markdown(reference: dict[str, Any], rows: list[dict[str, Any]], plan: Plan, 
                      f"{row['gain_over_baseline']:.1f} [{row['gain_over_baseline_low']:.1f}, "
                      f"{row['gain_over_baseline_high']:.1f}] | {share(row['share_of_oracle_gain'])} | "
                      f"{row['collisions']}/{row['episodes']} |")
-    lines += ["", "References (gain over the best blind constant): " + "; ".join(
+    return lines + ["", "References (gain over the best blind constant): " + "; ".join(
         f"{ref} {reference[f'{ref}_gain']:.1f} [{reference[f'{ref}_gain_low']:.1f}, {reference[f'{ref}_gain_high']:.1f}]"
-        for ref in REFERENCES) + ".", "", *notes, f"Runtime: {runtime}", ""]
-    return "\n".join(lines)
+        for ref in REFERENCES) + ".", ""]
+
+
+def markdown(sections: list[list[str]], plan: Plan, runtime: str, notes: list[str]) -> str:
+    split = ("held-out episodes (seeds from 10000)" if plan.held_out_start == EVAL_SEED_START else
+             f"recipe-selection episodes (seeds from {plan.held_out_start}; not held out: for choosing among recipes)")
+    lines = ["# Policies on TimeGapMonitor-v1", "",
+             f"Written by `python -m train.evaluate_task`. Per group (`timegap_env.experiments.task_map.V1_GROUPS`: "
+             f"v1's task with that group's leaders or degradations), {plan.held_out} {split}, the same for every policy "
+             f"and reference; the best blind constant chosen on {plan.selection} selection seeds from 5000 and the "
+             f"oracles' tables on training seeds 0-{plan.train - 1}, both of that group. Gains: mean per episode, "
+             "paired, [95 % bootstrap interval]; share: the policy's gain over the best blind constant / the full "
+             "oracle's.", ""]
+    for section in sections:
+        lines += section
+    return "\n".join([*lines, *notes, f"Runtime: {runtime}", ""])
 
 
 def main() -> None:
@@ -116,6 +142,9 @@ def main() -> None:
     parser.add_argument("--split", choices=["held_out", "selection"], default="held_out",
                         help="the episodes: held out (seeds from 10000), or the recipe-selection seeds (from "
                              f"{RECIPE_SEED_START}), where recipes are chosen (default: %(default)s)")
+    parser.add_argument("--groups", nargs="+", default=["v1"], choices=list(V1_GROUPS),
+                        help="the groups of episodes (default: %(default)s; a group whose data is not found is left "
+                             "out, and says so)")
     parser.add_argument("--out", default="results/task/policies", help="directory for policies.md and policies.csv")
     add_arguments(parser)
     args = parser.parse_args()
@@ -135,16 +164,26 @@ def main() -> None:
     baseline = args.baseline or args.policies[0]
     if baseline not in policies:
         raise ValueError(f"--baseline {baseline!r}: not one of the policies played {list(policies)}")
-    (reference,), _, rows = v1_headroom(plan, backend, policies, baseline=baseline)
+    rows, sections, notes = [], [], []
+    for group in args.groups:
+        missing = missing_data(group)
+        if missing:
+            notes.append(f"- group {group} left out: {missing}")
+            continue
+        (reference,), _, group_rows = v1_headroom(plan, backend, policies, baseline=baseline, group=group)
+        rows += group_rows
+        sections.append(group_lines(group, reference, group_rows, baseline))
+    if not rows:
+        raise ValueError(f"--groups {args.groups}: none could run ({'; '.join(notes)})")
     runtime = f"{time.perf_counter() - start:.0f} s ({backend.name} backend)"
     with open(work / "policies.csv", "w", newline="", encoding="utf-8") as file:
         writer = csv.DictWriter(file, fieldnames=list(rows[0]))
         writer.writeheader()
         writer.writerows({key: f"{value:.6g}" if isinstance(value, float) else value for key, value in row.items()}
                          for row in rows)
-    notes = [f"- {name}: {policy!r}" for name, policy in policies.items()]
+    notes += [f"- {name}: {policy!r}" for name, policy in policies.items()]
     notes.append(f"- chart_step's parameters: {'the best cell of ' + str(args.chart_step_tuning) if tuned else 'registered (tuned for v0)'}")
-    (work / "policies.md").write_text(markdown(reference, rows, plan, runtime, [*notes, ""], baseline), encoding="utf-8")
+    (work / "policies.md").write_text(markdown(sections, plan, runtime, [*notes, ""]), encoding="utf-8")
     cli.publish(work, args.out)
     print((Path(args.out) / "policies.md").read_text(encoding="utf-8"))
 

@@ -40,3 +40,17 @@ def test_the_committed_v1_runs_load_as_v1():
     config = EnvConfig.from_dict(version=1)
     assert evaluate_task.learned(ROOT / "results" / "ppo_v1", config).hidden_features == ()
     assert len(evaluate_task.learned(ROOT / "results" / "ppo_v1_nomonitor", config).hidden_features) == 6
+
+
+def test_a_group_without_its_data_is_left_out_and_says_so(tmp_path, monkeypatch):
+    monkeypatch.setenv("TIMEGAP_OPENACC_PATH", str(tmp_path / "nowhere"))
+    out = tmp_path / "eval"
+    monkeypatch.setattr(sys, "argv", ["evaluate_task", "--train", "1", "--selection", "2", "--held-out", "2",
+                                      "--policies", "rule_platoon", "--groups", "stop_and_go", "openacc", "--out", str(out)])
+    evaluate_task.main()
+    table = (out / "policies.md").read_text()
+    assert "## stop_and_go" in table and "## openacc" not in table and "group openacc left out: no OpenACC data" in table
+    monkeypatch.setattr(sys, "argv", ["evaluate_task", "--policies", "rule_platoon", "--groups", "openacc", "--out",
+                                      str(tmp_path / "none")])
+    with pytest.raises(ValueError, match="none could run"):
+        evaluate_task.main()

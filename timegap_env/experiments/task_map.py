@@ -310,16 +310,31 @@ def cell_rows(config: EnvConfig, cell: dict[str, Any], weightings: dict[str, Rew
 
 
 V1_CELL = {"severity": "default", "traffic": "v1"}  # how TimeGapMonitor-v1's rows name their cell
+V1_GROUPS: dict[str, dict[str, Any]] = {  # the held-out groups on v1's task: EnvConfig overrides of v1's defaults
+    "v1": {},  # v1's own mix
+    "larger_degradations": {"degradation": LARGER_DEGRADATIONS},  # every episode degraded beyond the training ranges
+    "regimes": {"scenario_weights": {"regimes": 1.0}},  # traffic that changes within every episode
+    "ngsim_in_band": {"scenario_weights": {"ngsim_in_band": 1.0}},  # real drivers (NGSIM I-80 data)
+    "openacc": {"scenario_weights": {"openacc": 1.0}},  # real lead cars (OpenACC data)
+    "idm": {"scenario_weights": {"idm": 1.0}},  # highway-env's IDM driver behind scripted braking
+    "stop_and_go": {"scenario_weights": {"stop_and_go": 1.0}},  # harsh families the training never saw
+    "emergency_braking": {"scenario_weights": {"emergency_braking": 1.0}},
+}
 
 
 def v1_headroom(plan: Plan = Plan(), backend: Backend | None = None, policies: Mapping[str, Any] | None = None,
-                baseline: str | None = None) -> tuple[list[dict[str, Any]], list[dict[str, Any]], list[dict[str, Any]]]:
-    """``TimeGapMonitor-v1``'s own row (its weighting), Pareto points and ``policies``' rows, as a cell of the map
-    (:func:`cell_rows`)."""
-    config = EnvConfig.from_dict(version=1)
-    weighting = next(name for name, preset in WEIGHTINGS.items() if preset.weights == config.reward_weights)
-    assert TASK_VERSIONS[1]["reward_weights"] == weighting
-    return cell_rows(config, V1_CELL, {weighting: WEIGHTINGS[weighting]}, plan, backend or Backend(), policies, baseline)
+                baseline: str | None = None, group: str = "v1"
+                ) -> tuple[list[dict[str, Any]], list[dict[str, Any]], list[dict[str, Any]]]:
+    """``TimeGapMonitor-v1``'s own row (its weighting), Pareto points and ``policies``' rows on ``group``
+    (:data:`V1_GROUPS`; its references measured on that group's own training and selection seeds), as a cell of
+    the map (:func:`cell_rows`); ``ValueError`` naming an unknown group."""
+    if group not in V1_GROUPS:
+        raise ValueError(f"group = {group!r}: unknown; known: {list(V1_GROUPS)}")
+    config = EnvConfig.from_dict(V1_GROUPS[group], version=1)
+    weighting = TASK_VERSIONS[1]["reward_weights"]
+    assert WEIGHTINGS[weighting].weights == config.reward_weights
+    cell = V1_CELL if group == "v1" else {**V1_CELL, "traffic": group}
+    return cell_rows(config, cell, {weighting: WEIGHTINGS[weighting]}, plan, backend or Backend(), policies, baseline)
 
 
 def task_map(plan: Plan = Plan(), backend: Backend | None = None) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
@@ -341,6 +356,6 @@ def choose_default(rows: Sequence[dict[str, Any]]) -> dict[str, Any]:
     return max(candidates, key=lambda row: row["degradation_aware_share"])
 
 
-__all__ = ["FRONT_OBJECTIVES", "MAX_BLIND_COLLISION_RATE", "RECIPE_SEED_START", "REFERENCES", "SEVERITIES", "TARGET_SHARE", "TRAFFIC", "V1_CELL",
+__all__ = ["FRONT_OBJECTIVES", "MAX_BLIND_COLLISION_RATE", "RECIPE_SEED_START", "REFERENCES", "SEVERITIES", "TARGET_SHARE", "TRAFFIC", "V1_CELL", "V1_GROUPS",
            "WEIGHTINGS", "Plan", "cell_config", "cell_rows", "choose_default", "front_rows", "hypervolume", "map_cell",
            "regime_contexts", "task_map", "v1_headroom", "weigh"]
