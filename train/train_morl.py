@@ -102,6 +102,7 @@ def train(timesteps: int) -> tuple[Any, int]:
 
     torch.set_num_threads(1)  # small networks: one thread runs steadier (and the same) than a pool
     torch.manual_seed(SEED)
+    np.random.seed(SEED)  # MORL-Baselines' prioritized replay buffer samples from numpy's global generator
     seeded = SeededResets(mo_gym.make(MO_ENV_ID, objectives=list(OBJECTIVES)))
     env = MORecordEpisodeStatistics(seeded)
     env.reset()  # seed 0; train() resets without a seed: the next seeds follow
@@ -154,8 +155,11 @@ def figure(rows: list[dict[str, Any]], path: Path) -> None:
     for mask, marker, label in ((constant, "o", "constant settings"), (~constant, "^", "Envelope, per weight vector")):
         shown = ax.scatter(values[mask, 0], values[mask, 1], c=values[mask, 2], cmap="viridis", norm=norm, s=36,
                            marker=marker, label=label, edgecolors="k", linewidths=0.4)
+    labels: dict[tuple[float, float], list[str]] = {}  # points that coincide share one label
     for row, (x, y, _) in zip(rows, values):
-        ax.annotate(row["point"].replace("constant ", ""), (x, y), fontsize=6, xytext=(3, 2), textcoords="offset points")
+        labels.setdefault((round(float(x), 6), round(float(y), 6)), []).append(row["point"].replace("constant ", ""))
+    for (x, y), names in labels.items():
+        ax.annotate(" = ".join(names), (x, y), fontsize=6, xytext=(3, 2), textcoords="offset points")
     ax.set_xlabel(f"{x_name} (capacity) per episode")
     ax.set_ylabel(f"{y_name} per episode")
     ax.set_title("mo-TimeGapMonitor-v1: mean held-out term sums", fontsize=9)
@@ -188,8 +192,8 @@ def markdown(rows: list[dict[str, Any]], summary: dict[str, Any], runtime: str) 
         f"On the selection seeds the weight vector with the best v1 return is **{s['chosen']}** "
         f"({s['chosen_selection_return']:.1f} per episode; the best blind constant there: {s['best_blind']}, "
         f"{s['best_blind_selection_return']:.1f}). On the held-out seeds it returns {s['chosen_return']:.1f} "
-        f"({s['chosen_collisions']} collisions of {s['held_out']}) against the best blind constant's "
-        f"{s['best_blind_return']:.1f} ({s['best_blind_collisions']} collisions): a gain of **{s['gain']:.1f} "
+        f"(collisions: {s['chosen_collisions']} of {s['held_out']}) against the best blind constant's "
+        f"{s['best_blind_return']:.1f} (collisions: {s['best_blind_collisions']}): a gain of **{s['gain']:.1f} "
         f"[{s['gain_low']:.1f}, {s['gain_high']:.1f}]** per episode (mean of the paired differences, 95 % bootstrap "
         f"interval); without the collision term {s['gain_nc']:.1f} [{s['gain_nc_low']:.1f}, {s['gain_nc_high']:.1f}]. "
         + ("The interval lies above 0." if s["gain_low"] > 0 else
@@ -198,14 +202,15 @@ def markdown(rows: list[dict[str, Any]], summary: dict[str, Any], runtime: str) 
         "Mean held-out sums per episode of capacity (efficiency), string stability and time-gap variation (tracking), "
         "the v1 return on the selection and held-out seeds, and held-out collisions. Hypervolume (in units of each "
         "objective's spread over all the points below, above the worst point; `task_map.front_rows`): of the "
-        "constants with that point added.", "",
+        "constants with that point added. Same as: the constant whose held-out sums the point repeats (the agent "
+        "then played that constant, or the same sums, on every held-out seed).", "",
         "| point | efficiency | string_stability | tracking | v1 return (selection) | v1 return (held-out) "
-        "| collisions | hypervolume |",
-        "|---|---|---|---|---|---|---|---|"]
+        "| collisions | hypervolume | same as |",
+        "|---|---|---|---|---|---|---|---|---|"]
     for row in rows:
         lines.append(f"| {row['point']} | {row['efficiency']:.2f} | {row['string_stability']:.2f} | "
                      f"{row['tracking']:.2f} | {row['selection_return']:.1f} | {row['held_out_return']:.1f} | "
-                     f"{row['collisions']} | {row['hypervolume']:.3f} |")
+                     f"{row['collisions']} | {row['hypervolume']:.3f} | {row['same_as']} |")
     lines += ["", f"Hypervolume of the 9 constants alone: {s['hv_constants']:.3f}; of the Envelope's "
               f"{len(rows) - 9} points alone: {s['hv_envelope']:.3f}; of both together: {s['hv_both']:.3f} "
               + ("(the Envelope's points add volume: trade-offs no constant reaches)." if s["hv_both"]
@@ -276,7 +281,10 @@ def main() -> None:
                      **{objective: float(row[objective]) for objective in FRONT_OBJECTIVES},
                      "selection_return": float(selection_return), "held_out_return": float(held_return),
                      "collisions": collisions, "hypervolume": float(row["hypervolume"]),
-                     "constants_hypervolume": float(row["constants_hypervolume"])})
+                     "constants_hypervolume": float(row["constants_hypervolume"]),
+                     "same_as": "" if is_constant else next(
+                         (other for j, other in enumerate(constant_names)
+                          if np.array_equal(on_held[name]["terms"], constants_held[j])), "")})
     assert np.allclose([points[name] for name in constant_names],
                        constants_held.mean(axis=1)[:, columns])  # front_rows' points are the mean held-out sums
     summary = {"timesteps": args.timesteps, "selection": args.selection, "held_out": args.held_out,
