@@ -30,7 +30,8 @@ demo: $(STAMP)
 	MPLBACKEND=Agg $(PY) -m train.evaluate
 	MPLBACKEND=Agg $(PY) -m train.task_map
 	MPLBACKEND=Agg $(PY) -m train.evaluate_task --chart-step-tuning results/rule/v1/tuning.csv --model results/ppo_v1 results/ppo_v1_nomonitor
-	MPLBACKEND=Agg $(PY) -m train.evaluate_task --policies rule_platoon --model results/ppo_v1 results/ppo_v1_nomonitor --baseline ppo_v1_nomonitor --out results/task/ablation
+	MPLBACKEND=Agg $(PY) -m train.evaluate_task --policies rule_platoon --model results/ppo_v1 results/ppo_v1_nomonitor --baseline ppo_v1_nomonitor --groups v1 regimes --out results/task/ablation
+	MPLBACKEND=Agg $(PY) -m train.evaluate_task --chart-step-tuning results/rule/v1/tuning.csv --model results/ppo_v1 results/ppo_v1_nomonitor --groups larger_degradations regimes ngsim_in_band openacc stop_and_go emergency_braking --out results/task/groups
 
 test: $(STAMP)
 	MPLBACKEND=Agg $(PY) -m pytest -q
