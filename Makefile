@@ -45,6 +45,9 @@ package: $(STAMP)  # pip install . / the wheel / the sdist, core only, in a thro
 clients:  # the env through SB3, sb3-contrib, rl-zoo3, RLlib, TorchRL, Tianshou, gymnasium's wrappers (own venv)
 	bash .ci/clients
 
+morl:  # MORL-Baselines' Envelope on mo-TimeGapMonitor-v1 -> results/morl (in .venv-clients: make clients makes it)
+	MPLBACKEND=Agg .venv-clients/bin/python -m train.train_morl
+
 train: $(STAMP)  # the committed runs: v0's PPO; v1's PPO and its monitor ablation (same seed and budget)
 	$(PY) -m train.train_ppo
 	$(PY) -m train.train_ppo --env-id TimeGapMonitor-v1 --out results/ppo_v1
