@@ -1,7 +1,7 @@
 """One multi-objective learner on ``mo-TimeGapMonitor-v1``: MORL-Baselines' Envelope Q-learning, giving a front
 rather than a point (issue 25).
 
-    python -m train.train_morl [--timesteps 40000] [--selection 32] [--held-out 100] [--out results/morl]
+    python -m train.train_morl [--timesteps 35000] [--selection 32] [--held-out 100] [--out results/morl]
 
 Needs the ``mo`` extra (``pip install -e '.[mo]'``; ``.venv-clients`` has it). Trains Envelope (seed 0, one torch
 thread, on the CPU, small nets) on the reward terms efficiency, string stability, tracking and collision, its
