@@ -12,8 +12,9 @@ its gain over the best blind constant and over a baseline (``--baseline``; defau
 ``--policies``), paired, with 95 %
 bootstrap intervals (also without the collision term, which one episode can carry), the share of the full oracle's
 gain it captures, and its collisions. ``--split selection`` plays seeds from 6 000 instead (below every held-out
-one), where learned recipes are chosen; the held-out seeds only report. Writes ``policies.md`` and
-``policies.csv`` to ``--out`` (through a partial directory: a failed run overwrites nothing).
+one), where learned recipes are chosen; the held-out seeds only report. Writes ``policies.md``, ``policies.csv`` and
+``pareto.png`` (capacity, string stability and variation of the policies beside the constants') to ``--out``
+(through a partial directory: a failed run overwrites nothing).
 """
 
 from __future__ import annotations
@@ -25,6 +26,11 @@ import time
 from pathlib import Path
 from typing import Any
 
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt
+import numpy as np
 import torch
 
 from timegap_env import ENV_IDS, cli
@@ -33,7 +39,9 @@ from timegap_env.config import EnvConfig
 from timegap_env.experiments.backends import Backend, add_arguments
 from timegap_env.experiments.registry import load_learned
 from timegap_env.experiments.registry import make as make_policy
-from timegap_env.experiments.task_map import RECIPE_SEED_START, REFERENCES, V1_GROUPS, Plan, v1_headroom
+from timegap_env.experiments.task_map import (
+    FRONT_OBJECTIVES, RECIPE_SEED_START, REFERENCES, V1_GROUPS, Plan, v1_headroom,
+)
 from timegap_env.leaders import default_ngsim_path, default_openacc_dir, openacc_paths
 from timegap_env.leaders.ngsim import PATH_VARIABLE as NGSIM_PATH_VARIABLE
 from timegap_env.leaders.openacc import PATH_VARIABLE as OPENACC_PATH_VARIABLE
@@ -109,6 +117,30 @@ def group_lines(group: str, reference: dict[str, Any], rows: list[dict[str, Any]
         for ref in REFERENCES) + ".", ""]
 
 
+def figure(fronts: dict[str, list[dict[str, Any]]], rows: list[dict[str, Any]], path: Path) -> None:
+    """Per group, capacity (the efficiency term) against string stability, colour the time-gap variation (tracking),
+    each summed over an episode and averaged: the ladder's constants joined by a line, the references and the
+    policies as labelled points (higher is better on every axis)."""
+    x_name, y_name, colour = FRONT_OBJECTIVES
+    groups = list(fronts)
+    fig, axes = plt.subplots(1, len(groups), figsize=(4.4 * len(groups), 4.0), squeeze=False)
+    for ax, group in zip(axes[0], groups):
+        constants = [f for f in fronts[group] if f["point"].startswith("constant")]
+        ax.plot([f[x_name] for f in constants], [f[y_name] for f in constants], "-", color="0.7", lw=1, zorder=0)
+        points = [*fronts[group], *(row | {"point": row["policy"]} for row in rows if row["traffic"] == group)]
+        values = np.array([[p[x_name], p[y_name], p[colour]] for p in points])
+        shown = ax.scatter(values[:, 0], values[:, 1], c=values[:, 2], cmap="viridis", s=22)
+        for point, (x, y, _) in zip(points, values):
+            label = point["point"].replace("constant ", "")
+            ax.annotate(label, (x, y), fontsize=5.5, xytext=(3, 2), textcoords="offset points")
+        ax.set_title(group, fontsize=9)
+        ax.set_xlabel(f"{x_name} (capacity) per episode", fontsize=8)
+    axes[0][0].set_ylabel(f"{y_name} per episode", fontsize=8)
+    fig.colorbar(shown, ax=axes[0].tolist(), label=f"{colour} (time-gap variation) per episode")
+    fig.savefig(path, dpi=110, metadata={"Software": None})
+    plt.close(fig)
+
+
 def markdown(sections: list[list[str]], plan: Plan, runtime: str, notes: list[str]) -> str:
     split = ("held-out episodes (seeds from 10000)" if plan.held_out_start == EVAL_SEED_START else
              f"recipe-selection episodes (seeds from {plan.held_out_start}; not held out: for choosing among recipes)")
@@ -165,12 +197,13 @@ def main() -> None:
     if baseline not in policies:
         raise ValueError(f"--baseline {baseline!r}: not one of the policies played {list(policies)}")
     rows, sections, notes = [], [], []
+    fronts: dict[str, list[dict[str, Any]]] = {}  # group -> the constants' and references' Pareto points
     for group in args.groups:
         missing = missing_data(group)
         if missing:
             notes.append(f"- group {group} left out: {missing}")
             continue
-        (reference,), _, group_rows = v1_headroom(plan, backend, policies, baseline=baseline, group=group)
+        (reference,), fronts[group], group_rows = v1_headroom(plan, backend, policies, baseline=baseline, group=group)
         rows += group_rows
         sections.append(group_lines(group, reference, group_rows, baseline))
     if not rows:
@@ -183,6 +216,9 @@ def main() -> None:
                          for row in rows)
     notes += [f"- {name}: {policy!r}" for name, policy in policies.items()]
     notes.append(f"- chart_step's parameters: {'the best cell of ' + str(args.chart_step_tuning) if tuned else 'registered (tuned for v0)'}")
+    figure(fronts, rows, work / "pareto.png")
+    notes.append("- pareto.png: per group, capacity against string stability (colour: time-gap variation) of the "
+                 "constants, the references and the policies")
     (work / "policies.md").write_text(markdown(sections, plan, runtime, [*notes, ""]), encoding="utf-8")
     cli.publish(work, args.out)
     print((Path(args.out) / "policies.md").read_text(encoding="utf-8"))

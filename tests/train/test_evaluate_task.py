@@ -25,7 +25,7 @@ def test_a_tiny_evaluation_writes_its_table(tmp_path, monkeypatch, capsys):
     evaluate_task.main()
     table = (out / "policies.md").read_text()
     assert "| rule_platoon |" in table and "| fixed_1.0 |" in table and "0.0 [0.0, 0.0]" in table  # rule vs itself
-    assert sorted(path.name for path in out.iterdir()) == ["policies.csv", "policies.md"]
+    assert sorted(path.name for path in out.iterdir()) == ["pareto.png", "policies.csv", "policies.md"]
 
 
 def test_an_unknown_baseline_is_refused(tmp_path, monkeypatch):

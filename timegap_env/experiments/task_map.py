@@ -231,7 +231,8 @@ def cell_rows(config: EnvConfig, cell: dict[str, Any], weightings: dict[str, Rew
     starts with ``cell``'s entries; each gain also without the collision term, which one episode can dominate); per
     weighting, the Pareto points (:func:`front_rows`) of the constants and the references; and per weighting and
     policy of ``policies`` (name -> any policy the rollout harness plays), a row of its gain over the best blind
-    constant on the same held-out episodes and the share of the full oracle's gain it captures (and, with
+    constant on the same held-out episodes, the share of the full oracle's gain it captures and its mean
+    FRONT_OBJECTIVES (and, with
     ``baseline`` one of their names, its gain over that policy, paired). ``config`` must put the regime in the info
     (``info_keys="v1"``)."""
     train, selection, held_out = plan.seeds()
@@ -300,7 +301,9 @@ def cell_rows(config: EnvConfig, cell: dict[str, Any], weightings: dict[str, Rew
                           "gain": mean, "gain_low": low, "gain_high": high,
                           "share_of_oracle_gain": mean / gap if gap > 0 else math.nan,
                           "collisions": int(collided.sum()), "episodes": len(held_out),
-                          **dict(zip([f"gain_without_collisions{end}" for end in ("", "_low", "_high")], rest))}
+                          **dict(zip([f"gain_without_collisions{end}" for end in ("", "_low", "_high")], rest)),
+                          **{objective: float(terms[:, REWARD_TERMS.index(objective)].mean())
+                             for objective in FRONT_OBJECTIVES}}
             if baseline is not None:
                 versus = bootstrap_mean(returns - weigh(policies_held[baseline][0], weighting))
                 policy_row |= dict(zip(("gain_over_baseline", "gain_over_baseline_low", "gain_over_baseline_high"),
