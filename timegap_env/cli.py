@@ -81,6 +81,30 @@ def output_file(path: str | Path, option: str = "--out") -> Path:
     return path
 
 
+def count(text: str) -> int:
+    """An argparse ``type``: a count, an integer >= 1; anything else is a usage error naming it."""
+    import argparse
+
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: must be an integer >= 1") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"{text!r}: must be an integer >= 1")
+    return value
+
+
+def write_rows(rows: list[dict[str, Any]], path: Path) -> None:
+    """``rows`` (dicts with the first row's keys) as a CSV at ``path``, floats to 6 significant digits."""
+    import csv
+
+    with open(path, "w", newline="", encoding="utf-8") as file:
+        writer = csv.DictWriter(file, fieldnames=list(rows[0]))
+        writer.writeheader()
+        writer.writerows({key: f"{value:.6g}" if isinstance(value, float) else value for key, value in row.items()}
+                         for row in rows)
+
+
 def json_object(text: str) -> dict[str, Any]:
     """An argparse ``type``: ``text`` as a JSON object; anything else is a usage error saying what was wrong."""
     import argparse

@@ -49,13 +49,6 @@ from timegap_env.leaders.openacc import PATH_VARIABLE as OPENACC_PATH_VARIABLE
 DEFAULT_POLICIES = ("rule_platoon", "chart_step", "v2v_aware")
 
 
-def count(text: str) -> int:
-    value = int(text)
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"{text!r}: must be an integer >= 1")
-    return value
-
-
 def tuned_chart_step(path: Path) -> dict[str, float]:
     """The best cell of a ``train.tune_rule`` run's tuning.csv: ``k_up``, ``quiet_time`` [s], ``min_setting`` [s];
     ``ValueError`` naming the file if it has none."""
@@ -168,9 +161,9 @@ def main() -> None:
     parser.add_argument("--chart-step-tuning", type=Path, default=None,
                         help="a tune_rule --env-id TimeGapMonitor-v1 run's tuning.csv: chart_step takes its best cell "
                              "(default: the registered parameters, tuned for v0)")
-    parser.add_argument("--train", type=count, default=defaults.train, help="training seeds per condition")
-    parser.add_argument("--selection", type=count, default=defaults.selection, help="selection seeds")
-    parser.add_argument("--held-out", type=count, default=defaults.held_out, help="held-out seeds")
+    parser.add_argument("--train", type=cli.count, default=defaults.train, help="training seeds per condition")
+    parser.add_argument("--selection", type=cli.count, default=defaults.selection, help="selection seeds")
+    parser.add_argument("--held-out", type=cli.count, default=defaults.held_out, help="held-out seeds")
     parser.add_argument("--split", choices=["held_out", "selection"], default="held_out",
                         help="the episodes: held out (seeds from 10000), or the recipe-selection seeds (from "
                              f"{RECIPE_SEED_START}), where recipes are chosen (default: %(default)s)")
@@ -209,11 +202,7 @@ def main() -> None:
     if not rows:
         raise ValueError(f"--groups {args.groups}: none could run ({'; '.join(notes)})")
     runtime = f"{time.perf_counter() - start:.0f} s ({backend.name} backend)"
-    with open(work / "policies.csv", "w", newline="", encoding="utf-8") as file:
-        writer = csv.DictWriter(file, fieldnames=list(rows[0]))
-        writer.writeheader()
-        writer.writerows({key: f"{value:.6g}" if isinstance(value, float) else value for key, value in row.items()}
-                         for row in rows)
+    cli.write_rows(rows, work / "policies.csv")
     notes += [f"- {name}: {policy!r}" for name, policy in policies.items()]
     notes.append(f"- chart_step's parameters: {'the best cell of ' + str(args.chart_step_tuning) if tuned else 'registered (tuned for v0)'}")
     figure(fronts, rows, work / "pareto.png")

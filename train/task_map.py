@@ -15,7 +15,6 @@ directory: a failed run overwrites nothing); reruns give the same files but the 
 from __future__ import annotations
 
 import argparse
-import csv
 import time
 from pathlib import Path
 from typing import Any
@@ -32,22 +31,6 @@ from timegap_env.experiments.task_map import (
     FRONT_OBJECTIVES, MAX_BLIND_COLLISION_RATE, REFERENCES, SEVERITIES, TARGET_SHARE, TRAFFIC, WEIGHTINGS, Plan,
     choose_default, task_map, v1_headroom,
 )
-
-
-def count(text: str) -> int:
-    """A command-line count: an integer >= 1."""
-    value = int(text)
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"{text!r}: must be an integer >= 1")
-    return value
-
-
-def write_csv(rows: list[dict[str, Any]], path: Path) -> None:
-    with open(path, "w", newline="", encoding="utf-8") as file:
-        writer = csv.DictWriter(file, fieldnames=list(rows[0]))
-        writer.writeheader()
-        writer.writerows({key: f"{value:.6g}" if isinstance(value, float) else value for key, value in row.items()}
-                         for row in rows)
 
 
 def hypervolume_lines(fronts: list[dict[str, Any]], source: str) -> list[str]:
@@ -174,9 +157,9 @@ def figure(rows: list[dict[str, Any]], path: Path) -> None:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     defaults = Plan()
-    parser.add_argument("--train", type=count, default=defaults.train, help="training seeds per condition")
-    parser.add_argument("--selection", type=count, default=defaults.selection, help="selection seeds")
-    parser.add_argument("--held-out", type=count, default=defaults.held_out, help="held-out seeds")
+    parser.add_argument("--train", type=cli.count, default=defaults.train, help="training seeds per condition")
+    parser.add_argument("--selection", type=cli.count, default=defaults.selection, help="selection seeds")
+    parser.add_argument("--held-out", type=cli.count, default=defaults.held_out, help="held-out seeds")
     parser.add_argument("--out", default="results/task", help="directory for map.md, map.csv, map.png, v1.md, ...")
     add_arguments(parser)
     args = parser.parse_args()
@@ -186,16 +169,16 @@ def main() -> None:
     start = time.perf_counter()
     rows, fronts = task_map(plan, backend)
     runtime = f"{time.perf_counter() - start:.0f} s ({backend.name} backend)"
-    write_csv(rows, work / "map.csv")
-    write_csv(fronts, work / "map_fronts.csv")
+    cli.write_rows(rows, work / "map.csv")
+    cli.write_rows(fronts, work / "map_fronts.csv")
     (work / "map.md").write_text(markdown(rows, fronts, plan, choose_default(rows), runtime), encoding="utf-8")
     figure(rows, work / "map.png")
     front_figure(fronts, work / "map_fronts.png")
     start = time.perf_counter()
     v1_rows, v1_fronts, _ = v1_headroom(plan, backend)
     runtime = f"{time.perf_counter() - start:.0f} s ({backend.name} backend)"
-    write_csv(v1_rows, work / "v1.csv")
-    write_csv(v1_fronts, work / "v1_fronts.csv")
+    cli.write_rows(v1_rows, work / "v1.csv")
+    cli.write_rows(v1_fronts, work / "v1_fronts.csv")
     (work / "v1.md").write_text(v1_markdown(v1_rows[0], v1_fronts, plan, runtime), encoding="utf-8")
     cli.publish(work, args.out)
     print((Path(args.out) / "v1.md").read_text(encoding="utf-8"))

@@ -17,7 +17,6 @@ a partial directory: a failed run overwrites nothing); reruns give the same file
 from __future__ import annotations
 
 import argparse
-import csv
 import sys
 import time
 from pathlib import Path
@@ -85,14 +84,6 @@ class SeededResets(gym.Wrapper):
         return self.env.reset(seed=seed, options=options)
 
 
-def count(text: str) -> int:
-    """A command-line count: an integer >= 1."""
-    value = int(text)
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"{text!r}: must be an integer >= 1")
-    return value
-
-
 def train(timesteps: int) -> tuple[Any, int]:
     """Envelope trained for ``timesteps`` steps; and how many training episodes (seeds 0..) it reset."""
     import mo_gymnasium as mo_gym
@@ -126,14 +117,6 @@ def play(agent: Any, w: np.ndarray, config: EnvConfig, seeds: list[int]) -> dict
     return {"returns": np.array([record.episode_return for record in records]),
             "terms": np.array([[record.rewards[name] for name in REWARD_TERMS] for record in records]),
             "collisions": np.array([bool(record.summary["collision"]) for record in records])}
-
-
-def write_csv(rows: list[dict[str, Any]], path: Path) -> None:
-    with open(path, "w", newline="", encoding="utf-8") as file:
-        writer = csv.DictWriter(file, fieldnames=list(rows[0]))
-        writer.writeheader()
-        writer.writerows({key: f"{value:.6g}" if isinstance(value, float) else value for key, value in row.items()}
-                         for row in rows)
 
 
 def scaled_volumes(points: dict[str, np.ndarray], groups: dict[str, list[str]]) -> dict[str, float]:
@@ -221,9 +204,9 @@ def markdown(rows: list[dict[str, Any]], summary: dict[str, Any], runtime: str) 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--timesteps", type=count, default=DEFAULT_TIMESTEPS, help="Envelope's training steps")
-    parser.add_argument("--selection", type=count, default=32, help="selection seeds (from 5000)")
-    parser.add_argument("--held-out", type=count, default=100, help="held-out seeds (from 10000)")
+    parser.add_argument("--timesteps", type=cli.count, default=DEFAULT_TIMESTEPS, help="Envelope's training steps")
+    parser.add_argument("--selection", type=cli.count, default=32, help="selection seeds (from 5000)")
+    parser.add_argument("--held-out", type=cli.count, default=100, help="held-out seeds (from 10000)")
     parser.add_argument("--out", default="results/morl", help="directory for front.md, front.csv, front.png")
     args = parser.parse_args()
     cli.output_dir(args.out)
@@ -297,7 +280,7 @@ def main() -> None:
                **dict(zip(("gain", "gain_low", "gain_high"), gain)),
                **dict(zip(("gain_nc", "gain_nc_low", "gain_nc_high"), gain_nc)),
                "hv_constants": volumes["constants"], "hv_envelope": volumes["envelope"], "hv_both": volumes["both"]}
-    write_csv(rows, work / "front.csv")
+    cli.write_rows(rows, work / "front.csv")
     figure(rows, work / "front.png")
     (work / "front.md").write_text(markdown(rows, summary, runtime), encoding="utf-8")
     cli.publish(work, args.out)

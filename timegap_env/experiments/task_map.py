@@ -151,26 +151,28 @@ def weigh(terms: np.ndarray, weighting: RewardPreset) -> np.ndarray:
     return terms @ np.array([getattr(weighting.weights, name) for name in REWARD_TERMS])
 
 
+def best_constant_tables(config: EnvConfig, cases: dict[str, tuple[EnvConfig, dict[str, Any]]], train: Sequence[int],
+                         weightings: dict[str, RewardPreset], backend: Backend) -> dict[str, dict[str, float]]:
+    """Per weighting, a table: per case of ``cases`` (key -> (config, reset options)), the ladder constant [s] best on
+    ``train`` seeds."""
+    n_levels = len(config.setting_levels)
+    scored = {key: pair_terms(case_config, train, [(level, level) for level in range(n_levels)], backend, options)[0]
+              for key, (case_config, options) in cases.items()}
+    return {name: {key: float(config.setting_levels[int(np.argmax(weigh(terms, weighting).mean(axis=1)))])
+                   for key, terms in scored.items()} for name, weighting in weightings.items()}
+
+
 def lookup_tables(config: EnvConfig, train: Sequence[int], weightings: dict[str, RewardPreset],
                   backend: Backend) -> dict[str, dict[str, float]]:
     """Per weighting, the lookup oracle's table: per pinned condition, the constant best on ``train`` seeds."""
-    conditions = training_conditions(config)
-    n_levels = len(config.setting_levels)
-    scored = {key: pair_terms(condition_config, train, [(level, level) for level in range(n_levels)], backend, options)[0]
-              for key, (condition_config, options) in conditions.items()}
-    return {name: {key: float(config.setting_levels[int(np.argmax(weigh(terms, weighting).mean(axis=1)))])
-                   for key, terms in scored.items()} for name, weighting in weightings.items()}
+    return best_constant_tables(config, training_conditions(config), train, weightings, backend)
 
 
 def regime_tables(config: EnvConfig, train: Sequence[int], weightings: dict[str, RewardPreset],
                   backend: Backend) -> dict[str, dict[str, float]]:
     """Per weighting, the regime-aware oracle's table: per regime (:func:`regime_contexts`), the constant best on
     ``train`` seeds."""
-    n_levels = len(config.setting_levels)
-    scored = {key: pair_terms(context_config, train, [(level, level) for level in range(n_levels)], backend, options)[0]
-              for key, (context_config, options) in regime_contexts(config).items()}
-    return {name: {key: float(config.setting_levels[int(np.argmax(weigh(terms, weighting).mean(axis=1)))])
-                   for key, terms in scored.items()} for name, weighting in weightings.items()}
+    return best_constant_tables(config, regime_contexts(config), train, weightings, backend)
 
 
 def oracle_terms(config: EnvConfig, seeds: Sequence[int], oracle: TruthPolicy) -> tuple[np.ndarray, np.ndarray]:
