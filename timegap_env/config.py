@@ -28,6 +28,7 @@ import numpy as np
 MPH = 0.44704  # [m/s per mph]
 ACTION_MODES = ("platoon", "per_vehicle", "relative")  # one setting for all followers, one each, or one step
 # of the platoon's setting down the ladder, none, or up
+MONITOR_ESTIMATORS = ("bayes", "raw_gap")  # what the monitor reports as tau: the paper's posterior, or (s - s0) / v
 CHART_KINDS = ("shewhart", "ewma", "cusum")  # the charts of timegap_env.monitoring.charts.CHARTS
 
 # Bounds shared by several fields (each field's own are in its comment).
@@ -396,8 +397,12 @@ class MonitorConfig(ConfigMixin):
     max_spacing: float = 1000.0  # spacings above this are implausible and skipped [m], (0, 1e5]
     min_speed: float = TIME_GAP_MIN_SPEED  # measurements below this speed carry no evidence on tau and are left
     # out (not counted as skipped): at a standstill the posterior returns to the prior, the setting [m/s], [0, 10]
+    estimator: str = "bayes"  # one of MONITOR_ESTIMATORS: "bayes", the Proposition's posterior over the window;
+    # "raw_gap", an ablation: each tick's (s - s0) / v with s0 the prior's mean, variance sigma^2 / v^2 (the prior
+    # when the tick is left out), the window unused
 
     def __post_init__(self) -> None:
+        self._choice("estimator", MONITOR_ESTIMATORS)
         self._number("noise_variance", 0.0, 1e4, open_low=True)
         self._number("prior_standstill_spacing", 0.0, 100.0)
         self._number("forgetting", 0.0, 1.0, open_low=True)

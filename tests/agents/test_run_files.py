@@ -45,6 +45,13 @@ def test_the_committed_run_loads_as_it_was_trained(run: Path) -> None:
     assert read_env_file(COMMITTED / ENV_FILE).normalize is None
 
 
+def test_a_run_trained_on_the_raw_gap_reads_it_again(run: Path) -> None:
+    assert LearnedPolicy.load(run).monitor_estimator == "bayes"
+    env_file(run, env_kwargs={"config": {"action_mode": "relative", "monitor": {"estimator": "raw_gap"}}})
+    policy = LearnedPolicy.load(run)
+    assert policy.monitor_estimator == "raw_gap" and "monitor_estimator='raw_gap'" in repr(policy)
+
+
 def test_a_run_without_env_json_is_refused_not_read_as_platoon_mode(run: Path) -> None:
     (run / ENV_FILE).unlink()
     with pytest.raises(RunFileError, match=f"{run / ENV_FILE}: missing"):

@@ -231,6 +231,25 @@ def test_mixed_action_modes_cannot_share_an_env():
                                       PaperRulePolicy(config.with_overrides({"action_mode": "per_vehicle"}))], None, SEEDS)
 
 
+class RawGapReader(PaperRulePolicy):
+    """The paper's rule reading the raw-gap ablation's monitor, as a learned policy trained on it declares."""
+
+    monitor_estimator = "raw_gap"
+
+
+def test_a_policy_that_read_the_raw_gap_plays_in_an_env_whose_monitor_reports_it():
+    config = EnvConfig()
+    raw = harness.rollout(RawGapReader(config), config, SEEDS)
+    assert raw.config.monitor.estimator == "raw_gap"
+    as_config = harness.rollout(PaperRulePolicy(config), {"monitor": {"estimator": "raw_gap"}}, SEEDS)
+    assert [r.episode_return for r in raw.records] == [r.episode_return for r in as_config.records]
+    bayes = harness.rollout(PaperRulePolicy(config), config, SEEDS)
+    assert bayes.config.monitor.estimator == "bayes"
+    assert [r.fingerprint for r in raw.records] == [r.fingerprint for r in bayes.records]  # the same episodes
+    with pytest.raises(ValueError, match=r"different estimators \['bayes', 'raw_gap'\]"):
+        harness.rollout_side_by_side([RawGapReader(config), PaperRulePolicy(config)], config, SEEDS)
+
+
 class PicklingBackend(Backend):
     """What Ray does to a piece, without Ray: the function and every piece pickled out, the results pickled back."""
 

@@ -287,6 +287,7 @@ def test_presets():
         ({"window": 0.0}, "window"),
         ({"forgetting": 0.0}, "forgetting"),
         ({"max_speed": -1.0}, "max_speed"),
+        ({"estimator": "kalman"}, "estimator = 'kalman'"),
     ],
 )
 def test_monitor_config_rejects_bad_values(overrides, message):
@@ -312,3 +313,32 @@ def test_any_input_keeps_the_posterior_finite_and_positive_definite(ticks, windo
         assert_spd(monitor.cov)
         assert np.all(np.isfinite(monitor.mean))
         assert np.all(np.isfinite(monitor.prob_outside(1.35, 1.85)))
+
+
+def test_raw_gap_reports_each_ticks_gap_and_the_prior_when_a_tick_is_left_out():
+    config = MonitorConfig(estimator="raw_gap", min_speed=1.0)
+    monitor = TimeGapMonitor(1, 3, 1.2, config)
+    s0 = config.prior_standstill_spacing
+    speed = np.array([[[20.0, 0.5, 25.0]], [[10.0, 0.5, np.nan]]])  # follower 1 below min_speed, 2 NaN at tick 2
+    spacing = s0 + np.array([[[1.5, 0.9, 1.1]], [[0.8, 0.9, 1.1]]]) * np.nan_to_num(speed)
+    ticks = monitor.update_block(speed, spacing)
+    prior = TimeGapMonitor(1, 3, 1.2, MonitorConfig()).moments  # the prior, the monitor fresh from reset
+    np.testing.assert_allclose(ticks.tau_mean[:, 0, 0], [1.5, 0.8])  # (s - s0) / v, tick by tick, nothing carried
+    np.testing.assert_allclose(ticks.tau_var[:, 0, 0], config.noise_variance / np.array([20.0, 10.0]) ** 2)
+    assert ticks.tau_mean[0, 0, 1] == ticks.tau_mean[1, 0, 1] == 1.2  # too slow: the setting
+    assert ticks.tau_var[1, 0, 1] == prior.var_tau[0, 1]
+    assert ticks.tau_mean[1, 0, 2] == 1.2 and monitor.skipped[0, 2] == 1  # NaN: skipped, the setting
+    np.testing.assert_allclose(monitor.tau_mean[0], [0.8, 1.2, 1.2])
+    assert np.all(np.linalg.eigvalsh(monitor.cov) > 0)
+
+
+def test_raw_gap_differs_from_the_posterior_only_in_what_it_reports():
+    rng = np.random.default_rng(3)
+    speed = rng.uniform(15.0, 30.0, (50, 2, 2))
+    spacing = 2.0 + rng.normal(1.4, 0.05, speed.shape) * speed
+    bayes, raw = (TimeGapMonitor(2, 2, 1.4, MonitorConfig(estimator=kind)) for kind in ("bayes", "raw_gap"))
+    bayes.update_block(speed, spacing)
+    raw.update_block(speed, spacing)
+    np.testing.assert_array_equal(raw.n_measurements, bayes.n_measurements)  # the same window, kept
+    np.testing.assert_array_equal(raw.zts, bayes.zts)
+    assert not np.allclose(raw.tau_mean, bayes.tau_mean)

@@ -35,6 +35,7 @@ from stable_baselines3.common.vec_env import VecNormalize
 from timegap_env.agents.protocol import (
     ALGORITHMS, ENV_FILE, MODEL_FILE, VECNORMALIZE_FILE, RunFileError, check_spaces, read_env_file,
 )
+from timegap_env.config import MonitorConfig
 from timegap_env.envs.observation import feature_columns, hidden
 
 __all__ = ["LearnedPolicy", "ObservationNormalizer", "RunFileError", "load_model", "load_vecnormalize"]
@@ -169,11 +170,13 @@ class LearnedPolicy:
     reads the last k normalised observations side by side, oldest first, zeros before the first (as
     SB3's ``VecFrameStack``); ``predict`` then carries them as its ``state``: pass back the state it
     returned, None at the episodes' start. ``hidden_features``: observation features read as 0 before the model
-    sees them (a run trained without them, an ablation).
+    sees them (a run trained without them, an ablation). ``monitor_estimator``: the monitor whose observations the
+    model learned from (``MonitorConfig.estimator``; the rollout harness plays it in such an env), None: any.
     """
 
     def __init__(self, model: BaseAlgorithm, normalizer: ObservationNormalizer | None = None, name: str = "PPO",
-                 action_mode: str | None = None, frame_stack: int = 1, hidden_features: tuple[str, ...] = ()) -> None:
+                 action_mode: str | None = None, frame_stack: int = 1, hidden_features: tuple[str, ...] = (),
+                 monitor_estimator: str | None = None) -> None:
         expected = {"platoon": spaces.Discrete, "relative": spaces.Discrete, "per_vehicle": spaces.MultiDiscrete}
         if action_mode is None:
             action_mode = "per_vehicle" if isinstance(model.action_space, spaces.MultiDiscrete) else "platoon"
@@ -188,6 +191,7 @@ class LearnedPolicy:
         self.action_mode = action_mode
         self.frame_stack = frame_stack
         self.hidden_features = tuple(hidden_features)  # read as 0 before the model sees an observation, as in training
+        self.monitor_estimator = monitor_estimator
         self.model = model
         self.normalizer = normalizer
         self.name = name
@@ -239,7 +243,8 @@ class LearnedPolicy:
             torch.set_num_threads(threads)
         model = load_model(model_path, algorithm or algorithm_class(run.algo), device="cpu")
         try:
-            policy = cls(model, normalizer, name, run.action_mode, run.frame_stack, run.hidden_features)
+            policy = cls(model, normalizer, name, run.action_mode, run.frame_stack, run.hidden_features,
+                         run.config.monitor.estimator)
         except ValueError as error:  # the action mode or frame stack of env.json does not fit the model
             raise RunFileError(f"{run.path} does not fit the model {model_path}: {error}") from error
         check_spaces(run, model.action_space, _shape(model.observation_space), model_path)
@@ -279,5 +284,6 @@ class LearnedPolicy:
 
     def __repr__(self) -> str:
         hiding = f", hidden_features={list(self.hidden_features)}" if self.hidden_features else ""
+        hiding += f", monitor_estimator={self.monitor_estimator!r}" if self.monitor_estimator not in (None, MonitorConfig.estimator) else ""
         return (f"LearnedPolicy({self.name!r}, action_mode={self.action_mode!r}, normalized={self.normalizer is not None}, "
                 f"frame_stack={self.frame_stack}{hiding})")

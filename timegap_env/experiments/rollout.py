@@ -12,7 +12,8 @@ A policy is any of
 - an oracle with ``act(truth)`` (``timegap_env.agents.oracles``): called with the ground truth the infos hold;
 - a chooser, a callable ``(observations, infos) -> actions``.
 
-A policy with an ``action_mode`` attribute runs in an env of that action mode.
+A policy with an ``action_mode`` attribute runs in an env of that action mode, one with a ``monitor_estimator``
+attribute (a learned policy trained on the raw-gap ablation's observations) in an env whose monitor reports that.
 
 :func:`rollout` plays one policy (or, :func:`rollout_side_by_side`, several in one vector env, each on its own
 copy of the seeds) and returns an :class:`EpisodeRecord` per episode: its return, the reward terms summed over the
@@ -32,7 +33,7 @@ from typing import Any
 import numpy as np
 
 from timegap_env.envs.vector_env import TimeGapMonitorVectorEnv
-from timegap_env.config import EnvConfig
+from timegap_env.config import EnvConfig, MonitorConfig
 from timegap_env.envs.info import rewards_of, summary_of, truth_of
 from timegap_env.experiments.backends import Backend
 
@@ -75,14 +76,29 @@ class Batch:
     seconds: float = 0.0  # wall time of the rollout where it ran [s]
 
 
-def env_config(config: Config, action_mode: str | None = None) -> dict[str, Any]:
+def env_config(config: Config, action_mode: str | None = None, estimator: str | None = None) -> dict[str, Any]:
     """``gym.make``'s ``config`` for ``config`` (an EnvConfig's top-level fields, or the overrides as given), with
-    ``action_mode`` set when given."""
+    ``action_mode`` and the monitor's ``estimator`` set when given."""
     if isinstance(config, EnvConfig):
         fields = {field.name: getattr(config, field.name) for field in dataclasses.fields(config)}
     else:
         fields = dict(config or {})
-    return fields if action_mode is None else {**fields, "action_mode": action_mode}
+    if action_mode is not None:
+        fields["action_mode"] = action_mode
+    if estimator is not None:
+        monitor = fields.get("monitor") or {}
+        fields["monitor"] = (dataclasses.replace(monitor, estimator=estimator) if isinstance(monitor, MonitorConfig)
+                             else {**monitor, "estimator": estimator})
+    return fields
+
+
+def monitor_estimator(config: Config, policy: Any) -> str:
+    """The monitor's estimator ``policy`` reads: its ``monitor_estimator``, else ``config``'s."""
+    own = getattr(policy, "monitor_estimator", None)
+    if own is not None:
+        return str(own)
+    monitor = env_config(config).get("monitor") or {}
+    return str(monitor.estimator if isinstance(monitor, MonitorConfig) else monitor.get("estimator", MonitorConfig.estimator))
 
 
 def chooser(policy: Any) -> Callable[[np.ndarray, dict[str, Any], Any], tuple[np.ndarray, Any]]:
@@ -125,7 +141,11 @@ def rollout_side_by_side(policies: Sequence[Any], config: Config, seeds: Sequenc
     if len(modes) > 1:
         raise ValueError(f"policies act in different action modes {sorted(map(str, modes))}: run them apart")
     mode = modes.pop()
-    venv = TimeGapMonitorVectorEnv(num_envs=n * m, config=env_config(config, mode), autoreset_mode="same_step",
+    estimators = {monitor_estimator(config, policy) for policy in policies}
+    if len(estimators) > 1:
+        raise ValueError(f"policies read monitors of different estimators {sorted(estimators)}: run them apart")
+    venv = TimeGapMonitorVectorEnv(num_envs=n * m, config=env_config(config, mode, estimators.pop()),
+                                   autoreset_mode="same_step",
                                    step_diagnostics=step_diagnostics)
     try:
         obs, infos = venv.reset(seed=list(seeds) * m, options=options)
@@ -226,5 +246,5 @@ def run_jobs(jobs: Sequence[Job], backend: Backend | None = None) -> list[Batch]
     return (backend or Backend()).map(run_job, [(job,) for job in jobs])
 
 
-__all__ = ["Batch", "EpisodeRecord", "Job", "NOMINAL", "chooser", "env_config", "grid", "rollout", "rollout_side_by_side",
+__all__ = ["Batch", "EpisodeRecord", "Job", "NOMINAL", "chooser", "env_config", "grid", "monitor_estimator", "rollout", "rollout_side_by_side",
            "run_job", "run_jobs"]

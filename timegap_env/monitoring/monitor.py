@@ -52,6 +52,7 @@ class WindowRule(NamedTuple):
     forgetting: float  # exponential forgetting factor per tick [-]
     suffix_weight: np.ndarray  # (W,) weight of suffix slot p + 1 seen from slot p [-]
     age_weight: np.ndarray  # (W,) weight of slot m when its block is full [-]
+    raw_gap: bool  # MonitorConfig.estimator == "raw_gap": report each tick's (s - s0) / v instead of the posterior
 
 
 class TimeGapMonitor:
@@ -85,6 +86,10 @@ class TimeGapMonitor:
     returns to the prior, whose mean is the setting: the chart sees no deviation; without
     either, it holds the estimate it had when the platoon slowed down.
 
+    Raw gap. ``config.estimator = "raw_gap"`` (an ablation: what the Bayesian monitor adds) reports each
+    tick's (s - s0) / v instead of the posterior, with s0 the prior's mean taken as known and variance
+    sigma^2 / v^2; a tick left out reports the prior. The window's sums are kept as before, unused.
+
     Drift guard. The window sums are never updated by subtracting the outgoing measurement
     (which would accumulate round-off over a long run). The ring buffer is filled in blocks of
     W ticks: slots 0..p hold this block's per-tick stats, and their running sum is kept;
@@ -117,6 +122,7 @@ class TimeGapMonitor:
             forgetting=decay,
             suffix_weight=decay ** np.arange(1, W + 1),
             age_weight=decay ** np.arange(W - 1, -1, -1.0),
+            raw_gap=config.estimator == "raw_gap",
         )
         self._prior = Prior.from_cov(config.prior_standstill_spacing, config.prior_cov, config.noise_variance)
         self._kernel_args = (tuple(self._memory), tuple(self._rule), tuple(self._prior))  # as the kernel takes them
@@ -323,6 +329,8 @@ def update_env(speed, spacing, memory, slot, rule, prior, out, out_moments, e, c
             sums = WindowSums(window_sums[i, 0], window_sums[i, 1], window_sums[i, 2], window_sums[i, 3],
                               window_sums[i, 4])
             moments = posterior_moments(sums, memory.prior_tau[e, i], prior)
+            if rule.raw_gap:
+                moments = _raw_gap(v, s, used, memory.prior_tau[e, i], prior)
             out.tau_mean[k, c, i], out.tau_var[k, c, i] = moments.mean_tau, moments.var_tau
             if k == n_ticks - 1:  # field by field: a tuple indexed by a variable is slow in numba
                 out_moments.mean_s0[e, i], out_moments.mean_tau[e, i] = moments.mean_s0, moments.mean_tau
@@ -339,6 +347,19 @@ def update_env(speed, spacing, memory, slot, rule, prior, out, out_moments, e, c
                         slots[i, m, n] = slots[i, m, n] * rule.age_weight[m] + slots[i, m + 1, n]
             block_sum[:, :] = 0.0
             slot[e] = 0
+
+
+@numba.njit(cache=True, error_model="numpy", inline="always")
+def _raw_gap(speed, spacing, used, setting, prior):  # noqa: ANN001, ANN202
+    """The raw-gap ablation's read-out of one tick (``MonitorConfig.estimator = "raw_gap"``), as :class:`Moments`:
+    tau = (s - s0) / v with s0 the prior's mean, taken as known, and the spacing noise's variance sigma^2 / v^2;
+    a tick left out (``used`` False, or a speed of 0) gives the prior, whose mean of tau is the setting [s]."""
+    det = prior.p00 * prior.p11 - prior.p01 * prior.p01  # of the prior precision
+    var_s0 = prior.p11 / det  # the prior's covariance, the inverse of its precision [m^2]
+    if not used or speed <= 0.0:
+        return Moments(prior.standstill_spacing, setting, var_s0, -prior.p01 / det, prior.p00 / det)
+    return Moments(prior.standstill_spacing, (spacing - prior.standstill_spacing) / speed, var_s0, 0.0,
+                   prior.noise_variance / (speed * speed))
 
 
 @numba.njit(cache=True, error_model="numpy")
