@@ -7,7 +7,7 @@ PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 EXTRAS := dev,train,render,docs
 
-.PHONY: install demo test typecheck package clients train bench calibrate map degradation clean
+.PHONY: install demo test typecheck package clients train recipes bench calibrate map degradation clean
 
 install: $(STAMP)
 
@@ -48,10 +48,22 @@ clients:  # the env through SB3, sb3-contrib, rl-zoo3, RLlib, TorchRL, Tianshou,
 morl:  # MORL-Baselines' Envelope on mo-TimeGapMonitor-v1 -> results/morl (in .venv-clients: make clients makes it)
 	MPLBACKEND=Agg .venv-clients/bin/python -m train.train_morl
 
-train: $(STAMP)  # the committed runs: v0's PPO; v1's PPO and its monitor ablation (same seed and budget)
+train: $(STAMP)  # the committed runs: v0's PPO; v1's PPO and its two monitor ablations (same seed and budget)
 	$(PY) -m train.train_ppo
 	$(PY) -m train.train_ppo --env-id TimeGapMonitor-v1 --out results/ppo_v1
 	$(PY) -m train.train_ppo --env-id TimeGapMonitor-v1 --hide-features monitor --out results/ppo_v1_nomonitor
+	$(PY) -m train.train_ppo --env-id TimeGapMonitor-v1 --env-config '{"monitor": {"estimator": "raw_gap"}}' --out results/ppo_v1_rawgap
+
+recipes: $(STAMP)  # every other recipe tried on v1 (issue 25), its curve, its selection and held-out numbers (~40 min)
+	$(PY) -m train.train_ppo --env-id TimeGapMonitor-v1 --timesteps 6000000 --out results/recipes/ppo_6m
+	$(PY) -m train.train_ppo --env-id TimeGapMonitor-v1 --env-config '{"action_mode": "platoon"}' --out results/recipes/ppo_absolute
+	$(PY) -m train.train_ppo --env-id TimeGapMonitor-v1 --frame-stack 4 --out results/recipes/ppo_stack4
+	$(PY) -m train.train_ppo --env-id TimeGapMonitor-v1 --algo ppo_lstm --out results/recipes/ppo_lstm
+	$(PY) -m train.train_ppo --env-id TimeGapMonitor-v1 --cost-budget 0.05 --out results/recipes/ppo_lagrange_0.05
+	$(PY) -m train.train_ppo --env-id TimeGapMonitor-v1 --cost-budget 0.1 --out results/recipes/ppo_lagrange_0.1
+	MPLBACKEND=Agg $(PY) -m train.compare_curves results/ppo_v1 results/ppo_v1_nomonitor results/ppo_v1_rawgap results/recipes/ppo_* --out results/recipes/curves
+	MPLBACKEND=Agg $(PY) -m train.evaluate_task --split selection --chart-step-tuning results/rule/v1/tuning.csv --model results/ppo_v1 results/ppo_v1_nomonitor results/ppo_v1_rawgap results/recipes/ppo_* --out results/recipes/selection
+	MPLBACKEND=Agg $(PY) -m train.evaluate_task --chart-step-tuning results/rule/v1/tuning.csv --model results/ppo_v1 results/ppo_v1_nomonitor results/ppo_v1_rawgap results/recipes/ppo_* --out results/recipes/held_out
 
 bench: $(STAMP)
 	MPLBACKEND=Agg $(PY) -m train.bench

@@ -36,12 +36,15 @@ directory), as is ``--out`` naming a file. The run directory holds exactly:
   constant), the constant and the oracle (``train.value_of_information``'s) measured once on the
   same episodes; a resumed run continues the curve;
 - ``training.md``: command, timesteps, wall time, throughput and returns, written at the end; the share
-  of the oracle gap is "n/a" with the reason when the oracle does not beat the best constant there;
+  of the oracle gap is "n/a" with the reason when the oracle does not beat the best constant there (the
+  95 % interval of its gain above 0);
 - ``tensorboard/``: TensorBoard's logs (``--tensorboard-log`` puts them elsewhere).
 
 Sub-env i of phase k's env is seeded ``--seed + k * n_envs + i``; all training seeds stay below
 ``timegap_env.agents.protocol.EVAL_SEED_START`` (10 000), where the evaluation's seeds begin. The check episodes of
-the learning curve are ``EVAL_EPISODES`` episodes seeded ``EVAL_SEED + i``, also below 10 000.
+the learning curve are ``check_seeds(version)``: 32 episodes seeded from 9000 in v0, 100 from v1 on (whose
+collision term needs more), also below 10 000; their references are v0's oracle and best constant there, or, from v1
+on, the best blind constant and the full oracle of ``results/task`` (chosen on its training and selection seeds).
 A ``--resume`` from a checkpoint or statistics that cannot be read, or that take observations of
 another shape or actions of another meaning than the env's, stops with a message naming the file; so do
 bad settings (an unknown ``--env-config`` field, a hyperparameter), each before any work, as one line
@@ -83,14 +86,17 @@ from timegap_env.agents.protocol import (
     ALGORITHMS, ENV_FILE, EVAL_SEED_START, MODEL_FILE, VECNORMALIZE_FILE, env_version, read_env_file,
 )
 from timegap_env import ENV_ID, ENV_IDS, cli
-from timegap_env.config import EnvConfig
+from timegap_env.config import TASK_VERSIONS, EnvConfig
 from timegap_env.envs.action import action_space
 from timegap_env.envs.info import summary_of, truth_of
 from timegap_env.envs.observation import MONITOR_FEATURES, feature_columns, observation_space
 from timegap_env.envs.sb3 import TimeGapVecEnv
 from timegap_env.experiments.training import (
-    EVAL_EPISODES, EVAL_SEED, load_hyperparams, with_env_config,
+    check_seeds, load_hyperparams, with_env_config,
 )
+from timegap_env.experiments.backends import Backend
+from timegap_env.experiments.stats import bootstrap_mean
+from timegap_env.experiments.task_map import WEIGHTINGS, Plan, choose_references
 from timegap_env.experiments.value import DEFAULT_TRAIN_EPISODES, all_oracles, choose_oracle, constants, measure_lookup, run
 
 REPORT_FILE = "training.md"
@@ -252,27 +258,38 @@ class CurveReference:
     seeds: list[int]
     blind_setting: float  # the best constant setting there [s]
     blind_return: float  # its mean return
-    oracle: str  # the oracle's name (chosen on the selection seeds of train.value_of_information)
+    oracle: str  # the oracle's name
     oracle_return: float  # its mean return
+    gap_interval: tuple[float, float]  # the 95 % bootstrap interval of the oracle's mean gain over the constant there
 
     @classmethod
-    def measure(cls, config: EnvConfig) -> CurveReference:
-        """Every constant and the oracle on EVAL_EPISODES check episodes seeded EVAL_SEED on, in ``config``'s env
-        (one setting for the platoon)."""
+    def measure(cls, config: EnvConfig, version: int) -> CurveReference:
+        """The best constant and the oracle on the check episodes (``check_seeds(version)``) in ``config``'s env
+        (one setting for the platoon). Version 0: the constant best on those episodes and the oracle
+        train.value_of_information chooses; later versions: the best blind constant and the full oracle of
+        ``results/task`` (``choose_references``: tables on its training seeds, choices on its selection seeds)."""
         platoon = config.with_overrides({"action_mode": "platoon"})
-        seeds = list(range(EVAL_SEED, EVAL_SEED + EVAL_EPISODES))
-        fixed = constants(platoon, seeds)["return"].mean(axis=0)
-        table, _ = measure_lookup(platoon, DEFAULT_TRAIN_EPISODES)
-        oracle = choose_oracle(platoon, all_oracles(platoon, table))
-        oracle_return = run(platoon, seeds, lambda obs, infos: oracle.act(truth_of(infos)))["return"].mean()
-        best = int(np.argmax(fixed))
-        return cls(seeds, float(platoon.setting_levels[best]), float(fixed[best]), oracle.name, float(oracle_return))
+        seeds = check_seeds(version)
+        fixed = constants(platoon, seeds)["return"]  # (episodes, levels)
+        if version == 0:
+            table, _ = measure_lookup(platoon, DEFAULT_TRAIN_EPISODES)
+            oracle = choose_oracle(platoon, all_oracles(platoon, table))
+            best = int(np.argmax(fixed.mean(axis=0)))
+        else:
+            train, selection, _ = Plan().seeds()
+            weighting = TASK_VERSIONS[version]["reward_weights"]
+            chosen = choose_references(platoon, {weighting: WEIGHTINGS[weighting]}, train, selection, Backend())
+            oracle, best = chosen[weighting].full_oracle, chosen[weighting].blind
+        oracle_returns = run(platoon, seeds, lambda obs, infos: oracle.act(truth_of(infos)))["return"]
+        _, low, high = bootstrap_mean(oracle_returns - fixed[:, best])
+        return cls(seeds, float(platoon.setting_levels[best]), float(fixed[:, best].mean()), oracle.name,
+                   float(oracle_returns.mean()), (low, high))
 
     def share(self, policy_return: float) -> float:
-        """The share of the oracle gap captured: (policy - blind) / (oracle - blind) [-]; NaN when the oracle does
-        not beat the best blind constant (there is no gap to capture)."""
+        """The share of the oracle gap captured: (policy - blind) / (oracle - blind) [-]; NaN unless the oracle beats
+        the best blind constant there, its interval above 0 (no gap to capture, or one too small to divide by)."""
         gap = self.oracle_return - self.blind_return
-        return (policy_return - self.blind_return) / gap if gap > 0 else math.nan
+        return (policy_return - self.blind_return) / gap if self.gap_interval[0] > 0 else math.nan
 
 
 class LearningCurve(BaseCallback):
@@ -316,11 +333,13 @@ class LearningCurve(BaseCallback):
 
 
 def write_curve(points: list[tuple[int, float]], reference: CurveReference, out: Path) -> None:
-    """curve.csv (timesteps, mean return, share of the oracle gap) and curve.png."""
+    """curve.csv (timesteps, mean return, share of the oracle gap; the best blind constant's and the oracle's mean
+    returns on the same episodes) and curve.png."""
     with open(out / CURVE_FILE, "w", newline="") as file:
         writer = csv.writer(file)
-        writer.writerow(["timesteps", "mean_return", "share_of_oracle_gap"])
-        writer.writerows([(steps, f"{value:.4f}", f"{reference.share(value):.4f}") for steps, value in points])
+        writer.writerow(["timesteps", "mean_return", "share_of_oracle_gap", "best_blind_return", "oracle_return"])
+        writer.writerows([(steps, f"{value:.4f}", f"{reference.share(value):.4f}", f"{reference.blind_return:.4f}",
+                           f"{reference.oracle_return:.4f}") for steps, value in points])
     steps, values = np.array([p[0] for p in points]), np.array([p[1] for p in points])
     fig, (top, bottom) = plt.subplots(2, 1, figsize=(7, 6), sharex=True)
     top.plot(steps, values, "o-", ms=3, label="PPO, deterministic")
@@ -378,8 +397,10 @@ def share_text(reference: CurveReference, learned: float) -> str:
     share = reference.share(learned)
     if math.isfinite(share):
         return f"{share:.2f}"
+    low, high = reference.gap_interval
     return (f"n/a: the oracle ({reference.oracle_return:.1f}) does not beat the best constant "
-            f"({reference.blind_return:.1f}) on these episodes, so there is no gap to capture")
+            f"({reference.blind_return:.1f}) on these episodes, its gain's interval [{low:.1f}, {high:.1f}] not above 0, "
+            "so there is no gap to capture")
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -497,7 +518,7 @@ def main(argv: list[str] | None = None) -> None:
                                                 indent=1, sort_keys=True) + "\n")
         if model is not None:
             model.tensorboard_log = str(tensorboard)
-        reference = CurveReference.measure(evaluated)
+        reference = CurveReference.measure(evaluated, version)
         timings: list[tuple[str, int, float]] = []  # (phase, steps, seconds)
         for phase, (phase_end, phase_env_kwargs) in enumerate(phases):
             if model is not None and model.num_timesteps >= phase_end:
@@ -567,7 +588,7 @@ Command: `{command}` ({f"resumed from a checkpoint at {steps_before:,} steps" if
 | wall time, whole command after imports | {time.perf_counter() - started:.0f} s |
 {phase_rows}{lagrange_row}{hidden_row}
 | final mean episode return, last {len(episodes)} training episodes (stochastic policy) | {final_return} |
-| mean return, deterministic policy, {EVAL_EPISODES} episodes seeded {EVAL_SEED}+ | {learned:.1f} |
+| mean return, deterministic policy, {len(reference.seeds)} episodes seeded {reference.seeds[0]}+ | {learned:.1f} |
 | mean return, best constant ({seconds(reference.blind_setting)} s), same episodes | {reference.blind_return:.1f} |
 | mean return, oracle ({reference.oracle}), same episodes | {reference.oracle_return:.1f} |
 | share of the oracle gap captured | {share_text(reference, learned)} |

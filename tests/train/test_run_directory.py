@@ -118,11 +118,14 @@ def test_bad_settings_are_one_line_on_the_command_line_before_any_work(tmp_path:
 
 def test_training_md_says_why_there_is_no_share_of_the_oracle_gap() -> None:
     # results/ppo/training.md printed "nan": the oracle (-162.4) did not beat the best constant (-159.6) there
-    reference = train_ppo.CurveReference([9000], 1.0, -159.6, "oracle_lookup_episode", -162.4)
+    reference = train_ppo.CurveReference([9000], 1.0, -159.6, "oracle_lookup_episode", -162.4, (-5.0, -0.5))
     assert math.isnan(reference.share(-160.0))
-    assert train_ppo.share_text(reference, -160.0) == ("n/a: the oracle (-162.4) does not beat the best constant "
-                                                       "(-159.6) on these episodes, so there is no gap to capture")
-    assert train_ppo.share_text(train_ppo.CurveReference([9000], 1.0, -160.0, "o", -150.0), -155.0) == "0.50"
+    assert train_ppo.share_text(reference, -160.0) == (
+        "n/a: the oracle (-162.4) does not beat the best constant (-159.6) on these episodes, its gain's interval "
+        "[-5.0, -0.5] not above 0, so there is no gap to capture")
+    assert train_ppo.share_text(train_ppo.CurveReference([9000], 1.0, -160.0, "o", -150.0, (2.0, 18.0)), -155.0) == "0.50"
+    # a gain whose interval reaches 0 is no gap to divide by: v1's check episodes, a gain of 0.4
+    assert math.isnan(train_ppo.CurveReference([9000], 1.0, -76.0, "o", -75.6, (-0.3, 1.1)).share(-70.0))
 
 
 def test_a_run_into_a_symlinked_directory_replaces_the_directory_it_points_to(tmp_path: Path) -> None:

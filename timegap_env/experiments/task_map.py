@@ -226,36 +226,31 @@ def map_cell(severity: str, traffic: str, plan: Plan, backend: Backend
     return rows, fronts
 
 
-def cell_rows(config: EnvConfig, cell: dict[str, Any], weightings: dict[str, RewardPreset], plan: Plan,
-              backend: Backend, policies: Mapping[str, Any] | None = None, baseline: str | None = None
-              ) -> tuple[list[dict[str, Any]], list[dict[str, Any]], list[dict[str, Any]]]:
-    """Per weighting, the best blind constant and each reference on the held-out seeds of ``config`` (a row that
-    starts with ``cell``'s entries; each gain also without the collision term, which one episode can dominate); per
-    weighting, the Pareto points (:func:`front_rows`) of the constants and the references; and per weighting and
-    policy of ``policies`` (name -> any policy the rollout harness plays), a row of its gain over the best blind
-    constant on the same held-out episodes, the share of the full oracle's gain it captures and its mean
-    FRONT_OBJECTIVES (and, with
-    ``baseline`` one of their names, its gain over that policy, paired). ``config`` must put the regime in the info
-    (``info_keys="v1"``)."""
-    train, selection, held_out = plan.seeds()
-    levels = config.setting_levels
-    n_levels = len(levels)
+@dataclasses.dataclass(frozen=True)
+class References:
+    """What one weighting chooses on training and selection seeds: the best blind constant and the references."""
+
+    blind: int  # the best blind constant's ladder index
+    pair: tuple[int, int]  # the V2V pair's ladder indices: V2V up, V2V down
+    regime_aware: TruthPolicy
+    degradation_aware: TruthPolicy
+    full_oracle: TruthPolicy  # one of the candidates, maybe one of the two above
+
+
+def choose_references(config: EnvConfig, weightings: dict[str, RewardPreset], train: Sequence[int],
+                      selection: Sequence[int], backend: Backend) -> dict[str, References]:
+    """Per weighting, the best blind constant and the references of the module's docstring, their tables built on
+    ``train`` seeds and every choice made on ``selection`` seeds (``config`` must put the regime in the info)."""
+    n_levels = len(config.setting_levels)
     constants_sel, _ = pair_terms(config, selection, [(level, level) for level in range(n_levels)], backend)
-    constants_held, collided_held = pair_terms(config, held_out, [(level, level) for level in range(n_levels)], backend)
     pairs = [(up, down) for up in range(n_levels) for down in range(n_levels)]
     pairs_sel, _ = pair_terms(config, selection, pairs, backend)
     tables = lookup_tables(config, train, weightings, backend)
     regimes = regime_tables(config, train, weightings, backend)
     stability = [StabilityOracle(config, margin) for margin in MARGINS]
     stability_sel = backend.map(oracle_terms, [(config, selection, oracle) for oracle in stability])
-    policies = dict(policies or {})
-    policies_held = dict(zip(policies, backend.map(term_sums, [(config, held_out, policy) for policy in policies.values()])))
-    rows, fronts, policy_rows = [], [], []
+    chosen = {}
     for name, weighting in weightings.items():
-        blind = int(np.argmax(weigh(constants_sel, weighting).mean(axis=1)))
-        blind_return = weigh(constants_held[blind], weighting)
-        up, down = pairs[int(np.argmax(weigh(pairs_sel, weighting).mean(axis=1)))]
-        pair_held = pair_terms(config, held_out, [(up, down)], backend)
         lookups = [LookupOracle(tables[name], config), LookupOracle(tables[name], config, whole_episode=True)]
         lookup_sel = backend.map(oracle_terms, [(config, selection, oracle) for oracle in lookups])
         knowing = [*stability, *lookups]  # the degradation-aware candidates
@@ -263,9 +258,37 @@ def cell_rows(config: EnvConfig, cell: dict[str, Any], weightings: dict[str, Rew
         combined = [RegimeOracle(regimes[name], config, floor) for floor in knowing]
         regime_sel = backend.map(oracle_terms, [(config, selection, oracle) for oracle in [regime_aware, *combined]])
         scores = [float(weigh(terms, weighting).mean()) for terms, _ in [*stability_sel, *lookup_sel, *regime_sel]]
-        degradation_aware = knowing[int(np.argmax(scores[: len(knowing)]))]
-        full_oracle = [*knowing, regime_aware, *combined][int(np.argmax(scores))]
-        chosen = {"regime_aware": regime_aware, "degradation_aware": degradation_aware, "full_oracle": full_oracle}
+        chosen[name] = References(
+            blind=int(np.argmax(weigh(constants_sel, weighting).mean(axis=1))),
+            pair=pairs[int(np.argmax(weigh(pairs_sel, weighting).mean(axis=1)))],
+            regime_aware=regime_aware, degradation_aware=knowing[int(np.argmax(scores[: len(knowing)]))],
+            full_oracle=[*knowing, regime_aware, *combined][int(np.argmax(scores))])
+    return chosen
+
+
+def cell_rows(config: EnvConfig, cell: dict[str, Any], weightings: dict[str, RewardPreset], plan: Plan,
+              backend: Backend, policies: Mapping[str, Any] | None = None, baseline: str | None = None
+              ) -> tuple[list[dict[str, Any]], list[dict[str, Any]], list[dict[str, Any]]]:
+    """Per weighting, the best blind constant and each reference (:func:`choose_references`) on the held-out seeds of
+    ``config`` (a row that starts with ``cell``'s entries; each gain also without the collision term, which one
+    episode can dominate); per weighting, the Pareto points (:func:`front_rows`) of the constants and the references;
+    and per weighting and policy of ``policies`` (name -> any policy the rollout harness plays), a row of its gain
+    over the best blind constant on the same held-out episodes, the share of the full oracle's gain it captures and
+    its mean FRONT_OBJECTIVES (and, with ``baseline`` one of their names, its gain over that policy, paired).
+    ``config`` must put the regime in the info (``info_keys="v1"``)."""
+    train, selection, held_out = plan.seeds()
+    levels = config.setting_levels
+    n_levels = len(levels)
+    references = choose_references(config, weightings, train, selection, backend)
+    constants_held, collided_held = pair_terms(config, held_out, [(level, level) for level in range(n_levels)], backend)
+    policies = dict(policies or {})
+    policies_held = dict(zip(policies, backend.map(term_sums, [(config, held_out, policy) for policy in policies.values()])))
+    rows, fronts, policy_rows = [], [], []
+    for name, weighting in weightings.items():
+        blind, (up, down) = references[name].blind, references[name].pair
+        blind_return = weigh(constants_held[blind], weighting)
+        pair_held = pair_terms(config, held_out, [(up, down)], backend)
+        chosen = {key: getattr(references[name], key) for key in ("regime_aware", "degradation_aware", "full_oracle")}
         unique = list(dict.fromkeys(chosen.values()))  # the full oracle may be one of the others
         held = dict(zip(unique, backend.map(oracle_terms, [(config, held_out, oracle) for oracle in unique])))
         hindsight = np.argmax(weigh(constants_held, weighting), axis=0), np.arange(len(held_out))
@@ -362,5 +385,5 @@ def choose_default(rows: Sequence[dict[str, Any]]) -> dict[str, Any]:
 
 
 __all__ = ["FRONT_OBJECTIVES", "MAX_BLIND_COLLISION_RATE", "RECIPE_SEED_START", "REFERENCES", "SEVERITIES", "TARGET_SHARE", "TRAFFIC", "V1_CELL", "V1_GROUPS",
-           "WEIGHTINGS", "Plan", "cell_config", "cell_rows", "choose_default", "front_rows", "hypervolume", "map_cell",
+           "WEIGHTINGS", "Plan", "References", "cell_config", "cell_rows", "choose_default", "choose_references", "front_rows", "hypervolume", "map_cell",
            "regime_contexts", "task_map", "v1_headroom", "weigh"]

@@ -17,6 +17,12 @@ from timegap_env import ENV_ID
 
 EVAL_SEED = 9_000  # first seed of the end-of-training check, below EVAL_SEED_START [-]
 EVAL_EPISODES = 32  # episodes of the end-of-training check [-]
+LATER_CHECK_EPISODES = 100  # ... from TimeGapMonitor-v1 on, whose collision term (a rare 1000-point loss) needs more [-]
+
+
+def check_seeds(version: int) -> list[int]:
+    """The seeds of the end-of-training check (and the learning curve) of a run in env version ``version``."""
+    return list(range(EVAL_SEED, EVAL_SEED + (EVAL_EPISODES if version == 0 else LATER_CHECK_EPISODES)))
 RUN_KEYS = {"n_envs", "n_timesteps", "policy", "normalize", "frame_stack", "env_kwargs"}  # rl-zoo3's; the rest: PPO's
 STRING_KWARGS = ("policy_kwargs", "normalize")  # may be Python expressions as in rl-zoo3: "dict(net_arch=[64])"
 
@@ -58,4 +64,4 @@ def with_env_config(env_kwargs: dict[str, Any], overrides: dict[str, Any]) -> di
     return {**env_kwargs, "config": {**(env_kwargs.get("config") or {}), **overrides}} if overrides else env_kwargs
 
 
-__all__ = ["EVAL_EPISODES", "EVAL_SEED", "RUN_KEYS", "STRING_KWARGS", "load_hyperparams", "with_env_config"]
+__all__ = ["EVAL_EPISODES", "EVAL_SEED", "LATER_CHECK_EPISODES", "check_seeds", "RUN_KEYS", "STRING_KWARGS", "load_hyperparams", "with_env_config"]
