@@ -29,6 +29,8 @@ MPH = 0.44704  # [m/s per mph]
 ACTION_MODES = ("platoon", "per_vehicle", "relative")  # one setting for all followers, one each, or one step
 # of the platoon's setting down the ladder, none, or up
 MONITOR_ESTIMATORS = ("bayes", "raw_gap")  # what the monitor reports as tau: the paper's posterior, or (s - s0) / v
+SIMULATORS = ("native", "sumo")  # EnvConfig.simulator: this package's platoon, or SUMO's (timegap_env.sim.sumo)
+SUMO_MODELS = ("cc", "cacc")  # SumoConfig.model: Plexe's CC model, or SUMO's CACC model
 CHART_KINDS = ("shewhart", "ewma", "cusum")  # the charts of timegap_env.monitoring.charts.CHARTS
 
 # Bounds shared by several fields (each field's own are in its comment).
@@ -710,6 +712,19 @@ class DegradationConfig(ConfigMixin):
         return cast(tuple[float, float], getattr(self, field))
 
 
+@dataclasses.dataclass(frozen=True)
+class SumoConfig(ConfigMixin):
+    """How SUMO simulates the platoon when ``EnvConfig.simulator`` is "sumo" (``timegap_env.sim.sumo``)."""
+
+    model: str = "cc"  # one of SUMO_MODELS: "cc", Plexe's CC model (ACC without V2V, Ploeg's CACC with it; the
+    # engine lag and the controller gains mapped from PlatoonConfig); "cacc", SUMO's CACC model with its defaults
+    ballistic: bool = True  # SUMO's ballistic position update (False: its Euler update)
+
+    def __post_init__(self) -> None:
+        self._choice("model", SUMO_MODELS)
+        self._flag("ballistic")
+
+
 def _default_scenario_weights() -> dict[str, float]:
     return {"aggressive_cycles": 1.0, "sinusoid": 1.0, "hard_braking": 1.0, "stochastic_human": 1.0}
 
@@ -717,7 +732,7 @@ def _default_scenario_weights() -> dict[str, float]:
 NESTED_CONFIGS: dict[str, type[ConfigMixin]] = {  # EnvConfig's nested configs, each given as a dict of its fields
     "platoon": PlatoonConfig, "leader": LeaderConfig, "sensors": SensorConfig, "monitor": MonitorConfig,
     "chart": ChartConfig, "reward_weights": RewardWeights, "reward_scales": RewardScales,
-    "degradation": DegradationConfig,
+    "degradation": DegradationConfig, "sumo": SumoConfig,
 }
 
 
@@ -757,6 +772,9 @@ class EnvConfig(ConfigMixin):
     # 0 <= low <= high < 1
     info_keys: str = "v0"  # the info's keys, one of INFO_KEYS: "v0" is v0's; "v1" adds vector_reward, cost,
     # objectives and truth_regime (timegap_env.envs.info)
+    simulator: str = "native"  # one of SIMULATORS: "native", this package's compiled platoon; "sumo", SUMO through
+    # libsumo (the sumo extra; one env at a time per process), configured by ``sumo``
+    sumo: SumoConfig = SumoConfig()
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "reward_weights", RewardWeights.of(self.reward_weights, "EnvConfig.reward_weights"))
@@ -804,6 +822,7 @@ class EnvConfig(ConfigMixin):
                        f"must stay within platoon.max_v2v_latency = {self.platoon.max_v2v_latency} s")
         self._pair("dropout_probability_range", 0.0, 1.0, open_high=True, strict=False)
         self._choice("info_keys", INFO_KEYS)
+        self._choice("simulator", SIMULATORS)
 
     @classmethod
     def from_dict(cls, overrides: Mapping[str, Any] | EnvConfig | None = None, version: int = 0) -> EnvConfig:

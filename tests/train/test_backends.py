@@ -108,3 +108,15 @@ def test_the_sweep_estimate_of_bench_ray():
     assert sweep_seconds(slow_driver, 2, nodes=100, cpus_per_node=2) == 10.0 + 200.0 + 2.0  # the driver's tasks
     assert break_even_work(costs, 2) == 20.0  # W = 10 + W / 2
     assert break_even_work(dataclasses.replace(costs, efficiency=0.5), 2) == float("inf")  # no speed-up
+
+
+def test_worker_processes_give_the_serial_results_in_order():
+    pieces = [(2, 3), (3, 2), (5, 0)]
+    backend = Backend("processes", workers=2)
+    assert backend.map(power, pieces) == Backend().map(power, pieces) == [8, 9, 1]
+    assert backend.describe().startswith("processes: 3 pieces on 2 worker processes")
+    assert backend.map(power, []) == []
+    with pytest.raises(ValueError, match="workers = 0"):
+        Backend("processes", workers=0)
+    with pytest.raises(ValueError, match="workers = 2: an integer >= 1, only with the processes backend"):
+        Backend("serial", workers=2)

@@ -214,3 +214,4 @@ class TimeGapMonitorEnv(gym.Env):
         if self._renderer is not None:
             self._renderer.close()
             self._renderer = None
+        self.task.close()

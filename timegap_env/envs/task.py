@@ -115,12 +115,13 @@ class PlatoonTask:
     def __init__(self, config: EnvConfig, n_envs: int, fused: bool = True) -> None:
         self.config = config
         self.n_envs = n_envs
-        self.fused = bool(fused)
+        self.fused = bool(fused) and config.simulator == "native"  # SUMO's ticks run stage by stage
         self.n_followers = config.platoon.n_followers
         self.ticks_per_decision = config.ticks_per_decision
         self.episodes = Episodes(config, n_envs)
         self.ladder = SettingLadder(config, n_envs)
-        self.loop = MonitoredPlatoon(config.platoon, config.monitor, config.chart, config.sensors, n_envs)
+        self.loop = MonitoredPlatoon(config.platoon, config.monitor, config.chart, config.sensors, n_envs,
+                                     simulator=_simulator(config, n_envs))
         self.totals = EpisodeTotals.zeros(n_envs)
         self._previous_accel = np.zeros((n_envs, self.n_followers))  # before the next step's first tick [m/s^2]
         self._accel_envelope = np.zeros((n_envs, self.n_followers + 1))  # decaying peak |acceleration|, leader first [m/s^2]
@@ -154,7 +155,14 @@ class PlatoonTask:
     @staticmethod
     def bytes_per_env(config: EnvConfig) -> int:
         """Bytes of NumPy state each env of a task with ``config`` holds (what one more env costs) [B]."""
-        return _owned_bytes(PlatoonTask(config, 2)) - _owned_bytes(PlatoonTask(config, 1))
+        native = dataclasses.replace(config, simulator="native")  # the same arrays, whatever computes the ticks
+        return _owned_bytes(PlatoonTask(native, 2)) - _owned_bytes(PlatoonTask(native, 1))
+
+    def close(self) -> None:
+        """End what the simulator holds (SUMO's simulation; nothing natively)."""
+        close = getattr(self.loop.platoon, "close", None)
+        if close is not None:
+            close()
 
     # ------------------------------------------------------------------ reset
     def reset(self, mask: np.ndarray, rngs: Sequence[np.random.Generator], options: Mapping[str, Any] | None) -> None:
@@ -350,6 +358,18 @@ class PlatoonTask:
             center_history=centers,
             settling=chart.hold_off[0] > 0,
         )
+
+
+def _simulator(config: EnvConfig, n_envs: int) -> Any:
+    """The platoon of ``config.simulator`` for ``n_envs`` envs; None: the native one (MonitoredPlatoon's)."""
+    if config.simulator == "native":
+        return None
+    if n_envs != 1:
+        raise ValueError(f"simulator = 'sumo' with {n_envs} envs: libsumo runs one simulation per process; use one env "
+                         "per process (num_envs=1; the processes or Ray backend spread episodes over processes)")
+    from timegap_env.sim.sumo import SumoPlatoon  # libsumo only when asked for
+
+    return SumoPlatoon(config.platoon, config.sumo, config.episode_duration)
 
 
 def _owned_bytes(root: Any) -> int:

@@ -239,6 +239,10 @@ class TimeGapMonitorVectorEnv(VectorEnv):
     def _observations(self) -> np.ndarray:
         return self.task.observation().reshape(self.num_envs, -1)
 
+    def close_extras(self, **kwargs: Any) -> None:
+        """End what the simulator holds (SUMO's simulation)."""
+        self.task.close()
+
 
 def _copied(objectives: tuple[np.ndarray, np.ndarray] | None) -> tuple[np.ndarray, np.ndarray] | None:
     """A copy of the objectives and cost of ``PlatoonTask.objectives`` (None stays None)."""

@@ -1,8 +1,10 @@
-"""Where a script's independent pieces of work run: in this process, or as Ray tasks.
+"""Where a script's independent pieces of work run: in this process, in worker processes, or as Ray tasks.
 
 A piece is a call ``function(*arguments)`` whose result depends on its arguments alone (an episode
-batch, say: the env seeds everything it draws), so both backends return the same results, in order,
+batch, say: the env seeds everything it draws), so every backend returns the same results, in order,
 bit for bit. ``--backend serial`` (the default) runs the pieces one after another here;
+``--backend processes`` in a pool of worker processes on this machine (``--workers``, default one per CPU; each
+piece's function and arguments are pickled to a worker, as SUMO needs: libsumo runs one simulation per process);
 ``--backend ray`` runs each as a Ray task (one CPU each): with no ``--address`` Ray starts on this
 machine and stops with the script, with ``--address`` (e.g. ``ray://head:10001`` or ``auto``) the
 script joins that cluster. Ray comes with the ``ray`` extra (``pip install -e '.[ray]'``).
@@ -15,14 +17,16 @@ must be at those paths on every node.
 from __future__ import annotations
 
 import argparse
+import multiprocessing
 import os
 import time
+from concurrent.futures import ProcessPoolExecutor
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
 REPO = Path(__file__).resolve().parents[2]  # the repository (a clone): what Ray ships to a cluster
-BACKENDS = ("serial", "ray")
+BACKENDS = ("serial", "processes", "ray")
 NOT_SHIPPED = [".git", ".venv", ".venv-clients", "results", "runs", "*.egg-info", "__pycache__"]  # of working_dir
 
 
@@ -31,28 +35,40 @@ def call(function: Callable[..., Any], *arguments: Any) -> Any:
     return function(*arguments)
 
 
+def call_piece(work: tuple[Callable[..., Any], tuple[Any, ...]]) -> Any:
+    """``function(*piece)`` of ``work = (function, piece)``: what a worker process runs."""
+    function, piece = work
+    return function(*piece)
+
+
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """``--backend`` and ``--address`` on a script's command line."""
     parser.add_argument("--backend", choices=BACKENDS, default="serial",
-                        help="serial: here, one piece after another (default); ray: each piece a Ray task")
+                        help="serial: here, one piece after another (default); processes: a pool of worker "
+                             "processes here; ray: each piece a Ray task")
     parser.add_argument("--address", default=None,
                         help="with --backend ray: the cluster to join (default: start Ray on this machine)")
+    parser.add_argument("--workers", type=int, default=None,
+                        help="with --backend processes: worker processes (default: one per CPU)")
 
 
 class Backend:
     """Runs pieces of work serially or on Ray; :meth:`describe` says how the last :meth:`map` spread them."""
 
-    def __init__(self, name: str = "serial", address: str | None = None) -> None:
+    def __init__(self, name: str = "serial", address: str | None = None, workers: int | None = None) -> None:
         if name not in BACKENDS:
             raise ValueError(f"backend = {name!r}: must be one of {BACKENDS}")
         if address is not None and name != "ray":
             raise ValueError(f"address = {address!r}: only with the ray backend")
-        self.name, self.address = name, address
+        if workers is not None and (name != "processes" or isinstance(workers, bool) or not isinstance(workers, int)
+                                    or workers < 1):
+            raise ValueError(f"workers = {workers!r}: an integer >= 1, only with the processes backend")
+        self.name, self.address, self.workers = name, address, workers
         self._spread = "not used yet"
 
     @classmethod
     def from_args(cls, args: argparse.Namespace) -> Backend:
-        return cls(args.backend, args.address)
+        return cls(args.backend, args.address, getattr(args, "workers", None))
 
     def map(self, function: Callable[..., Any], pieces: Sequence[tuple[Any, ...]]) -> list[Any]:
         """``[function(*piece) for piece in pieces]``, here or as Ray tasks, in the order of ``pieces``."""
@@ -60,6 +76,11 @@ class Backend:
         if self.name == "serial":
             results = [function(*piece) for piece in pieces]
             self._spread = f"serial: {len(pieces)} pieces one after another in this process"
+        elif self.name == "processes":
+            workers = self.workers or os.cpu_count() or 1
+            with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn")) as pool:
+                results = list(pool.map(call_piece, [(function, piece) for piece in pieces]))
+            self._spread = f"processes: {len(pieces)} pieces on {workers} worker processes"
         else:
             results = self._ray_map(function, pieces)
         self._spread += f", {time.perf_counter() - start:.1f} s wall"

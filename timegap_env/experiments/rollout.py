@@ -125,6 +125,13 @@ def _rows(infos: Mapping[str, Any], rows: slice, total: int) -> dict[str, Any]:
     return out
 
 
+def simulator(config: Config) -> str:
+    """The simulator ``config`` names (``EnvConfig.simulator``; overrides without one: the native)."""
+    if isinstance(config, EnvConfig):
+        return config.simulator
+    return str((config or {}).get("simulator", EnvConfig.simulator))
+
+
 def rollout_side_by_side(policies: Sequence[Any], config: Config, seeds: Sequence[int],
                          options: dict[str, Any] | None = None, *, step_diagnostics: bool = True,
                          trace: bool = False) -> list[Batch]:
@@ -134,7 +141,24 @@ def rollout_side_by_side(policies: Sequence[Any], config: Config, seeds: Sequenc
     ``step_diagnostics=False`` runs faster and leaves the reward terms, the ground truth and the time below the
     stable setting out of the records (the per-step infos hold none of them); oracles and choosers reading the
     infos need it on. ``trace`` keeps env 0's every tick (of the first policy), for a profile.
+
+    In SUMO (``config``'s simulator "sumo", one simulation per process) every policy plays every seed in an env of
+    its own, one after another, with the same records.
     """
+    if simulator(config) == "native":
+        return _side_by_side(policies, config, seeds, options, step_diagnostics, trace)
+    batches = []
+    for i, policy in enumerate(policies):
+        parts = [_side_by_side([policy], config, [seed], options, step_diagnostics, trace and i == 0 and j == 0)[0]
+                 for j, seed in enumerate(seeds)]
+        batches.append(Batch([record for part in parts for record in part.records], parts[0].config, parts[0].trace,
+                             sum(part.seconds for part in parts)))
+    return batches
+
+
+def _side_by_side(policies: Sequence[Any], config: Config, seeds: Sequence[int], options: dict[str, Any] | None,
+                  step_diagnostics: bool, trace: bool) -> list[Batch]:
+    """:func:`rollout_side_by_side` in one vector env."""
     start = time.perf_counter()
     n, m = len(seeds), len(policies)
     modes = {getattr(policy, "action_mode", None) for policy in policies}
@@ -246,5 +270,5 @@ def run_jobs(jobs: Sequence[Job], backend: Backend | None = None) -> list[Batch]
     return (backend or Backend()).map(run_job, [(job,) for job in jobs])
 
 
-__all__ = ["Batch", "EpisodeRecord", "Job", "NOMINAL", "chooser", "env_config", "grid", "monitor_estimator", "rollout", "rollout_side_by_side",
+__all__ = ["Batch", "EpisodeRecord", "Job", "NOMINAL", "chooser", "env_config", "grid", "monitor_estimator", "simulator", "rollout", "rollout_side_by_side",
            "run_job", "run_jobs"]
