@@ -29,9 +29,9 @@ demo: $(STAMP)
 	MPLBACKEND=Agg $(PY) -m train.tune_rule --env-id TimeGapMonitor-v1 --out results/rule/v1
 	MPLBACKEND=Agg $(PY) -m train.evaluate
 	MPLBACKEND=Agg $(PY) -m train.task_map
-	MPLBACKEND=Agg $(PY) -m train.evaluate_task --chart-step-tuning results/rule/v1/tuning.csv --model results/ppo_v1 results/ppo_v1_nomonitor
-	MPLBACKEND=Agg $(PY) -m train.evaluate_task --policies rule_platoon --model results/ppo_v1 results/ppo_v1_nomonitor --baseline ppo_v1_nomonitor --groups v1 regimes --out results/task/ablation
-	MPLBACKEND=Agg $(PY) -m train.evaluate_task --chart-step-tuning results/rule/v1/tuning.csv --model results/ppo_v1 results/ppo_v1_nomonitor --groups larger_degradations regimes ngsim_in_band openacc stop_and_go emergency_braking --out results/task/groups
+	MPLBACKEND=Agg $(PY) -m train.evaluate_task --chart-step-tuning results/rule/v1/tuning.csv --model results/ppo_v1 results/ppo_v1_nomonitor results/ppo_v1_rawgap
+	MPLBACKEND=Agg $(PY) -m train.evaluate_task --policies rule_platoon --model results/ppo_v1 results/ppo_v1_nomonitor results/ppo_v1_rawgap --baseline ppo_v1 --groups v1 regimes --out results/task/ablation
+	MPLBACKEND=Agg $(PY) -m train.evaluate_task --chart-step-tuning results/rule/v1/tuning.csv --model results/ppo_v1 results/ppo_v1_nomonitor results/ppo_v1_rawgap --groups larger_degradations regimes ngsim_in_band openacc stop_and_go emergency_braking --out results/task/groups
 
 test: $(STAMP)
 	MPLBACKEND=Agg $(PY) -m pytest -q
@@ -54,13 +54,18 @@ train: $(STAMP)  # the committed runs: v0's PPO; v1's PPO and its two monitor ab
 	$(PY) -m train.train_ppo --env-id TimeGapMonitor-v1 --hide-features monitor --out results/ppo_v1_nomonitor
 	$(PY) -m train.train_ppo --env-id TimeGapMonitor-v1 --env-config '{"monitor": {"estimator": "raw_gap"}}' --out results/ppo_v1_rawgap
 
-recipes: $(STAMP)  # every other recipe tried on v1 (issue 25), its curve, its selection and held-out numbers (~40 min)
+recipes: $(STAMP)  # every other recipe tried on v1 (issue 25) and the chosen one and its ablations with two more seeds: curves, selection and held-out numbers (~1 h)
 	$(PY) -m train.train_ppo --env-id TimeGapMonitor-v1 --timesteps 6000000 --out results/recipes/ppo_6m
 	$(PY) -m train.train_ppo --env-id TimeGapMonitor-v1 --env-config '{"action_mode": "platoon"}' --out results/recipes/ppo_absolute
 	$(PY) -m train.train_ppo --env-id TimeGapMonitor-v1 --frame-stack 4 --out results/recipes/ppo_stack4
 	$(PY) -m train.train_ppo --env-id TimeGapMonitor-v1 --algo ppo_lstm --out results/recipes/ppo_lstm
 	$(PY) -m train.train_ppo --env-id TimeGapMonitor-v1 --cost-budget 0.05 --out results/recipes/ppo_lagrange_0.05
 	$(PY) -m train.train_ppo --env-id TimeGapMonitor-v1 --cost-budget 0.1 --out results/recipes/ppo_lagrange_0.1
+	for seed in 1 2; do \
+	  $(PY) -m train.train_ppo --env-id TimeGapMonitor-v1 --seed $$seed --out results/recipes/ppo_seed$$seed && \
+	  $(PY) -m train.train_ppo --env-id TimeGapMonitor-v1 --seed $$seed --hide-features monitor --out results/recipes/ppo_nomonitor_seed$$seed && \
+	  $(PY) -m train.train_ppo --env-id TimeGapMonitor-v1 --seed $$seed --env-config '{"monitor": {"estimator": "raw_gap"}}' --out results/recipes/ppo_rawgap_seed$$seed || exit 1; \
+	done
 	MPLBACKEND=Agg $(PY) -m train.compare_curves results/ppo_v1 results/ppo_v1_nomonitor results/ppo_v1_rawgap results/recipes/ppo_* --out results/recipes/curves
 	MPLBACKEND=Agg $(PY) -m train.evaluate_task --split selection --chart-step-tuning results/rule/v1/tuning.csv --model results/ppo_v1 results/ppo_v1_nomonitor results/ppo_v1_rawgap results/recipes/ppo_* --out results/recipes/selection
 	MPLBACKEND=Agg $(PY) -m train.evaluate_task --chart-step-tuning results/rule/v1/tuning.csv --model results/ppo_v1 results/ppo_v1_nomonitor results/ppo_v1_rawgap results/recipes/ppo_* --out results/recipes/held_out
