@@ -7,7 +7,7 @@ PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 EXTRAS := dev,train,render,docs
 
-.PHONY: install demo test typecheck package clients train recipes bench calibrate map degradation clean
+.PHONY: install demo test typecheck package clients sumo morl train recipes bench calibrate map degradation clean
 
 install: $(STAMP)
 
@@ -44,6 +44,10 @@ package: $(STAMP)  # pip install . / the wheel / the sdist, core only, in a thro
 
 clients:  # the env through SB3, sb3-contrib, rl-zoo3, RLlib, TorchRL, Tianshou, gymnasium's wrappers (own venv)
 	bash .ci/clients
+
+sumo: $(STAMP)  # SUMO as a second simulator (issue 26): the sumo extra, the tests marked sumo, results/sumo (~10 min)
+	bash .ci/sumo
+	MPLBACKEND=Agg $(PY) -m train.sumo_report --chart-step-tuning results/rule/v1/tuning.csv --backend processes
 
 morl:  # MORL-Baselines' Envelope on mo-TimeGapMonitor-v1 -> results/morl (in .venv-clients: make clients makes it)
 	MPLBACKEND=Agg .venv-clients/bin/python -m train.train_morl

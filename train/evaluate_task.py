@@ -20,7 +20,6 @@ one), where learned recipes are chosen; the held-out seeds only report. Writes `
 from __future__ import annotations
 
 import argparse
-import csv
 import math
 import time
 from pathlib import Path
@@ -37,7 +36,7 @@ from timegap_env import ENV_IDS, cli
 from timegap_env.agents.protocol import ENV_FILE, EVAL_SEED_START, read_env_file
 from timegap_env.config import EnvConfig
 from timegap_env.experiments.backends import Backend, add_arguments
-from timegap_env.experiments.registry import load_learned
+from timegap_env.experiments.registry import load_learned, tuned_chart_step
 from timegap_env.experiments.registry import make as make_policy
 from timegap_env.experiments.task_map import (
     FRONT_OBJECTIVES, RECIPE_SEED_START, REFERENCES, V1_GROUPS, Plan, v1_headroom,
@@ -47,20 +46,6 @@ from timegap_env.leaders.ngsim import PATH_VARIABLE as NGSIM_PATH_VARIABLE
 from timegap_env.leaders.openacc import PATH_VARIABLE as OPENACC_PATH_VARIABLE
 
 DEFAULT_POLICIES = ("rule_platoon", "chart_step", "v2v_aware")
-
-
-def tuned_chart_step(path: Path) -> dict[str, float]:
-    """The best cell of a ``train.tune_rule`` run's tuning.csv: ``k_up``, ``quiet_time`` [s], ``min_setting`` [s];
-    ``ValueError`` naming the file if it has none."""
-    try:
-        with open(path, newline="", encoding="utf-8") as file:
-            best = [row for row in csv.DictReader(file) if row.get("best") == "1"]
-        if len(best) != 1:
-            raise ValueError(f"{len(best)} rows with best = 1")
-        row = best[0]
-        return {"k_up": int(row["k_up"]), "quiet_time": float(row["quiet_time"]), "min_setting": float(row["min_setting"])}
-    except (OSError, UnicodeDecodeError, csv.Error, ValueError, KeyError, TypeError) as error:
-        raise ValueError(f"--chart-step-tuning {path}: not a tune_rule tuning.csv with one best cell ({error})") from error
 
 
 def missing_data(group: str) -> str:

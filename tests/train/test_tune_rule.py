@@ -4,6 +4,7 @@ import csv
 from pathlib import Path
 
 from timegap_env.agents.policies import ChartStepPolicy
+from timegap_env.experiments.registry import tuned_chart_step
 from train import tune_rule
 
 COMMITTED = Path(__file__).resolve().parents[2] / "results" / "rule" / "tuning.csv"
@@ -34,18 +35,16 @@ def test_the_policy_s_defaults_are_the_committed_best_cell():
 
 
 def test_tuning_for_v1_runs_v1_and_its_best_cell_reaches_evaluate_task(tmp_path):
-    from train import evaluate_task
-
     out = tmp_path / "v1"
     tune_rule.main(["--episodes", "2", "--k-up", "2", "3", "--quiet-time", "20", "--min-setting", "1.2",
                     "--out", str(out), "--env-id", "TimeGapMonitor-v1"])
     report = (out / "tuning.md").read_text()
     assert "training episodes of TimeGapMonitor-v1" in report and "the defaults of `ChartStepPolicy`" not in report
-    best = evaluate_task.tuned_chart_step(out / "tuning.csv")
+    best = tuned_chart_step(out / "tuning.csv")
     assert best["k_up"] in (2, 3) and best["quiet_time"] == 20.0 and best["min_setting"] == 1.2
     (tmp_path / "bad.csv").write_text("policy,best\nx,0\n")
     try:
-        evaluate_task.tuned_chart_step(tmp_path / "bad.csv")
+        tuned_chart_step(tmp_path / "bad.csv")
     except ValueError as error:
         assert "bad.csv" in str(error)
     else:

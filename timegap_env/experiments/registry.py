@@ -14,6 +14,7 @@ and selection seeds: :func:`make_oracle`) and ``ppo`` a trained run (:func:`load
 
 from __future__ import annotations
 
+import csv
 import dataclasses
 from collections.abc import Callable, Mapping
 from pathlib import Path
@@ -135,6 +136,20 @@ def learned_exists(model: Path) -> bool:
     return model.is_file() or (model / MODEL_FILE).is_file() or find_run(model) is not None
 
 
+def tuned_chart_step(path: Path) -> dict[str, float]:
+    """The best cell of a ``train.tune_rule`` run's tuning.csv: ``k_up``, ``quiet_time`` [s], ``min_setting`` [s];
+    ``ValueError`` naming the file if it has none."""
+    try:
+        with open(path, newline="", encoding="utf-8") as file:
+            best = [row for row in csv.DictReader(file) if row.get("best") == "1"]
+        if len(best) != 1:
+            raise ValueError(f"{len(best)} rows with best = 1")
+        row = best[0]
+        return {"k_up": int(row["k_up"]), "quiet_time": float(row["quiet_time"]), "min_setting": float(row["min_setting"])}
+    except (OSError, UnicodeDecodeError, csv.Error, ValueError, KeyError, TypeError) as error:
+        raise ValueError(f"--chart-step-tuning {path}: not a tune_rule tuning.csv with one best cell ({error})") from error
+
+
 def load_learned(model: Path, config: EnvConfig | None = None) -> Any:
     """The learned policy of ``model`` (an SB3 zip or run directory, or an RLlib run), loaded as it was trained
     (``LearnedPolicy.load``: ``env.json``, its statistics; torch on one thread), checked to take the observations of
@@ -161,4 +176,5 @@ def load_learned(model: Path, config: EnvConfig | None = None) -> Any:
 
 
 __all__ = ["FIXED_PREFIX", "LearnedPolicyError", "ORACLE", "POLICIES", "PPO", "PolicySpec", "fixed_name", "fixed_names",
+           "tuned_chart_step",
            "in_mode", "is_known", "known", "learned_exists", "load_learned", "make", "make_oracle", "register"]

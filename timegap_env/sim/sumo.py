@@ -11,7 +11,8 @@ it as given); the followers are SUMO's own car-following models, not this packag
   constant-time-headway law u = -(v - v_pred + lambda (h v + 2 m - gap)) / h with headway h = the applied setting and
   lambda = k_s / k_v (the native gains' ratio; the native law's overall gain k_v is 1/h there); with V2V it runs
   Ploeg's CACC, headway h = the applied setting, its gains kp = k_s and kd = k_v (the native ones), fed the
-  predecessor's speed and acceleration after each tick (the native V2V delay of one tick). The standstill gap of
+  predecessor's speed and controller output (its desired acceleration, as Ploeg's design sends; the native
+  feed-forward reads the predecessor's actual acceleration) after each tick (the native V2V delay of one tick). The standstill gap of
   both laws is 2 m; the vType's ``minGap`` adds the rest of s0.
 - ``SumoConfig.model = "cacc"``: SUMO's ``CACC`` model (Milanés & Shladover; Xiao, Wang & van Arem) with its
   default gains: time gap = the vehicle's ``tau`` (the applied setting), standstill gap = ``minGap`` = s0; its CACC
@@ -186,7 +187,7 @@ class SumoPlatoon(Platoon):
         for i, vid in enumerate(self._ids):
             sumo.vehicle.moveTo(vid, "e_0", float(self._offset + state.x[0, i]))
             sumo.vehicle.setPreviousSpeed(vid, float(state.v[0, i]))
-            sumo.vehicle.setSpeedMode(vid, 0 if i == 0 else 31)
+            sumo.vehicle.setSpeedMode(vid, 0)  # every check of SUMO off: the leader on its profile, each follower its model alone
         n = self.n_followers
         self._pushed = {"headway": np.full(n, np.nan), "lag": np.full(n, np.nan), "mode": np.full(n, -1)}
         if self.sumo_config.model == "cc":
@@ -240,6 +241,9 @@ class SumoPlatoon(Platoon):
         sumo.simulationStep()
         self._read(state.x[0], state.v[0], state.a[0])
         state.u[0, 0] = state.a[0, 0]
+        if self.sumo_config.model == "cc":  # each follower's controller output, what Ploeg's CACC sends over V2V
+            for i, vid in enumerate(self._ids[1:], start=1):
+                state.u[0, i] = float(sumo.vehicle.getParameter(vid, "carFollowModel.ccsa").split(":")[2])
         state.ticks[0] += 1
         spacing = state.x[0, :-1] - state.x[0, 1:] - cfg.vehicle_length
         new = (spacing <= 0.0) & ~state.collided[0]
@@ -272,11 +276,11 @@ class SumoPlatoon(Platoon):
                 if lag[f] != pushed["lag"][f]:
                     _parameter(sumo, vid, "cctau", float(engine_tau(lag[f], cfg.dt)))
                     pushed["lag"][f] = lag[f]
-                if mode == PLOEG:
-                    predecessor = f  # the vehicle ahead, leader = 0
+                if mode == PLOEG:  # the predecessor's (the vehicle ahead; the leader's: its acceleration) message
+                    predecessor = f
                     message = ":".join(repr(float(value)) for value in (
                         state.v[0, predecessor], state.a[0, predecessor], self._offset + state.x[0, predecessor],
-                        0.0, tick * cfg.dt, state.a[0, predecessor], state.v[0, predecessor], 0.0, 0.0))
+                        0.0, tick * cfg.dt, state.u[0, predecessor], state.v[0, predecessor], 0.0, 0.0))
                     sumo.vehicle.setParameter(vid, "carFollowModel.ccpsa", message)
             pushed["headway"][f], pushed["mode"][f] = headway, mode
 
