@@ -171,3 +171,16 @@ def test_episodes_spread_over_worker_processes_give_the_serial_records() -> None
                                                                        for b in spread]
     assert rollout(FixedPolicy(1.0), config, [10_000]).records[0].episode_return == serial[0].records[0].episode_return
 
+
+
+@pytest.mark.sumo
+def test_a_sumo_env_refuses_to_be_copied_by_name() -> None:
+    pytest.importorskip("libsumo")
+    import copy
+
+    env = gym.make(timegap_env.LATEST_ENV_ID, config=SUMO)
+    try:
+        with pytest.raises(TypeError, match="a SumoPlatoon cannot be copied or pickled"):
+            copy.deepcopy(env.unwrapped)
+    finally:
+        env.close()

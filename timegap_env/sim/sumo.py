@@ -129,6 +129,10 @@ class SumoPlatoon(Platoon):
             self._folder.cleanup()
             self._folder = None
 
+    def __getstate__(self) -> dict[str, Any]:
+        raise TypeError("a SumoPlatoon cannot be copied or pickled: its simulation lives in libsumo, one per process; "
+                        "build a new env (in the worker process, for a parallel run)")
+
     def __del__(self) -> None:
         if _owner is self:
             self.close()
