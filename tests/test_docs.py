@@ -12,6 +12,7 @@ runs in a fresh process on a copy of the package with its page's edits applied.
 
 from __future__ import annotations
 
+import importlib.util
 import os
 import re
 import shutil
@@ -46,6 +47,8 @@ def skip_without_data(code: str) -> None:
         pytest.skip(f"the OpenACC data are not at {timegap_env.default_openacc_dir()} (set TIMEGAP_OPENACC_PATH)")
     if "ngsim" in code and not timegap_env.default_ngsim_path().exists():
         pytest.skip(f"the NGSIM data are not at {timegap_env.default_ngsim_path()} (set TIMEGAP_NGSIM_PATH)")
+    if '"simulator": "sumo"' in code and importlib.util.find_spec("libsumo") is None:
+        pytest.skip("libsumo is not installed (the sumo extra: pip install -e '.[sumo]')")
 
 
 @pytest.fixture
