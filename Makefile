@@ -73,6 +73,7 @@ recipes: $(STAMP)  # every other recipe tried on v1 (issue 25) and the chosen on
 	MPLBACKEND=Agg $(PY) -m train.compare_curves results/ppo_v1 results/ppo_v1_nomonitor results/ppo_v1_rawgap results/recipes/ppo_* --out results/recipes/curves
 	MPLBACKEND=Agg $(PY) -m train.evaluate_task --split selection --chart-step-tuning results/rule/v1/tuning.csv --model results/ppo_v1 results/ppo_v1_nomonitor results/ppo_v1_rawgap results/recipes/ppo_* --out results/recipes/selection
 	MPLBACKEND=Agg $(PY) -m train.evaluate_task --chart-step-tuning results/rule/v1/tuning.csv --model results/ppo_v1 results/ppo_v1_nomonitor results/ppo_v1_rawgap results/recipes/ppo_* --out results/recipes/held_out
+	MPLBACKEND=Agg $(PY) -m train.evaluate_task --policies rule_platoon --model results/ppo_v1 results/ppo_v1_nomonitor results/ppo_v1_rawgap results/recipes/ppo_seed* results/recipes/ppo_nomonitor_seed* results/recipes/ppo_rawgap_seed* --groups regimes --out results/recipes/regimes_seeds
 
 bench: $(STAMP)
 	MPLBACKEND=Agg $(PY) -m train.bench

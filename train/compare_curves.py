@@ -83,10 +83,10 @@ def table(runs: list[dict[str, Any]], blind: float, oracle: float) -> list[str]:
 
 def figure(runs: list[dict[str, Any]], blind: float, oracle: float, path: Path) -> None:
     """Every run's mean return on the check episodes against its steps; the references dashed."""
-    fig, ax = plt.subplots(figsize=(8, 4.5))
-    for run in runs:
-        ax.plot([p["timesteps"] for p in run["points"]], [p["mean_return"] for p in run["points"]], "-", lw=1.2,
-                label=run["name"])
+    fig, ax = plt.subplots(figsize=(9, 5))
+    for i, run in enumerate(runs):  # line styles cycle too: runs that share their start overlap there
+        ax.plot([p["timesteps"] for p in run["points"]], [p["mean_return"] for p in run["points"]],
+                ("-", "--", "-.", ":")[i // 10 % 4], lw=1.2, label=run["name"])
     ax.axhline(blind, color="k", ls="--", lw=1, label="best blind constant")
     ax.axhline(oracle, color="0.5", ls=":", lw=1, label="oracle")
     ax.set_xlabel("timesteps")
