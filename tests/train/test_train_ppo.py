@@ -132,7 +132,7 @@ def test_tiny_training_run_saves_loads_and_resumes(tmp_path: Path) -> None:
     report = (out / "training.md").read_text()
     assert "| timesteps, this command / total | 64 / 192 |" in report and "| warm-up, {" not in report
     curve = (out / "curve.csv").read_text().splitlines()
-    assert curve[0] == "timesteps,mean_return,share_of_oracle_gap" and [row.split(",")[0] for row in curve[1:]][-2:] == [
+    assert curve[0] == "timesteps,mean_return,share_of_oracle_gap,best_blind_return,oracle_return" and [row.split(",")[0] for row in curve[1:]][-2:] == [
         "128", "192"]  # the first run's end, then the resumed run's end
     with pytest.raises(ValueError, match="timesteps = 192"):
         train_ppo.main([*common, "--resume", "--timesteps", "192"])
