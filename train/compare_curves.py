@@ -25,9 +25,8 @@ import matplotlib.pyplot as plt
 
 from timegap_env import cli
 from timegap_env.agents.protocol import ENV_FILE, read_env_file
-
-CURVE_FILE = "curve.csv"  # train_ppo's
-COLUMNS = ("timesteps", "mean_return", "share_of_oracle_gap", "best_blind_return", "oracle_return")
+from timegap_env.config import MonitorConfig
+from timegap_env.experiments.training import CURVE_COLUMNS, CURVE_FILE
 
 
 def read_run(path: Path) -> dict[str, Any]:
@@ -37,27 +36,31 @@ def read_run(path: Path) -> dict[str, Any]:
     try:
         with open(curve_path, newline="") as file:
             rows = list(csv.DictReader(file))
-        points = [{name: float(row[name]) for name in COLUMNS} for row in rows]
+        points = [{name: float(row[name]) for name in CURVE_COLUMNS} for row in rows]
     except (OSError, UnicodeDecodeError, csv.Error, KeyError, TypeError, ValueError) as error:
-        raise ValueError(f"{curve_path}: not a learning curve of train_ppo with the columns {list(COLUMNS)} "
+        raise ValueError(f"{curve_path}: not a learning curve of train_ppo with the columns {list(CURVE_COLUMNS)} "
                          f"({type(error).__name__}: {error})") from error
     if not points:
         raise ValueError(f"{curve_path}: no points")
     config = run.config
     recipe = [run.algo, config.action_mode, f"{run.frame_stack} frame(s)"]
     recipe += [f"hidden {', '.join(run.hidden_features)}"] if run.hidden_features else []
-    recipe += [f"monitor {config.monitor.estimator}"] if config.monitor.estimator != "bayes" else []
+    recipe += [f"monitor {config.monitor.estimator}"] if config.monitor.estimator != MonitorConfig.estimator else []
     return {"name": path.name, "env_id": run.env_id, "recipe": "; ".join(recipe), "points": points}
 
 
 def references(runs: list[dict[str, Any]]) -> tuple[float, float]:
     """The best blind constant's and the oracle's return on the check episodes, the same for every run; ``ValueError``
     naming the runs that differ."""
-    seen = {(run["env_id"], run["points"][0]["best_blind_return"], run["points"][0]["oracle_return"]) for run in runs}
+    seen: dict[tuple[str, float, float], list[str]] = {}
+    for run in runs:
+        key = (run["env_id"], run["points"][0]["best_blind_return"], run["points"][0]["oracle_return"])
+        seen.setdefault(key, []).append(run["name"])
     if len(seen) > 1:
+        groups = "; ".join(f"{', '.join(names)}: {key}" for key, names in seen.items())
         raise ValueError("the runs' check episodes have different references (env id, best blind return, oracle "
-                         f"return): {sorted(seen)}; compare runs of one env version and reward")
-    _, blind, oracle = seen.pop()
+                         f"return): {groups}; compare runs of one env version and reward")
+    (_, blind, oracle), = seen
     return blind, oracle
 
 

@@ -40,7 +40,7 @@ from timegap_env import cli
 from timegap_env.agents.protocol import EVAL_SEED_START
 from timegap_env.config import EnvConfig
 from timegap_env.experiments.backends import Backend, add_arguments
-from timegap_env.experiments.crosscheck import SIMULATORS, SOURCES, crosscheck_rows, transfer_returns
+from timegap_env.experiments.crosscheck import SETUPS, SOURCES, crosscheck_rows, transfer_returns
 from timegap_env.experiments.registry import fixed_name, load_learned, tuned_chart_step
 from timegap_env.experiments.registry import make as make_policy
 from timegap_env.experiments.stats import bootstrap_mean
@@ -69,10 +69,11 @@ def crosscheck_lines(rows: list[dict[str, Any]]) -> list[str]:
     lines = ["# SUMO against the native simulator: the physics", "",
              "Each leader piece drives a platoon of five followers at one constant setting, no degradation, with the "
              "env's sensors, monitor and chart (`timegap_env.experiments.crosscheck`). Amplification: the largest ratio "
-             "of a follower's peak |acceleration| to its predecessor's (above 1: a disturbance grew); stable: the share "
+             "of a follower's peak |acceleration| to its predecessor's, each peak at least 0.1 m/s^2 (above 1: a "
+             "disturbance grew); stable: the share "
              "of pieces where no ratio exceeds 1.01; gap std: the actual time gap's standard deviation [s]; alarms: the "
              "share of follower-ticks the chart is in alarm; collisions: pieces with one.", ""]
-    sims = list(SIMULATORS)
+    sims = list(SETUPS)
     for source in SOURCES:
         for v2v in (False, True):
             subset = [row for row in rows if row["source"] == source and row["v2v"] == v2v]
@@ -93,32 +94,41 @@ def crosscheck_lines(rows: list[dict[str, Any]]) -> list[str]:
                     cells.append(" / ".join(form.format(value) for value in values))
                 lines.append(f"| {setting:g} s | " + " | ".join(cells) + " |")
             lines.append("")
-    lines += ["## SUMO minus native, over every piece and setting", "",
-              "| source | V2V | SUMO model | " + " | ".join(f"{metric} [95 % CI]" for metric in DIFFERENCES)
-              + " | same stability verdict |", "|---|---|---|" + "---|" * (len(DIFFERENCES) + 1)]
+    lines += ["## SUMO minus native", "",
+              "Each piece's difference averaged over the settings, the mean over the pieces with its 95 % bootstrap "
+              "interval over the pieces; in brackets after it, the largest difference at any one piece and setting.",
+              "", "| source | V2V | SUMO model | pieces | " + " | ".join(f"{metric} [95 % CI] (largest)"
+                                                                       for metric in DIFFERENCES)
+              + " | same stability verdict |", "|---|---|---|---|" + "---|" * (len(DIFFERENCES) + 1)]
     for row in difference_rows(rows):
-        lines.append(f"| {row['source']} | {'on' if row['v2v'] else 'off'} | {row['simulator']} | "
-                     + " | ".join(f"{row[m]:+.3f} [{row[m + '_low']:+.3f}, {row[m + '_high']:+.3f}]" for m in DIFFERENCES)
+        lines.append(f"| {row['source']} | {'on' if row['v2v'] else 'off'} | {row['simulator']} | {row['pieces']} | "
+                     + " | ".join(f"{row[m]:+.3f} [{row[m + '_low']:+.3f}, {row[m + '_high']:+.3f}] "
+                                  f"({row[m + '_largest']:+.2f})" for m in DIFFERENCES)
                      + f" | {row['same_verdict']:.0%} |")
     return lines + [""]
 
 
 def difference_rows(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
-    """Per source, V2V and SUMO model: the paired differences (SUMO - native) of DIFFERENCES over pieces x settings,
-    bootstrap intervals, and the share of (piece, setting) with the same string-stability verdict."""
+    """Per source, V2V and SUMO model: the paired differences (SUMO - native) of DIFFERENCES, each piece's averaged
+    over the settings, with bootstrap intervals over the pieces (the settings of a piece are not independent), the
+    largest difference at any (piece, setting), and the share of (piece, setting) with the same stability verdict."""
     native = {(r["source"], r["seed"], r["v2v"], r["setting"]): r for r in rows if r["simulator"] == "native"}
     out = []
     for source in SOURCES:
         for v2v in (False, True):
-            for sim in [name for name in SIMULATORS if name != "native"]:
+            for sim in [name for name in SETUPS if name != "native"]:
                 pairs = [(r, native[(r["source"], r["seed"], r["v2v"], r["setting"])]) for r in rows
                          if r["source"] == source and r["v2v"] == v2v and r["simulator"] == sim]
                 if not pairs:
                     continue
-                row: dict[str, Any] = {"source": source, "v2v": v2v, "simulator": sim, "n": len(pairs)}
+                seeds = sorted({a["seed"] for a, _ in pairs})
+                row: dict[str, Any] = {"source": source, "v2v": v2v, "simulator": sim, "pieces": len(seeds)}
                 for metric in DIFFERENCES:
-                    mean, low, high = bootstrap_mean(np.array([a[metric] - b[metric] for a, b in pairs]))
-                    row |= {metric: mean, f"{metric}_low": low, f"{metric}_high": high}
+                    per_piece = [np.mean([a[metric] - b[metric] for a, b in pairs if a["seed"] == seed])
+                                 for seed in seeds]
+                    mean, low, high = bootstrap_mean(np.array(per_piece))
+                    largest = max((a[metric] - b[metric] for a, b in pairs), key=abs)
+                    row |= {metric: mean, f"{metric}_low": low, f"{metric}_high": high, f"{metric}_largest": largest}
                 row["same_verdict"] = float(np.mean([a["string_stable"] == b["string_stable"] for a, b in pairs]))
                 out.append(row)
     return out
@@ -131,7 +141,7 @@ def crosscheck_figure(rows: list[dict[str, Any]], path: Path) -> None:
     for column, source in enumerate(sources):
         for line, v2v in enumerate((False, True)):
             ax = axes[line][column]
-            for sim in SIMULATORS:
+            for sim in SETUPS:
                 subset = [row for row in rows if row["source"] == source and row["v2v"] == v2v and row["simulator"] == sim]
                 settings = sorted({row["setting"] for row in subset})
                 ax.plot(settings, [np.mean([r["amplification"] for r in subset if r["setting"] == s]) for s in settings],
@@ -188,8 +198,8 @@ def transfer_lines(returns: dict[str, dict[str, np.ndarray]], seeds: list[int]) 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--pieces", type=cli.count, nargs=len(SOURCES), default=[3, 10, 10],
-                        metavar="N", help=f"leader pieces of each of {list(SOURCES)} (default: %(default)s)")
+    parser.add_argument("--pieces", type=cli.count, nargs=len(SOURCES), default=[3, 10, 10], metavar="N",
+                        help=f"distinct leader pieces of each of {list(SOURCES)}, at most (default: %(default)s)")
     parser.add_argument("--held-out", type=cli.count, default=50, help="held-out episodes of the transfer")
     parser.add_argument("--model", type=Path, nargs="*", default=[Path("results/ppo_v1")], help="learned v1 runs")
     parser.add_argument("--chart-step-tuning", type=Path, default=None,

@@ -92,7 +92,7 @@ from timegap_env.envs.info import summary_of, truth_of
 from timegap_env.envs.observation import MONITOR_FEATURES, feature_columns, observation_space
 from timegap_env.envs.sb3 import TimeGapVecEnv
 from timegap_env.experiments.training import (
-    check_seeds, load_hyperparams, with_env_config,
+    CURVE_COLUMNS, CURVE_FILE, check_seeds, load_hyperparams, with_env_config,
 )
 from timegap_env.experiments.backends import Backend
 from timegap_env.experiments.stats import bootstrap_mean
@@ -100,7 +100,7 @@ from timegap_env.experiments.task_map import WEIGHTINGS, Plan, choose_references
 from timegap_env.experiments.value import DEFAULT_TRAIN_EPISODES, all_oracles, choose_oracle, constants, measure_lookup, run
 
 REPORT_FILE = "training.md"
-CURVE_FILE, CURVE_FIGURE = "curve.csv", "curve.png"
+CURVE_FIGURE = "curve.png"
 TENSORBOARD_DIR = "tensorboard"  # TensorBoard's logs in the run directory, unless --tensorboard-log
 RUN_CONTENTS = {MODEL_FILE, VECNORMALIZE_FILE, ENV_FILE, REPORT_FILE, CURVE_FILE, CURVE_FIGURE, TENSORBOARD_DIR}
 WARMUP_KEYS = {"n_timesteps", "env_kwargs"}  # of the warm-up file's env section
@@ -337,7 +337,7 @@ def write_curve(points: list[tuple[int, float]], reference: CurveReference, out:
     returns on the same episodes) and curve.png."""
     with open(out / CURVE_FILE, "w", newline="") as file:
         writer = csv.writer(file)
-        writer.writerow(["timesteps", "mean_return", "share_of_oracle_gap", "best_blind_return", "oracle_return"])
+        writer.writerow(CURVE_COLUMNS)
         writer.writerows([(steps, f"{value:.4f}", f"{reference.share(value):.4f}", f"{reference.blind_return:.4f}",
                            f"{reference.oracle_return:.4f}") for steps, value in points])
     steps, values = np.array([p[0] for p in points]), np.array([p[1] for p in points])
@@ -398,7 +398,7 @@ def share_text(reference: CurveReference, learned: float) -> str:
     if math.isfinite(share):
         return f"{share:.2f}"
     low, high = reference.gap_interval
-    return (f"n/a: the oracle ({reference.oracle_return:.1f}) does not beat the best constant "
+    return (f"n/a: the oracle ({reference.oracle_return:.1f}) does not measurably beat the best constant "
             f"({reference.blind_return:.1f}) on these episodes, its gain's interval [{low:.1f}, {high:.1f}] not above 0, "
             "so there is no gap to capture")
 

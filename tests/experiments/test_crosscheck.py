@@ -8,7 +8,7 @@ import pytest
 
 from timegap_env.config import EnvConfig
 from timegap_env.experiments.backends import Backend
-from timegap_env.experiments.crosscheck import METRICS, SIMULATORS, crosscheck_rows, drive, piece_rows
+from timegap_env.experiments.crosscheck import METRICS, SETUPS, crosscheck_rows, drive, piece_rows
 from timegap_env.leaders import LeaderProfile, make_leader
 
 
@@ -36,6 +36,24 @@ def test_unknown_sources_are_named_before_any_work() -> None:
 def test_a_piece_runs_through_every_simulator() -> None:
     pytest.importorskip("libsumo")
     rows = piece_rows("paper", 10_000, EnvConfig.from_dict({"setting_levels": (1.0, 1.6)}))
-    assert len(rows) == len(SIMULATORS) * 2 * 2
-    assert {row["simulator"] for row in rows} == set(SIMULATORS)
+    assert len(rows) == len(SETUPS) * 2 * 2
+    assert {row["simulator"] for row in rows} == set(SETUPS)
     assert all(np.isfinite(row[metric]) for row in rows for metric in METRICS)
+
+
+@pytest.mark.sumo
+@pytest.mark.parametrize("setup", ["sumo_cc", "sumo_cacc"])
+def test_a_steady_sumo_platoon_keeps_its_setting(setup: str) -> None:
+    pytest.importorskip("libsumo")
+    config = EnvConfig().nested_overrides(SETUPS[setup])
+    metrics = drive(config, LeaderProfile.from_speed(np.full(600, 25.0)), 1.4, v2v=True, seed=0)
+    assert abs(metrics["gap_error"]) < 0.01 and metrics["gap_std"] < 0.01  # s0 and the setting mapped, in seconds
+    assert metrics["alarm_rate"] == 0.0 and metrics["collision"] == 0.0
+
+
+def test_a_recorded_source_gives_distinct_pieces() -> None:
+    from timegap_env.experiments.crosscheck import distinct_seeds
+
+    seeds = distinct_seeds("paper", 3, EnvConfig())
+    profiles = {make_leader("paper", seed).speed.tobytes() for seed in seeds}
+    assert len(seeds) == len(profiles) == 3

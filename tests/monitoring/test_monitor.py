@@ -342,3 +342,11 @@ def test_raw_gap_differs_from_the_posterior_only_in_what_it_reports():
     np.testing.assert_array_equal(raw.n_measurements, bayes.n_measurements)  # the same window, kept
     np.testing.assert_array_equal(raw.zts, bayes.zts)
     assert not np.allclose(raw.tau_mean, bayes.tau_mean)
+
+
+def test_a_raw_gap_recentre_resets_only_the_followers_it_names():
+    monitor = TimeGapMonitor(1, 2, 1.2, MonitorConfig(estimator="raw_gap"))
+    s0 = MonitorConfig().prior_standstill_spacing
+    monitor.update_block(np.full((3, 1, 2), 20.0), s0 + np.full((3, 1, 2), 1.5 * 20.0))
+    monitor.recenter(1.6, np.array([[True, False]]))
+    np.testing.assert_allclose(monitor.tau_mean[0], [1.6, 1.5])  # the other keeps its last tick's gap

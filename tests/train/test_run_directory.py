@@ -121,7 +121,7 @@ def test_training_md_says_why_there_is_no_share_of_the_oracle_gap() -> None:
     reference = train_ppo.CurveReference([9000], 1.0, -159.6, "oracle_lookup_episode", -162.4, (-5.0, -0.5))
     assert math.isnan(reference.share(-160.0))
     assert train_ppo.share_text(reference, -160.0) == (
-        "n/a: the oracle (-162.4) does not beat the best constant (-159.6) on these episodes, its gain's interval "
+        "n/a: the oracle (-162.4) does not measurably beat the best constant (-159.6) on these episodes, its gain's interval "
         "[-5.0, -0.5] not above 0, so there is no gap to capture")
     assert train_ppo.share_text(train_ppo.CurveReference([9000], 1.0, -160.0, "o", -150.0, (2.0, 18.0)), -155.0) == "0.50"
     # a gain whose interval reaches 0 is no gap to divide by: v1's check episodes, a gain of 0.4

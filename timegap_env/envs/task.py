@@ -35,6 +35,7 @@ from timegap_env.envs.reward import (
 from timegap_env.envs.step_kernel import StepRules, StepState, fused_step
 from timegap_env.envs.totals import EpisodeTotals
 from timegap_env.monitoring.loop import MonitoredPlatoon
+from timegap_env.sim.platoon import Platoon
 
 
 @dataclasses.dataclass(frozen=True)
@@ -121,7 +122,7 @@ class PlatoonTask:
         self.episodes = Episodes(config, n_envs)
         self.ladder = SettingLadder(config, n_envs)
         self.loop = MonitoredPlatoon(config.platoon, config.monitor, config.chart, config.sensors, n_envs,
-                                     simulator=_simulator(config, n_envs))
+                                     physics=_physics(config, n_envs))
         self.totals = EpisodeTotals.zeros(n_envs)
         self._previous_accel = np.zeros((n_envs, self.n_followers))  # before the next step's first tick [m/s^2]
         self._accel_envelope = np.zeros((n_envs, self.n_followers + 1))  # decaying peak |acceleration|, leader first [m/s^2]
@@ -174,12 +175,12 @@ class PlatoonTask:
         try:
             episodes.draw_many(envs, rngs, options)
             loop.degrade_many(envs, [episodes.degradations[env] for env in envs], episodes.packet_loss_keys[envs])
+            loop.reset(episodes.leader_speed[:, 0], episodes.leader_accel[:, 0], mask=mask,
+                       setting=episodes.initial_setting[:, None], noise_key=episodes.noise_keys,
+                       dropout_probability=episodes.dropout_probability)  # SUMO starts here, and may fail
         except BaseException:  # the envs are half reset: they name no episode (the env shells refuse to step them)
             episodes.scenario[envs] = ""
             raise
-        loop.reset(episodes.leader_speed[:, 0], episodes.leader_accel[:, 0], mask=mask,
-                   setting=episodes.initial_setting[:, None], noise_key=episodes.noise_keys,
-                   dropout_probability=episodes.dropout_probability)
         loop.platoon.set_v2v(self._v2v_during(loop.ticks), mask=mask)  # the others keep their last tick's
         self._previous_accel[mask] = loop.platoon.a[mask, 1:]
         self._accel_envelope[mask] = np.abs(loop.platoon.a[mask])
@@ -360,7 +361,7 @@ class PlatoonTask:
         )
 
 
-def _simulator(config: EnvConfig, n_envs: int) -> Any:
+def _physics(config: EnvConfig, n_envs: int) -> Platoon | None:
     """The platoon of ``config.simulator`` for ``n_envs`` envs; None: the native one (MonitoredPlatoon's)."""
     if config.simulator == "native":
         return None

@@ -53,7 +53,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 class Backend:
-    """Runs pieces of work serially or on Ray; :meth:`describe` says how the last :meth:`map` spread them."""
+    """Runs pieces of work serially, in worker processes (``workers``: how many; None: one per CPU) or on Ray
+    (``address``: the cluster); :meth:`describe` says how the last :meth:`map` spread them."""
 
     def __init__(self, name: str = "serial", address: str | None = None, workers: int | None = None) -> None:
         if name not in BACKENDS:
@@ -71,7 +72,8 @@ class Backend:
         return cls(args.backend, args.address, getattr(args, "workers", None))
 
     def map(self, function: Callable[..., Any], pieces: Sequence[tuple[Any, ...]]) -> list[Any]:
-        """``[function(*piece) for piece in pieces]``, here or as Ray tasks, in the order of ``pieces``."""
+        """``[function(*piece) for piece in pieces]``, here, in worker processes or as Ray tasks, in the order of
+        ``pieces``."""
         start = time.perf_counter()
         if self.name == "serial":
             results = [function(*piece) for piece in pieces]

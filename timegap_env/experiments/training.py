@@ -23,6 +23,10 @@ LATER_CHECK_EPISODES = 100  # ... from TimeGapMonitor-v1 on, whose collision ter
 def check_seeds(version: int) -> list[int]:
     """The seeds of the end-of-training check (and the learning curve) of a run in env version ``version``."""
     return list(range(EVAL_SEED, EVAL_SEED + (EVAL_EPISODES if version == 0 else LATER_CHECK_EPISODES)))
+
+
+CURVE_FILE = "curve.csv"  # a run's learning curve (train_ppo writes it, compare_curves reads it)
+CURVE_COLUMNS = ("timesteps", "mean_return", "share_of_oracle_gap", "best_blind_return", "oracle_return")
 RUN_KEYS = {"n_envs", "n_timesteps", "policy", "normalize", "frame_stack", "env_kwargs"}  # rl-zoo3's; the rest: PPO's
 STRING_KWARGS = ("policy_kwargs", "normalize")  # may be Python expressions as in rl-zoo3: "dict(net_arch=[64])"
 
@@ -64,4 +68,5 @@ def with_env_config(env_kwargs: dict[str, Any], overrides: dict[str, Any]) -> di
     return {**env_kwargs, "config": {**(env_kwargs.get("config") or {}), **overrides}} if overrides else env_kwargs
 
 
-__all__ = ["EVAL_EPISODES", "EVAL_SEED", "LATER_CHECK_EPISODES", "check_seeds", "RUN_KEYS", "STRING_KWARGS", "load_hyperparams", "with_env_config"]
+__all__ = ["CURVE_COLUMNS", "CURVE_FILE", "EVAL_EPISODES", "EVAL_SEED", "LATER_CHECK_EPISODES", "RUN_KEYS",
+           "STRING_KWARGS", "check_seeds", "load_hyperparams", "with_env_config"]

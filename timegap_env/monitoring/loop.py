@@ -43,7 +43,7 @@ class MonitoredPlatoon:
     (:class:`~timegap_env.monitoring.monitor.TimeGapMonitor`), ``chart`` (a chart from
     :func:`~timegap_env.monitoring.charts.make_chart`), ``degradation``
     (:class:`~timegap_env.sim.degradation.DegradationTable`, none until :meth:`degrade`);
-    ``ticks`` (n_envs,) since each env's reset. ``simulator``: the platoon to monitor, built for ``platoon`` and
+    ``ticks`` (n_envs,) since each env's reset. ``physics``: the platoon to monitor, built for ``platoon`` and
     ``n_envs`` (another simulator's, such as :class:`~timegap_env.sim.sumo.SumoPlatoon`); None: the native one.
     """
 
@@ -55,12 +55,12 @@ class MonitoredPlatoon:
         sensors: SensorConfig = SensorConfig(),
         n_envs: int = 1,
         seed: int | None = None,
-        simulator: Platoon | None = None,
+        physics: Platoon | None = None,
     ) -> None:
         for name, config in (("monitor", monitor), ("chart", chart)):
             if not np.isclose(config.dt, platoon.dt):
                 raise ValueError(f"{name}.dt = {config.dt}: must equal PlatoonConfig.dt = {platoon.dt}")
-        self.platoon = Platoon(platoon, n_envs) if simulator is None else simulator
+        self.platoon = Platoon(platoon, n_envs) if physics is None else physics
         self.sensors = Sensors(sensors, n_envs, seed, platoon.n_followers)
         self.monitor = TimeGapMonitor(n_envs, platoon.n_followers, platoon.initial_setting, monitor)
         self.chart = make_chart(n_envs, platoon.n_followers, platoon.initial_setting, chart)

@@ -200,6 +200,12 @@ class TimeGapMonitor:
         np.copyto(memory.prior_tau, setting, where=vehicles)
         for sums in (memory.block_sum, memory.window_sums, memory.slots):  # (n_envs, n_vehicles, ...)
             np.copyto(sums, 0.0, where=vehicles.reshape(vehicles.shape + (1,) * (sums.ndim - 2)))
+        if self._rule.raw_gap and self._moments is not None:  # the others keep their last tick's raw gap
+            fresh = Moments(*np.zeros((len(Moments._fields),) + self.shape))
+            _posterior_of_window(memory.window_sums, memory.prior_tau, tuple(self._prior), tuple(fresh))
+            for target, value in zip(self._posterior, fresh):
+                np.copyto(target, value, where=vehicles)  # the recentred ones: their prior
+            return
         self._moments = None  # the prior, recomputed when first read
 
     def _latest(self) -> Moments:
@@ -234,7 +240,7 @@ class TimeGapMonitor:
 
     @property
     def tau_mean(self) -> np.ndarray:
-        """Posterior mean of tau (n_envs, n_vehicles) [s]."""
+        """Posterior mean of tau (n_envs, n_vehicles) [s] (the raw gap, with ``estimator = "raw_gap"``)."""
         return self._latest().mean_tau.copy()
 
     @property
@@ -328,9 +334,10 @@ def update_env(speed, spacing, memory, slot, rule, prior, out, out_moments, e, c
                     window_sums[i, n] = slots[i, p + 1, n] * rule.suffix_weight[p] + block_sum[i, n]
             sums = WindowSums(window_sums[i, 0], window_sums[i, 1], window_sums[i, 2], window_sums[i, 3],
                               window_sums[i, 4])
-            moments = posterior_moments(sums, memory.prior_tau[e, i], prior)
             if rule.raw_gap:
                 moments = _raw_gap(v, s, used, memory.prior_tau[e, i], prior)
+            else:
+                moments = posterior_moments(sums, memory.prior_tau[e, i], prior)
             out.tau_mean[k, c, i], out.tau_var[k, c, i] = moments.mean_tau, moments.var_tau
             if k == n_ticks - 1:  # field by field: a tuple indexed by a variable is slow in numba
                 out_moments.mean_s0[e, i], out_moments.mean_tau[e, i] = moments.mean_s0, moments.mean_tau
