@@ -7,7 +7,7 @@ PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 EXTRAS := dev,train,render,docs
 
-.PHONY: install demo test typecheck package clients sumo morl train recipes bench calibrate map degradation clean
+.PHONY: install demo test typecheck package clients sumo morl train recipes group-idm bench calibrate map degradation clean
 
 install: $(STAMP)
 
@@ -44,6 +44,9 @@ package: $(STAMP)  # pip install . / the wheel / the sdist, core only, in a thro
 
 clients:  # the env through SB3, sb3-contrib, rl-zoo3, RLlib, TorchRL, Tianshou, gymnasium's wrappers (own venv)
 	bash .ci/clients
+
+group-idm: $(STAMP)  # v1's policies behind highway-env's IDM driver (issue 25's IDM group; ~40 min: slow leaders)
+	MPLBACKEND=Agg $(PY) -m train.evaluate_task --chart-step-tuning results/rule/v1/tuning.csv --model results/ppo_v1 results/ppo_v1_nomonitor results/ppo_v1_rawgap --groups idm --out results/task/idm
 
 sumo: $(STAMP)  # SUMO as a second simulator (issue 26): the sumo extra, the tests marked sumo, results/sumo (~10 min)
 	bash .ci/sumo
