@@ -90,6 +90,18 @@ class Degradation:
                 self._fail("end", self.end, f"must be None (never) or a time after onset = {self.onset}, "
                            f"at most {MAX_TIME:g} [s]")
 
+    @classmethod
+    def drawn(cls, kind: str, followers: tuple[int, ...], size: float | None = None, onset: float = 0.0,
+              end: float | None = None, car: str | None = None) -> Degradation:
+        """A degradation as :func:`draw_degradation` draws it: valid by construction (a kind of DEGRADATIONS, follower
+        numbers as ints, times and size as floats in their ranges), so not checked again (the checks were a sixth
+        of a batched reset's time)."""
+        degradation = object.__new__(cls)
+        for name, value in (("kind", kind), ("followers", followers), ("size", size), ("onset", onset), ("end", end),
+                            ("car", car)):
+            object.__setattr__(degradation, name, value)
+        return degradation
+
     def _time_or_size(self, field: str, rule: str) -> None:
         """Check that ``field`` is a real number (not a bool) that is finite as a float, and store it as a float."""
         value = getattr(self, field)
@@ -186,15 +198,15 @@ def draw_degradation(rng: np.random.Generator, config: DegradationConfig, n_foll
         from timegap_env.sim.presets import COMMERCIAL_ACC, acc_presets  # scipy-backed: imported when used
 
         cars = sorted(car for car in acc_presets() if car != COMMERCIAL_ACC)
-        return tuple(Degradation(kind, (f,), car=cars[rng.integers(len(cars))]) for f in followers)
+        return tuple(Degradation.drawn(kind, (f,), car=cars[rng.integers(len(cars))]) for f in followers)
     if record.range_field is None:
-        return (Degradation(kind, followers, onset=onset, end=end),)
+        return (Degradation.drawn(kind, followers, onset=float(onset), end=end),)
     size = float(rng.uniform(*config.size_range(kind)))
     if record.whole_ticks:
         size = round_to_tick(size, dt)
     if record.signed and rng.random() < 0.5:
         size = -size
-    return (Degradation(kind, followers, size=size, onset=onset, end=end),)
+    return (Degradation.drawn(kind, followers, size=size, onset=float(onset), end=end),)
 
 
 def round_to_tick(time: float, dt: float) -> float:
@@ -310,19 +322,33 @@ class DegradationTable:
         for i, (active_value, other_value) in enumerate(zip(while_active, otherwise)):  # in TRUE_PARAMETERS order
             self._while_active[i, envs], self._otherwise[i, envs] = active_value, other_value
 
-    def _find_stable_settings(self, env: int) -> None:
-        """Env ``env``'s smallest string-stable settings (``stable``) for its nominal and degraded parameters, with
-        the link up and down."""
+    def _find_stable_settings(self, envs: np.ndarray) -> None:
+        """The smallest string-stable settings (``stable``) of the envs ``envs`` for their nominal and degraded
+        parameters, with the link up and down: the nominal ones once for all; a follower whose degraded parameters
+        are its nominal ones (not hit, or hit in the radar or the link only) copies them, the others are searched."""
         cfg = self.config
-        for f in range(cfg.n_followers):
-            for (degraded, up), table in self.stable.items():
-                lag, gain = (self.lag[env, f], self.gain[env, f]) if degraded else (self._nominal_lag[f], self._nominal_gain[f])
-                k_s, k_v = (self.k_s[env, f], self.k_v[env, f]) if degraded else (cfg.k_s, cfg.k_v)
-                delay = cfg.v2v_delay + (self.extra_delay[env, f] * cfg.dt if degraded else 0.0)
-                loss = float(self.packet_loss[env, f]) if degraded else 0.0
-                table[env, f] = smallest_stable_setting(float(lag), float(gain), float(k_s), float(k_v), cfg.k_a,
-                                                        cfg.k_f if up else 0.0, round(float(delay), 9), loss, cfg.dt)
-        self._stale[env] = False
+        for up in (False, True):
+            nominal = [self._stable_setting(self._nominal_lag[f], self._nominal_gain[f], cfg.k_s, cfg.k_v, 0.0, 0.0, up)
+                       for f in range(cfg.n_followers)]
+            self.stable[False, up][envs] = self.stable[True, up][envs] = nominal
+        own = ((self.lag[envs] != self._nominal_lag) | (self.gain[envs] != self._nominal_gain)
+               | (self.k_s[envs] != cfg.k_s) | (self.k_v[envs] != cfg.k_v) | (self.extra_delay[envs] != 0)
+               | (self.packet_loss[envs] != 0.0))
+        for env, f in zip(*np.nonzero(own)):
+            env = envs[env]
+            for up in (False, True):
+                self.stable[True, up][env, f] = self._stable_setting(
+                    self.lag[env, f], self.gain[env, f], self.k_s[env, f], self.k_v[env, f],
+                    self.extra_delay[env, f] * cfg.dt, self.packet_loss[env, f], up)
+        self._stale[envs] = False
+
+    def _stable_setting(self, lag: float, gain: float, k_s: float, k_v: float, extra_delay: float, loss: float,
+                        up: bool) -> float:
+        """:func:`smallest_stable_setting` of one follower's parameters (``extra_delay`` [s] beyond the V2V delay),
+        with the link up or down."""
+        cfg = self.config
+        return smallest_stable_setting(float(lag), float(gain), float(k_s), float(k_v), cfg.k_a, cfg.k_f if up else 0.0,
+                                       round(float(cfg.v2v_delay + extra_delay), 9), float(loss), cfg.dt)
 
     def write_faults(self, platoon: Platoon, env: int, key: int | np.unsignedinteger) -> None:
         """Write env ``env``'s degradations into ``platoon.faults``; ``key`` (uint64) seeds its packet losses."""
@@ -361,8 +387,8 @@ class DegradationTable:
         ``smallest_stable_setting`` [s] for the true parameters and link, and the true parameters of
         TRUE_PARAMETERS.
         """
-        for env in np.flatnonzero(self._stale):
-            self._find_stable_settings(int(env))
+        if self._stale.any():
+            self._find_stable_settings(np.flatnonzero(self._stale))
         active = self.active(ticks)
         parameters = np.where(active, self._while_active, self._otherwise)
         stable = np.where(active, np.where(v2v, self.stable[True, True], self.stable[True, False]),
