@@ -41,25 +41,9 @@ from timegap_env.experiments.registry import make as make_policy
 from timegap_env.experiments.task_map import (
     FRONT_OBJECTIVES, RECIPE_SEED_START, REFERENCES, V1_GROUPS, Plan, v1_headroom,
 )
-from timegap_env.leaders import default_ngsim_path, default_openacc_dir, openacc_paths
-from timegap_env.leaders.ngsim import PATH_VARIABLE as NGSIM_PATH_VARIABLE
-from timegap_env.leaders.openacc import PATH_VARIABLE as OPENACC_PATH_VARIABLE
+from timegap_env.leaders.scenarios import missing_data
 
 DEFAULT_POLICIES = ("rule_platoon", "chart_step", "v2v_aware")
-
-
-def missing_data(group: str) -> str:
-    """Why ``group`` cannot run here ("" if it can): the NGSIM or OpenACC data it drives with is not found."""
-    if group == "ngsim_in_band" and not default_ngsim_path().is_file():
-        return f"no NGSIM data at {default_ngsim_path()} (${NGSIM_PATH_VARIABLE})"
-    if group == "openacc":
-        try:
-            found = bool(openacc_paths(default_openacc_dir()))
-        except OSError:
-            found = False
-        if not found:
-            return f"no OpenACC data in {default_openacc_dir()} (${OPENACC_PATH_VARIABLE})"
-    return ""
 
 
 def learned(path: Path, config: EnvConfig) -> Any:
@@ -177,7 +161,7 @@ def main() -> None:
     rows, sections, notes = [], [], []
     fronts: dict[str, list[dict[str, Any]]] = {}  # group -> the constants' and references' Pareto points
     for group in args.groups:
-        missing = missing_data(group)
+        missing = missing_data(group)  # a group of a recorded leader is named after its scenario
         if missing:
             notes.append(f"- group {group} left out: {missing}")
             continue

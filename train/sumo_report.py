@@ -44,24 +44,10 @@ from timegap_env.experiments.crosscheck import SETUPS, SOURCES, crosscheck_rows,
 from timegap_env.experiments.registry import fixed_name, load_learned, tuned_chart_step
 from timegap_env.experiments.registry import make as make_policy
 from timegap_env.experiments.stats import bootstrap_mean
-from timegap_env.leaders import default_ngsim_path, default_openacc_dir, openacc_paths
+from timegap_env.leaders.scenarios import missing_data
 from timegap_env.sim.sumo import import_libsumo
 
 DIFFERENCES = ("amplification", "gap_std", "alarm_rate")  # the metrics whose SUMO - native difference gets an interval
-
-
-def missing_data(source: str) -> str:
-    """Why ``source``'s leaders cannot be read here ("" if they can)."""
-    if source == "ngsim" and not default_ngsim_path().is_file():
-        return f"no NGSIM data at {default_ngsim_path()}"
-    if source == "openacc":
-        try:
-            found = bool(openacc_paths(default_openacc_dir()))
-        except OSError:
-            found = False
-        if not found:
-            return f"no OpenACC data in {default_openacc_dir()}"
-    return ""
 
 
 def crosscheck_lines(rows: list[dict[str, Any]]) -> list[str]:
@@ -214,7 +200,7 @@ def main() -> None:
     notes = []
     pieces = {}
     for source, count in zip(SOURCES, args.pieces):
-        missing = missing_data(source)
+        missing = missing_data(SOURCES[source])
         if missing:
             notes.append(f"- source {source} left out: {missing}")
         else:

@@ -35,3 +35,13 @@ def test_idm_family_is_a_human_driver_behind_scripted_braking():
     assert first.name == "idm" and first.speed.size == disturbance.speed.size
     assert first.accel.min() < -1.0  # it brakes in answer to the disturbance ...
     assert first.accel.min() > disturbance.accel.min()  # ... more gently than the scripted braking
+
+
+def test_missing_recorded_data_is_named_with_its_variable(tmp_path, monkeypatch):
+    from timegap_env.leaders.scenarios import missing_data
+
+    monkeypatch.setenv("TIMEGAP_NGSIM_PATH", str(tmp_path / "absent.csv"))
+    monkeypatch.setenv("TIMEGAP_OPENACC_PATH", str(tmp_path))
+    assert missing_data("ngsim_in_band") == f"no NGSIM data at {tmp_path / 'absent.csv'} ($TIMEGAP_NGSIM_PATH)"
+    assert missing_data("openacc") == f"no OpenACC data in {tmp_path} ($TIMEGAP_OPENACC_PATH)"
+    assert missing_data("paper") == ""

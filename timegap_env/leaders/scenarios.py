@@ -262,3 +262,18 @@ def family_params(overrides: Mapping[str, Any]) -> dict[str, Any]:
         except ValueError as error:
             raise ValueError(f"EnvConfig.leader_params[{name!r}]: {error}") from error
     return params
+
+
+def missing_data(scenario: str) -> str:
+    """Why the leaders of ``scenario`` cannot be built here ("" if they can): the NGSIM or OpenACC data they are
+    read from is not found (the path and the variable that sets it)."""
+    if scenario.startswith("ngsim") and not ngsim.default_ngsim_path().is_file():
+        return f"no NGSIM data at {ngsim.default_ngsim_path()} (${ngsim.PATH_VARIABLE})"
+    if scenario == "openacc":
+        try:
+            found = bool(openacc.openacc_paths(openacc.default_openacc_dir()))
+        except OSError:
+            found = False
+        if not found:
+            return f"no OpenACC data in {openacc.default_openacc_dir()} (${openacc.PATH_VARIABLE})"
+    return ""
