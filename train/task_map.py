@@ -165,7 +165,7 @@ def main() -> None:
     args = parser.parse_args()
     cli.output_dir(args.out)
     plan, backend = Plan(args.train, args.selection, args.held_out), Backend.from_args(args)
-    work = cli.work_directory(args.out)
+    work = cli.work_directory(args.out, copy=True)  # results/task also holds evaluate_task's folders: kept
     start = time.perf_counter()
     rows, fronts = task_map(plan, backend)
     runtime = f"{time.perf_counter() - start:.0f} s ({backend.name} backend)"
