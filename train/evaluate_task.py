@@ -37,6 +37,7 @@ from timegap_env.agents.protocol import ENV_FILE, EVAL_SEED_START, read_env_file
 from timegap_env.config import EnvConfig
 from timegap_env.experiments.backends import Backend, add_arguments
 from timegap_env.experiments.registry import load_learned, tuned_chart_step
+from timegap_env.experiments.stats import wilson_interval
 from timegap_env.experiments.registry import make as make_policy
 from timegap_env.experiments.task_map import (
     FRONT_OBJECTIVES, RECIPE_SEED_START, REFERENCES, V1_GROUPS, Plan, v1_headroom,
@@ -66,14 +67,16 @@ def group_lines(group: str, reference: dict[str, Any], rows: list[dict[str, Any]
              f"{reference['best_blind_collisions']} collisions); the full oracle's gain over it "
              f"{reference['full_oracle_gain']:.1f} (`{reference['full_oracle_chosen']}`).", "",
              "| policy | return | gain over best blind [CI] | the same without the collision term [CI] "
-             f"| gain over {baseline} [CI] | share of the oracle's gain | collisions |", "|---|---|---|---|---|---|---|"]
+             f"| gain over {baseline} [CI] | share of the oracle's gain | collisions [95 % Wilson CI of the rate] |",
+             "|---|---|---|---|---|---|---|"]
     for row in rows:
+        _, low, high = wilson_interval(row["collisions"], row["episodes"])
         lines.append(f"| {row['policy']} | {row['return']:.1f} | {row['gain']:.1f} [{row['gain_low']:.1f}, "
                      f"{row['gain_high']:.1f}] | {row['gain_without_collisions']:.1f} "
                      f"[{row['gain_without_collisions_low']:.1f}, {row['gain_without_collisions_high']:.1f}] | "
                      f"{row['gain_over_baseline']:.1f} [{row['gain_over_baseline_low']:.1f}, "
                      f"{row['gain_over_baseline_high']:.1f}] | {share(row['share_of_oracle_gain'])} | "
-                     f"{row['collisions']}/{row['episodes']} |")
+                     f"{row['collisions']}/{row['episodes']} [{low:.2f}, {high:.2f}] |")
     return lines + ["", "References (gain over the best blind constant): " + "; ".join(
         f"{ref} {reference[f'{ref}_gain']:.1f} [{reference[f'{ref}_gain_low']:.1f}, {reference[f'{ref}_gain_high']:.1f}]"
         for ref in REFERENCES) + ".", ""]

@@ -8,6 +8,7 @@ from pathlib import Path
 import pytest
 
 from timegap_env.config import EnvConfig
+from timegap_env.experiments.stats import wilson_interval
 from train import evaluate_task
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -50,6 +51,10 @@ def test_a_group_without_its_data_is_left_out_and_says_so(tmp_path, monkeypatch)
     evaluate_task.main()
     table = (out / "policies.md").read_text()
     assert "## stop_and_go" in table and "## openacc" not in table and "group openacc left out: no OpenACC data" in table
+    rule_row = next(line for line in table.splitlines() if line.startswith("| rule_platoon |"))
+    collided = int(rule_row.split("|")[-2].split("/")[0])
+    _, low, high = wilson_interval(collided, 2)  # the collisions' rate with its Wilson interval
+    assert rule_row.endswith(f"{collided}/2 [{low:.2f}, {high:.2f}] |")
     monkeypatch.setattr(sys, "argv", ["evaluate_task", "--policies", "rule_platoon", "--groups", "openacc", "--out",
                                       str(tmp_path / "none")])
     with pytest.raises(ValueError, match="none could run"):
