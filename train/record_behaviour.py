@@ -8,10 +8,12 @@
 Records, through ``gym.make``, ``gym.make_vec`` and ``timegap_env.simulate`` only:
 
 - full episodes of ``TimeGapMonitor-v0`` (observation, reward, terminated, truncated and the
-  whole info of every step) in the platoon and per-vehicle action modes, several seeds, leader
+  whole info of every step, the ground truth's keys included: ``truth_info=True``) in the platoon and per-vehicle action modes, several seeds, leader
   families (synthetic, NGSIM when the data is present, highway-env's IDM driver, the user's own
   speed series) and configs (EWMA and CUSUM charts, forgetting, dropouts, three followers);
 - the native vector env over more steps than an episode, so autoresets are included;
+- the same of ``TimeGapMonitor-v1`` (fewer episodes: its regimes leader, the relative action mode, the raw-gap
+  monitor);
 - one rendered frame;
 - ``simulate("paper")`` and ``simulate`` with a schedule of settings and a V2V outage.
 
@@ -52,6 +54,14 @@ EPISODES: list[dict[str, Any]] = [  # gym.make config, reset seed and options, a
                 "degradation": {"kind_weights": {"v2v_outage": 1.0}}, "setting_levels": (0.6, 0.7), "preferred_setting": 0.6},
      "seed": 0, "options": {"scenario": "hard_braking"}, "actions": 108},
 ]
+V1_EPISODES: list[dict[str, Any]] = [  # the same, of TimeGapMonitor-v1
+    {"config": None, "seed": 0, "options": None, "actions": 300},
+    {"config": None, "seed": 1, "options": {"scenario": "regimes"}, "actions": 301},
+    {"config": {"action_mode": "per_vehicle"}, "seed": 2, "options": None, "actions": 302},
+    {"config": {"action_mode": "relative", "monitor": {"estimator": "raw_gap"}}, "seed": 3, "options": None,
+     "actions": 303},
+]
+ENV_KWARGS: dict[str, Any] = {"truth_info": True}  # every info key, the ground truth's included
 VECTOR_ENVS, VECTOR_STEPS = 4, 300
 SWITCH_CHANCE = 0.15  # chance per step that the action generator picks a new setting [-]
 
@@ -77,11 +87,12 @@ def actions(levels: int, shape: tuple[int, ...], seed: int) -> Iterator[np.ndarr
         yield current.astype(np.int64)
 
 
-def record_episode(spec: dict[str, Any]) -> dict[str, Any]:
-    env = gym.make(timegap_env.ENV_ID, config=spec["config"])
+def record_episode(spec: dict[str, Any], env_id: str = timegap_env.ENV_ID) -> dict[str, Any]:
+    env = gym.make(env_id, config=spec["config"], **ENV_KWARGS)
     obs, info = env.reset(seed=spec["seed"], options=spec["options"])
     steps = [{"obs": obs, "info": info}]
-    levels = len(env.unwrapped.config.setting_levels)
+    space = env.action_space  # Discrete(levels) or MultiDiscrete([levels] * N); Discrete(3) in the relative mode
+    levels = int(space.n) if isinstance(space, gym.spaces.Discrete) else int(space.nvec[0])
     for action in actions(levels, env.action_space.shape, spec["actions"]):
         obs, reward, terminated, truncated, info = env.step(action)
         steps.append({"action": action, "obs": obs, "reward": reward, "terminated": terminated,
@@ -92,9 +103,9 @@ def record_episode(spec: dict[str, Any]) -> dict[str, Any]:
     return canonical({"steps": steps})
 
 
-def record_vector_env() -> dict[str, Any]:
-    envs = gym.make_vec(timegap_env.ENV_ID, num_envs=VECTOR_ENVS, vectorization_mode="vector_entry_point",
-                        config={"action_mode": "per_vehicle"}, autoreset_mode="same_step")
+def record_vector_env(env_id: str = timegap_env.ENV_ID) -> dict[str, Any]:
+    envs = gym.make_vec(env_id, num_envs=VECTOR_ENVS, vectorization_mode="vector_entry_point",
+                        config={"action_mode": "per_vehicle"}, autoreset_mode="same_step", **ENV_KWARGS)
     obs, infos = envs.reset(seed=20)
     steps = [{"obs": obs, "infos": infos}]
     generator = actions(len(envs.unwrapped.config.setting_levels), envs.action_space.shape, 200)
@@ -135,29 +146,32 @@ def record() -> dict[str, Any]:
     return {
         "episodes": [record_episode(spec) for spec in EPISODES],
         "vector_env": record_vector_env(),
+        "v1_episodes": [record_episode(spec, timegap_env.ENV_IDS[1]) for spec in V1_EPISODES],
+        "v1_vector_env": record_vector_env(timegap_env.ENV_IDS[1]),
         "render": record_render(),
         "simulate": record_simulations(),
     }
 
 
-def differences(before: Any, after: Any, renamed: dict[str, str], path: str = "") -> Iterator[str]:
+def differences(before: Any, after: Any, renamed: dict[str, str], path: str = "", key_order: bool = True
+                ) -> Iterator[str]:
     """Paths where ``after`` differs from ``before`` (its dict keys read through ``renamed``) in structure,
-    key order, dtype, shape or bytes."""
+    key order (unless ``key_order`` is False), dtype, shape or bytes."""
     if isinstance(before, dict) or isinstance(after, dict):
         if not (isinstance(before, dict) and isinstance(after, dict)):
             yield f"{path}: a dict on one side only"
             return
         before = {renamed.get(key, key): value for key, value in before.items()}
-        if list(before) != list(after):
+        if (list(before) if key_order else sorted(before)) != (list(after) if key_order else sorted(after)):
             yield f"{path}: keys {list(before)} -> {list(after)}"
         for key in before.keys() & after.keys():
-            yield from differences(before[key], after[key], renamed, f"{path}/{key}")
+            yield from differences(before[key], after[key], renamed, f"{path}/{key}", key_order)
     elif isinstance(before, list) or isinstance(after, list):
         if not (isinstance(before, list) and isinstance(after, list)) or len(before) != len(after):
             yield f"{path}: list lengths {len(before)} -> {len(after)}"
             return
         for i, (a, b) in enumerate(zip(before, after)):
-            yield from differences(a, b, renamed, f"{path}[{i}]")
+            yield from differences(a, b, renamed, f"{path}[{i}]", key_order)
     elif before.dtype != after.dtype or before.shape != after.shape:
         yield f"{path}: {before.dtype}{before.shape} -> {after.dtype}{after.shape}"
     elif before.tobytes() != after.tobytes():
@@ -170,6 +184,8 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--compare", type=Path, help="an earlier recording to compare this one with")
     parser.add_argument("--rename", action="append", default=[], metavar="OLD=NEW",
                         help="read the earlier recording's dict key OLD as NEW (repeatable)")
+    parser.add_argument("--any-key-order", action="store_true",
+                        help="compare dicts' keys as sets (for a change that only reorders an info's keys)")
     args = parser.parse_args(argv)
     cli.output_file(args.out)
     for pair in args.rename:
@@ -187,7 +203,7 @@ def main(argv: list[str] | None = None) -> None:
     args.out.write_bytes(pickle.dumps(recording))
     print(f"wrote {args.out}")
     if args.compare is not None:
-        found = list(differences(earlier, recording, renamed))
+        found = list(differences(earlier, recording, renamed, key_order=not args.any_key_order))
         for line in found[:50]:
             print(line)
         print(f"{len(found)} difference(s) from {args.compare}")

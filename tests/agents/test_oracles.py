@@ -13,7 +13,7 @@ LEVELS = np.asarray(CONFIG.setting_levels)
 
 
 def truth_after(options: dict, steps: int = 3, config: dict | None = None) -> dict:
-    env = gym.make("TimeGapMonitor-v0", config=config)
+    env = gym.make("TimeGapMonitor-v0", config=config, truth_info=True)
     env.reset(seed=0, options=options)
     for _ in range(steps):
         _, _, _, _, info = env.step(2)
@@ -32,7 +32,7 @@ def test_the_stability_oracle_takes_the_smallest_level_above_the_stable_setting_
 
 
 def test_the_oracles_act_on_a_batch_of_envs_from_the_vector_envs_truth():
-    envs = gym.make_vec("TimeGapMonitor-v0", num_envs=3, vectorization_mode="vector_entry_point")
+    envs = gym.make_vec("TimeGapMonitor-v0", num_envs=3, vectorization_mode="vector_entry_point", truth_info=True)
     _, infos = envs.reset(seed=[1, 2, 3])
     actions = StabilityOracle(CONFIG).act(truth_of(infos))
     assert actions.shape == (3,) and actions.dtype == np.int64

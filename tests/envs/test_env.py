@@ -15,6 +15,10 @@ from timegap_env.envs.observation import FEATURES
 
 LEVELS = np.array(EnvConfig().setting_levels)
 N_FEATURES = len(FEATURES)
+MONITOR_KEYS = {"estimate", "estimate_std", "setting", "lcl", "ucl", "alarm", "v2v", "skipped_measurements"}  # always
+TRUE_STATE_KEYS = {"actual_time_gap", "ttc", "jerk", "collision"}  # with truth_info=True, beside the truth_* keys
+REWARD_KEYS = {f"reward_{name}" for name in ("tracking", "string_stability", "safety", "collision", "comfort",
+                                             "efficiency", "preference", "switching")}
 
 
 def level_index(setting: float) -> int:
@@ -71,13 +75,20 @@ def test_action_outside_the_space_is_refused(action):
         env.step(action)
 
 
-def test_observations_stay_in_bounds_and_info_is_complete():
-    env = gym.make("TimeGapMonitor-v0", config={"dropout_probability_range": (0.05, 0.05)})
+@pytest.mark.parametrize("truth_info", [False, True])
+def test_observations_stay_in_bounds_and_info_is_complete(truth_info):
+    env = gym.make("TimeGapMonitor-v0", config={"dropout_probability_range": (0.05, 0.05)}, truth_info=truth_info)
     env.action_space.seed(0)
     _, infos = run_episode(env, lambda obs: env.action_space.sample(), seed=3)
-    step_keys = {"actual_time_gap", "estimate", "estimate_std", "setting", "lcl", "ucl", "alarm", "ttc", "jerk", "v2v",
-                 "collision", "skipped_measurements"}
-    assert step_keys <= set(infos[1])
+    if truth_info:  # the monitor's view, the platoon's true state and the ground truth
+        step_keys = {"actual_time_gap", "estimate", "estimate_std", "setting", "lcl", "ucl", "alarm", "ttc", "jerk",
+                     "v2v", "collision", "skipped_measurements"}
+        assert step_keys <= set(infos[1])
+        truth_keys = {f"truth_{name}" for name in truth_of(infos[1])}
+        assert {"truth_kind", "truth_onset", "truth_end", "truth_active", "truth_smallest_stable_setting"} <= truth_keys
+        assert set(infos[1]) == MONITOR_KEYS | TRUE_STATE_KEYS | REWARD_KEYS | truth_keys
+    else:  # the monitor's view only
+        assert set(infos[1]) == MONITOR_KEYS | REWARD_KEYS
     assert set(rewards_of(infos[1])) == {"tracking", "string_stability", "safety", "collision", "comfort", "efficiency",
                                          "preference", "switching"}
     summary = summary_of(infos[-1])
@@ -87,10 +98,11 @@ def test_observations_stay_in_bounds_and_info_is_complete():
     assert all(np.all(np.isfinite(info["estimate"])) for info in infos)
 
 
-def test_info_has_the_same_numeric_keys_from_reset_on():
+@pytest.mark.parametrize("truth_info", [False, True])
+def test_info_has_the_same_numeric_keys_from_reset_on(truth_info):
     """TorchRL and gymnasium's vector envs batch info by key: every value an array of a fixed shape and dtype,
     no nested dicts, no strings, the same keys at reset and at every step (the summary only at the end)."""
-    env = gym.make("TimeGapMonitor-v0", config={"episode_duration": 5.0})
+    env = gym.make("TimeGapMonitor-v0", config={"episode_duration": 5.0}, truth_info=truth_info)
     _, infos = run_episode(env, lambda obs: level_index(1.0), seed=0)
     layout = {key: (value.shape, value.dtype) for key, value in infos[0].items()}
     assert all(isinstance(value, np.ndarray) and value.dtype.kind in "biuf" for info in infos for value in info.values())
@@ -98,7 +110,97 @@ def test_info_has_the_same_numeric_keys_from_reset_on():
         assert {key: (value.shape, value.dtype) for key, value in info.items() if key in layout} == layout
         assert set(info) - set(layout) == {f"episode_{name}" for name in summary_of(info)}
     assert summary_of(infos[-1]) and not any(summary_of(info) for info in infos[:-1])
-    assert set(truth_of(infos[0])["kind"]) <= set(KIND_NAMES)
+    if truth_info:
+        assert set(truth_of(infos[0])["kind"]) <= set(KIND_NAMES)
+    else:
+        with pytest.raises(KeyError, match="truth_info=True"):
+            truth_of(infos[0])
+
+
+def is_truth_key(key: str) -> bool:
+    """What only truth_info=True puts in an info (a vector env's masks ``_<key>`` of them too)."""
+    key = key.removeprefix("_")
+    return key in TRUE_STATE_KEYS or key.startswith("truth_")
+
+
+def assert_within(lean, full, where: str) -> None:
+    """``lean`` holds every key of ``full`` but the ground truth's, with the same bits (nested dicts and object arrays,
+    a vector env's final_obs, element by element); ``full`` holds the ground truth."""
+    if isinstance(full, dict):
+        assert not any(is_truth_key(key) for key in lean), f"{where}: {sorted(lean)}"
+        assert set(lean) == {key for key in full if not is_truth_key(key)}, f"{where}: {sorted(set(full) ^ set(lean))}"
+        for key in lean:
+            assert_within(lean[key], full[key], f"{where}[{key!r}]")
+        return
+    if isinstance(full, tuple):  # what reset or step returns
+        assert isinstance(lean, tuple) and len(lean) == len(full), where
+        for i, (a, b) in enumerate(zip(lean, full)):
+            assert_within(a, b, f"{where}[{i}]")
+        return
+    lean, full = np.asarray(lean), np.asarray(full)
+    assert lean.dtype == full.dtype and lean.shape == full.shape, where
+    if full.dtype == object:
+        for i, (a, b) in enumerate(zip(lean.ravel(), full.ravel())):
+            assert (a is None) == (b is None), f"{where}[{i}]"
+            if a is not None:
+                assert_within(a, b, f"{where}[{i}]")
+        return
+    assert lean.tobytes() == full.tobytes(), where
+
+
+@pytest.mark.parametrize("env_id", ["TimeGapMonitor-v0", "TimeGapMonitor-v1", timegap_env.MO_ENV_ID])
+def test_truth_info_adds_the_ground_truth_and_changes_nothing_else(env_id):
+    """By default the info is the monitor's view: no truth_* keys and none of the platoon's true state
+    (actual_time_gap, ttc, jerk, collision). truth_info=True adds them and nothing else: the same seed and actions
+    give the same observations, rewards and flags bit for bit, and every key of the default info has the same value."""
+    config = {"episode_duration": 12.0}
+    options = {"degradation": {"kind": "gain", "size": 0.7, "followers": [2], "onset": 5.0}}
+    lean, full = (gym.make(env_id, config=config, truth_info=truth_info) for truth_info in (False, True))
+    assert (lean.unwrapped.truth_info, full.unwrapped.truth_info) == (False, True)
+    rng = np.random.default_rng(0)
+    lean.action_space.seed(0)
+    for episode in range(2):
+        got, want = lean.reset(seed=episode, options=options), full.reset(seed=episode, options=options)
+        assert_within(got, want, f"episode {episode} reset")
+        extra = set(want[1]) - set(got[1])
+        assert TRUE_STATE_KEYS | {"truth_kind", "truth_active", "truth_smallest_stable_setting"} <= extra
+        assert ("truth_regime" in extra) == (env_id != "TimeGapMonitor-v0")
+        assert truth_of(want[1])["kind"].tolist() == ["none", "gain", "none", "none", "none"]
+        with pytest.raises(KeyError, match="truth_info=True"):
+            truth_of(got[1])
+        for step in range(20):
+            action = lean.action_space.sample() if step % 3 else int(rng.integers(len(LEVELS)))
+            got, want = lean.step(action), full.step(action)
+            assert_within(got, want, f"episode {episode} step {step}")  # observation, reward, flags, info
+            if got[2] or got[3]:
+                break
+        assert got[3] and summary_of(got[4]) and set(want[4]) - set(got[4]) == extra  # the episode ran to its end
+
+
+def test_the_vector_envs_truth_info_adds_the_ground_truth_and_changes_nothing_else():
+    """The same for the native vector env, across same-step autoresets (final_obs, final_info) and for
+    gymnasium's SyncVectorEnv over single envs."""
+    config = {"episode_duration": 5.0}
+    options = {"degradation": {"kind": "lag", "size": 2.0, "onset": 2.0}}
+    for make in (lambda truth_info: gym.make_vec("TimeGapMonitor-v1", num_envs=3,
+                                                 vectorization_mode="vector_entry_point", config=config,
+                                                 autoreset_mode="same_step", truth_info=truth_info),
+                 lambda truth_info: gym.vector.SyncVectorEnv(
+                     [lambda: gym.make("TimeGapMonitor-v1", config=config, truth_info=truth_info)] * 3,
+                     autoreset_mode=gym.vector.AutoresetMode.SAME_STEP)):
+        lean, full = make(False), make(True)
+        got, want = lean.reset(seed=[3, 4, 5], options=options), full.reset(seed=[3, 4, 5], options=options)
+        assert_within(got, want, "reset")
+        assert "truth_kind" in want[1] and "_truth_kind" in want[1] and "actual_time_gap" in want[1]
+        ended = 0
+        for step in range(12):
+            actions = np.array([step % len(LEVELS), 4, (3 * step) % len(LEVELS)])
+            got, want = lean.step(actions), full.step(actions)
+            assert_within(got, want, f"step {step}")
+            if "final_info" in want[4]:
+                assert "truth_kind" in want[4]["final_info"] and "actual_time_gap" in want[4]["final_info"]
+                ended += 1
+        assert ended == 2  # two autoresets of all three
 
 
 def test_observation_bounds_hold_every_step():
@@ -165,7 +267,7 @@ def test_v2v_outages_happen_and_show_in_the_observation():
 
 def test_collision_terminates_with_the_collision_penalty():
     speed = np.r_[np.full(30, 30.0), np.maximum(30.0 - 2.0 * np.arange(1, 20), 0.0), np.zeros(300)]  # 20 m/s^2 stop
-    env = gym.make("TimeGapMonitor-v0", config={"degradation": {"kind_weights": {"none": 1.0}}})
+    env = gym.make("TimeGapMonitor-v0", config={"degradation": {"kind_weights": {"none": 1.0}}}, truth_info=True)
     env.reset(seed=0, options={"leader_speed": speed})
     for _ in range(60):
         _, reward, terminated, truncated, info = env.step(level_index(0.6))
@@ -324,7 +426,7 @@ def test_reset_with_a_seed_gives_the_same_bits_whatever_ran_before(monitor):
                 break
         return steps
 
-    env = gym.make("TimeGapMonitor-v0", config=config)
+    env = gym.make("TimeGapMonitor-v0", config=config, truth_info=True)  # the whole info, ground truth included
     first = episode(env)
     env.reset(seed=3)
     for _ in range(7):  # a partial episode of another length shifts where a shared ring would stand
@@ -338,7 +440,7 @@ def test_a_standing_platoon_has_no_nan_and_no_alarms():
     """Below TIME_GAP_MIN_SPEED (s - s0) / v says nothing of the time gap: the monitor leaves such measurements
     out, so its estimate returns to the setting and the chart stays quiet; the actual time gap is inf, never NaN."""
     env = gym.make("TimeGapMonitor-v0", config={"degradation": {"kind_weights": {"none": 1.0}}, "episode_duration": 30.0,
-                                                "dropout_probability_range": (0.0, 0.0)})
+                                                "dropout_probability_range": (0.0, 0.0)}, truth_info=True)
     _, infos = run_episode(env, lambda obs: level_index(1.4), seed=0, options={"leader_speed": np.zeros(400)})
     assert not any(np.isnan(value).any() for info in infos for value in info.values())
     assert not any(info["alarm"].any() for info in infos)
@@ -348,7 +450,7 @@ def test_a_standing_platoon_has_no_nan_and_no_alarms():
 
 @pytest.mark.parametrize("scenario", ["stop_and_go", "emergency_braking", "hard_braking"])
 def test_stopping_leaders_give_no_nan(scenario):
-    env = gym.make("TimeGapMonitor-v0", config={"episode_duration": 120.0})
+    env = gym.make("TimeGapMonitor-v0", config={"episode_duration": 120.0}, truth_info=True)  # actual_time_gap, ttc too
     for seed in range(3):
         obs, info = env.reset(seed=seed, options={"scenario": scenario})
         while True:

@@ -42,7 +42,8 @@ def same_bytes(fused: object, staged: object, where: str) -> None:
 
 def run_both(config: dict, n_steps: int, autoreset_mode: str = "same_step", n_envs: int = 4, seed: int = 7) -> int:
     """Step a fused and a staged vector env alike and compare everything they return; the number of episodes ended."""
-    envs = {fused: TimeGapMonitorVectorEnv(n_envs, config=config, autoreset_mode=autoreset_mode) for fused in (True, False)}
+    envs = {fused: TimeGapMonitorVectorEnv(n_envs, config=config, autoreset_mode=autoreset_mode, truth_info=True)
+            for fused in (True, False)}  # truth_info: the platoon's true state and the ground truth compared too
     envs[False].task.fused = False
     outputs = {fused: env.reset(seed=seed) for fused, env in envs.items()}
     same_bytes(outputs[True][0], outputs[False][0], "reset observation")
@@ -99,7 +100,7 @@ def test_single_env_fused_equals_staged_in_every_action_mode() -> None:
     from timegap_env.envs.env import TimeGapMonitorEnv
 
     for mode in ("platoon", "per_vehicle", "relative"):
-        envs = {fused: TimeGapMonitorEnv({**SHORT, "action_mode": mode}) for fused in (True, False)}
+        envs = {fused: TimeGapMonitorEnv({**SHORT, "action_mode": mode}, truth_info=True) for fused in (True, False)}
         envs[False].task.fused = False
         envs[True].action_space.seed(1)
         for episode, kind in enumerate(("packet_loss", "radar_bias")):
@@ -135,7 +136,7 @@ def test_the_vector_env_gives_the_ground_truth_without_step_diagnostics() -> Non
 
     options = {"degradation": {"kind": "gain", "size": 0.7, "followers": [1, 3]}}
     lean = TimeGapMonitorVectorEnv(2, step_diagnostics=False)
-    full = TimeGapMonitorVectorEnv(2)
+    full = TimeGapMonitorVectorEnv(2, truth_info=True)
     assert lean.reset(seed=5, options=options)[1] == {}
     want = truth_of(full.reset(seed=5, options=options)[1])
     got = lean.ground_truth()
@@ -153,6 +154,47 @@ def test_step_diagnostics_must_be_a_bool(value: object) -> None:
         gym.make("TimeGapMonitor-v0", step_diagnostics=value)
     with pytest.raises(ValueError, match="step_diagnostics"):
         TimeGapMonitorVectorEnv(2, step_diagnostics=value)
+
+
+@pytest.mark.parametrize("value", ["yes", 1, None])
+def test_truth_info_must_be_a_bool(value: object) -> None:
+    import gymnasium as gym
+
+    import timegap_env
+    from timegap_env.envs.env import TimeGapMonitorEnv
+
+    with pytest.raises(ValueError, match="truth_info"):
+        gym.make("TimeGapMonitor-v0", truth_info=value)
+    with pytest.raises(ValueError, match="truth_info"):
+        gym.make(timegap_env.MO_ENV_ID, truth_info=value)
+    with pytest.raises(ValueError, match="truth_info"):
+        TimeGapMonitorEnv(truth_info=value)
+    with pytest.raises(ValueError, match="truth_info"):
+        TimeGapMonitorVectorEnv(2, truth_info=value)
+    with pytest.raises(ValueError, match="truth_info"):
+        gym.make_vec("TimeGapMonitor-v0", num_envs=2, vectorization_mode="vector_entry_point", truth_info=value)
+
+
+def test_truth_info_needs_step_diagnostics() -> None:
+    """The ground truth is a per-step key: asking for it while leaving every per-step key out is refused."""
+    import gymnasium as gym
+
+    import timegap_env
+    from timegap_env.envs.env import TimeGapMonitorEnv
+
+    makers = [lambda: gym.make("TimeGapMonitor-v0", step_diagnostics=False, truth_info=True),
+              lambda: gym.make("TimeGapMonitor-v1", step_diagnostics=False, truth_info=True),
+              lambda: gym.make(timegap_env.MO_ENV_ID, step_diagnostics=False, truth_info=True),
+              lambda: TimeGapMonitorEnv(step_diagnostics=False, truth_info=True),
+              lambda: TimeGapMonitorVectorEnv(2, step_diagnostics=False, truth_info=True),
+              lambda: gym.make_vec("TimeGapMonitor-v0", num_envs=2, vectorization_mode="vector_entry_point",
+                                   step_diagnostics=False, truth_info=True)]
+    for make in makers:
+        with pytest.raises(ValueError, match="truth_info"):
+            make()
+    for step_diagnostics, truth_info in ((True, False), (True, True), (False, False)):  # the other three are fine
+        env = TimeGapMonitorVectorEnv(2, step_diagnostics=step_diagnostics, truth_info=truth_info)
+        assert (env.step_diagnostics, env.truth_info) == (step_diagnostics, truth_info)
 
 
 @pytest.mark.slow
@@ -193,8 +235,8 @@ def test_without_v2v_the_followers_stay_in_acc() -> None:
 
     from timegap_env.envs.observation import FEATURES
 
-    acc = gym.make("TimeGapMonitor-v0", config={"platoon": {"v2v": False}})
-    no_feed_forward = gym.make("TimeGapMonitor-v0", config={"platoon": {"v2v": False, "k_f": 0.0}})
+    acc = gym.make("TimeGapMonitor-v0", config={"platoon": {"v2v": False}}, truth_info=True)
+    no_feed_forward = gym.make("TimeGapMonitor-v0", config={"platoon": {"v2v": False, "k_f": 0.0}}, truth_info=True)
     for env in (acc, no_feed_forward):
         env.reset(seed=4, options={"degradation": None})
     for _ in range(20):

@@ -30,25 +30,30 @@ def assert_same_infos(got, want, where=""):
             np.testing.assert_array_equal(got[key], value, err_msg=f"{where}/{key}")
 
 
-def native_and_reference(n, config, autoreset_mode="same_step", **kwargs):
+def native_and_reference(n, config, autoreset_mode="same_step", truth_info=False, **kwargs):
+    """The native vector env and SyncVectorEnv over single envs, both with ``truth_info`` (the ground truth in the
+    infos, compared too, when True)."""
     native = gym.make_vec("TimeGapMonitor-v0", num_envs=n, vectorization_mode="vector_entry_point", config=config,
-                          autoreset_mode=autoreset_mode, **kwargs)
-    reference = SyncVectorEnv([lambda: gym.make("TimeGapMonitor-v0", config=config) for _ in range(n)],
-                              autoreset_mode=parse_autoreset_mode(autoreset_mode))
+                          autoreset_mode=autoreset_mode, truth_info=truth_info, **kwargs)
+    reference = SyncVectorEnv([lambda: gym.make("TimeGapMonitor-v0", config=config, truth_info=truth_info)
+                               for _ in range(n)], autoreset_mode=parse_autoreset_mode(autoreset_mode))
     return native, reference
 
 
+@pytest.mark.parametrize("truth_info", [False, True])
 @pytest.mark.parametrize("autoreset_mode", ["same_step", "next_step"])
 @pytest.mark.parametrize("action_mode", ["platoon", "relative"])
-def test_vector_env_equals_sync_vector_env_step_by_step(action_mode, autoreset_mode):
-    """Observations, rewards, flags and infos (masks, final_obs, final_info) as gymnasium's SyncVectorEnv."""
+def test_vector_env_equals_sync_vector_env_step_by_step(action_mode, autoreset_mode, truth_info):
+    """Observations, rewards, flags and infos (masks, final_obs, final_info) as gymnasium's SyncVectorEnv, with
+    the ground truth in the infos or without it."""
     config = {"episode_duration": 6.0, "dropout_probability_range": (0.0, 0.1), "action_mode": action_mode,
               "degradation": {"v2v_outage_duration_range": (1.0, 3.0), "midway_onset_probability": 0.7}}
-    native, reference = native_and_reference(3, config, autoreset_mode)
+    native, reference = native_and_reference(3, config, autoreset_mode, truth_info)
     assert native.metadata["autoreset_mode"] == parse_autoreset_mode(autoreset_mode)
     obs_native, info_native = native.reset(seed=7)
     obs_reference, info_reference = reference.reset(seed=7)
     np.testing.assert_array_equal(obs_native, obs_reference)
+    assert ("truth_kind" in info_native) == ("actual_time_gap" in info_native) == truth_info
     assert_same_infos(info_native, info_reference, "reset")
     rng = np.random.default_rng(0)
     for step in range(20):  # three episodes of 6 steps each and more: crosses autoresets
@@ -69,7 +74,7 @@ def test_vector_env_equals_sync_vector_env_under_every_degradation(kind, size):
     pinned = {"degradation": {"kind": kind, "onset": 2.0, **({} if size is None else {"size": size})}}
     if kind == "commercial_acc":
         pinned["degradation"]["onset"] = 0.0
-    native, reference = native_and_reference(3, config)
+    native, reference = native_and_reference(3, config, truth_info=True)
     _, info_native = native.reset(seed=11, options=pinned)
     _, info_reference = reference.reset(seed=11, options=pinned)
     assert set(truth_of(info_native)["kind"].ravel()) == {kind}
@@ -85,7 +90,7 @@ def test_vector_env_equals_sync_vector_env_under_every_degradation(kind, size):
 
 def test_vector_env_without_autoreset_waits_for_a_masked_reset():
     config = {"episode_duration": 3.0}
-    native, reference = native_and_reference(2, config, "disabled")
+    native, reference = native_and_reference(2, config, "disabled", truth_info=True)
     native.reset(seed=5)
     reference.reset(seed=5)
     for step in range(3):

@@ -15,7 +15,7 @@ from timegap_env.envs.reward import COST_TERMS, OBJECTIVES, REWARD_TERMS
 from timegap_env.leaders.regimes import REGIMES
 from timegap_env.leaders.scenarios import USER, regime_names
 
-V1_KEYS = {VECTOR_REWARD, COST, OBJECTIVES_KEY, "truth_regime"}
+V1_KEYS = {VECTOR_REWARD, COST, OBJECTIVES_KEY, "truth_regime"}  # with truth_info=True; without it no truth_regime
 
 
 def weights_vector(config: EnvConfig) -> np.ndarray:
@@ -33,11 +33,14 @@ def test_v1_is_v0_with_the_tasks_overrides():
     assert tuned.reward_weights == RewardWeights(**{**vars(REWARD_PRESETS["variation_first"].weights), "comfort": 0.1})
 
 
-def test_v0_info_keeps_its_keys_and_v1_adds_the_objectives():
-    env0, env1 = gym.make("TimeGapMonitor-v0"), gym.make("TimeGapMonitor-v1")
+@pytest.mark.parametrize("truth_info", [False, True])
+def test_v0_info_keeps_its_keys_and_v1_adds_the_objectives(truth_info):
+    env0, env1 = (gym.make(env_id, truth_info=truth_info) for env_id in ("TimeGapMonitor-v0", "TimeGapMonitor-v1"))
     _, info0 = env0.reset(seed=3)
     _, info1 = env1.reset(seed=3)
-    assert not V1_KEYS & set(info0) and set(info1) == set(info0) | V1_KEYS
+    v1_keys = V1_KEYS if truth_info else V1_KEYS - {"truth_regime"}
+    assert not V1_KEYS & set(info0) and set(info1) == set(info0) | v1_keys
+    assert any(key.startswith("truth_") for key in info1) == truth_info
     assert np.all(info1[VECTOR_REWARD] == 0) and info1[COST] == 0
     _, _, _, _, step0 = env0.step(4)
     _, _, _, _, step1 = env1.step(4)
@@ -91,7 +94,7 @@ def test_objectives_are_the_terms_in_natural_units():
 
 
 def test_the_regime_is_the_leaders_own():
-    env = gym.make("TimeGapMonitor-v1")
+    env = gym.make("TimeGapMonitor-v1", truth_info=True)
     names = regime_names()
     assert names[-1] == USER and {f"regimes:{r}" for r in REGIMES} <= set(names)
     _, info = env.reset(seed=2, options={"scenario": "regimes"})
@@ -110,7 +113,7 @@ def test_the_regime_is_the_leaders_own():
 
 def test_the_vector_env_carries_the_objectives_through_autoresets():
     venv = gym.make_vec("TimeGapMonitor-v1", num_envs=3, vectorization_mode="vector_entry_point",
-                        config={"episode_duration": 20.0}, autoreset_mode="same_step")
+                        config={"episode_duration": 20.0}, autoreset_mode="same_step", truth_info=True)
     _, infos = venv.reset(seed=0)
     weights = weights_vector(venv.unwrapped.config)
     assert infos[VECTOR_REWARD].shape == (3, len(REWARD_TERMS)) and infos["truth_regime"].shape == (3,)

@@ -28,7 +28,8 @@ SEEDS = [10_000, 10_001, 10_002]
 def old_evaluate(policy, config_overrides, options, seeds):
     n = len(seeds)
     venv = gym.make_vec(timegap_env.ENV_ID, num_envs=n, vectorization_mode="vector_entry_point",
-                        config={**config_overrides, "action_mode": policy.action_mode}, autoreset_mode="same_step")
+                        config={**config_overrides, "action_mode": policy.action_mode}, autoreset_mode="same_step",
+                        truth_info=True)
     obs, infos = venv.reset(seed=seeds, options=options)
     task, config = venv.unwrapped.task, venv.unwrapped.config
     prints = [task.fingerprint(env) for env in range(n)]
@@ -64,7 +65,8 @@ def old_evaluate(policy, config_overrides, options, seeds):
 def old_sweep(policy, overrides, seeds):
     n = len(seeds)
     venv = gym.make_vec(timegap_env.ENV_ID, num_envs=n, vectorization_mode="vector_entry_point",
-                        config={**overrides, "action_mode": policy.action_mode}, autoreset_mode="same_step")
+                        config={**overrides, "action_mode": policy.action_mode}, autoreset_mode="same_step",
+                        truth_info=True)
     obs, infos = venv.reset(seed=list(seeds))
     scenarios = [str(name) for name in venv.unwrapped.scenario]
     kinds = [next((str(k) for k in row if k != NOMINAL), NOMINAL) for row in truth_of(infos)["kind"]]
@@ -119,7 +121,7 @@ def old_value_run(config, seeds, choose, options=None):
     n = len(seeds)
     fields = {field.name: getattr(config, field.name) for field in dataclasses.fields(config)}
     venv = gym.make_vec(timegap_env.ENV_ID, num_envs=n, vectorization_mode="vector_entry_point", config=fields,
-                        autoreset_mode="same_step")
+                        autoreset_mode="same_step", truth_info=True)
     obs, infos = venv.reset(seed=list(seeds), options=options)
     kinds = [next((k for k in row if k != NOMINAL), NOMINAL) for row in truth_of(infos)["kind"]]
     returns, active = np.zeros(n), np.ones(n, dtype=bool)

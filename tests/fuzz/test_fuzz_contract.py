@@ -43,13 +43,14 @@ MAX_TIME = 1e6  # latest onset or end of a degradation [s] (timegap_env.sim.degr
 
 
 def make(mode: str = "platoon", **config: Any) -> gym.Env:
-    return gym.make(ENV_ID, config={"action_mode": mode, "platoon": {"n_followers": N_FOLLOWERS}, **config})
+    return gym.make(ENV_ID, config={"action_mode": mode, "platoon": {"n_followers": N_FOLLOWERS}, **config},
+                    truth_info=True)  # every info key: the true state and the ground truth too
 
 
 def make_vector(num_envs: int = 3, autoreset_mode: str = "same_step", mode: str = "platoon", **config: Any):
     return gym.make_vec(ENV_ID, num_envs=num_envs, vectorization_mode="vector_entry_point",
                         config={"action_mode": mode, "platoon": {"n_followers": N_FOLLOWERS}, **config},
-                        autoreset_mode=autoreset_mode)
+                        autoreset_mode=autoreset_mode, truth_info=True)
 
 
 def run(env: Any, seed: int, steps: int, actions_seed: int = 0, options: dict | None = None) -> str:
@@ -72,7 +73,7 @@ def run(env: Any, seed: int, steps: int, actions_seed: int = 0, options: dict | 
 
 @pytest.mark.parametrize("build", ["gym.make", "class"])
 def test_step_before_reset_and_after_the_end_raise_reset_needed(build):
-    env = make(**SHORT) if build == "gym.make" else TimeGapMonitorEnv(config=SHORT)
+    env = make(**SHORT) if build == "gym.make" else TimeGapMonitorEnv(config=SHORT, truth_info=True)
     with pytest.raises(ResetNeeded):
         env.step(0)
     env.reset(seed=0)
@@ -137,7 +138,7 @@ BAD_OPTIONS = [
 def test_a_failed_reset_leaves_the_env_refusing_to_step(options, build):
     """After a reset that raised, step() raises ResetNeeded (mid-episode too); the next good reset runs as a fresh
     env's would; the env's scenario is not the failed episode's (issue 22, items 5, 12)."""
-    env = make() if build == "gym.make" else TimeGapMonitorEnv(config={"platoon": {"n_followers": N_FOLLOWERS}})
+    env = make() if build == "gym.make" else TimeGapMonitorEnv(config={"platoon": {"n_followers": N_FOLLOWERS}}, truth_info=True)
     env.reset(seed=1, options={"scenario": "sinusoid"})
     env.step(0)
     with pytest.raises(ValueError):

@@ -187,7 +187,7 @@ def run_single(config: dict[str, Any], seed: int, episodes: list[dict[str, Any] 
     """``steps`` random-action steps of one single env, resetting with the next of ``episodes``' options when an
     episode ends; every output checked. Returns counts of steps, episodes and refused resets."""
     counts = {"steps": 0, "episodes": 0, "refused_resets": 0}
-    env = gym.make(ENV_ID, config=config)
+    env = gym.make(ENV_ID, config=config, truth_info=True)  # the true state's keys are checked for NaN too
     rng = np.random.default_rng(seed)
     space = env.observation_space
     k = 0
@@ -284,7 +284,7 @@ def run_vector(config: dict[str, Any], num_envs: int, autoreset_mode: str, seed:
     few others) are reset through ``reset_mask``. Every output checked."""
     counts = {"env_steps": 0, "episodes_ended": 0, "masked_resets": 0}
     envs = gym.make_vec(ENV_ID, num_envs=num_envs, vectorization_mode="vector_entry_point", config=config,
-                        autoreset_mode=autoreset_mode)
+                        autoreset_mode=autoreset_mode, truth_info=True)
     rng = np.random.default_rng(seed)
     result, error = call(lambda: envs.reset(seed=seed, options=materialise(options)))
     if error is not None:
@@ -364,8 +364,8 @@ def compare_with_sync(config: dict[str, Any], num_envs: int, autoreset_mode: str
                       options: dict[str, Any] | None, steps: int, defects: Defects, case: str) -> int:
     """The native vector env against SyncVectorEnv over single envs, step by step; returns the steps compared."""
     native = gym.make_vec(ENV_ID, num_envs=num_envs, vectorization_mode="vector_entry_point", config=config,
-                          autoreset_mode=autoreset_mode)
-    reference = SyncVectorEnv([lambda: gym.make(ENV_ID, config=config) for _ in range(num_envs)],
+                          autoreset_mode=autoreset_mode, truth_info=True)
+    reference = SyncVectorEnv([lambda: gym.make(ENV_ID, config=config, truth_info=True) for _ in range(num_envs)],
                               autoreset_mode=parse_autoreset_mode(autoreset_mode))
     options = materialise(options)
     got, error = call(lambda: native.reset(seed=seed, options=options))

@@ -139,7 +139,7 @@ def test_the_smallest_stable_setting_is_where_string_stability_begins():
 
 
 def test_the_env_reports_the_ground_truth_and_never_observes_it():
-    env = gym.make("TimeGapMonitor-v0")
+    env = gym.make("TimeGapMonitor-v0", truth_info=True)
     pinned = {"degradation": {"kind": "gain", "size": 0.7, "followers": [1, 2], "onset": 5.0}}
     obs, info = env.reset(seed=0, options=pinned)
     truth = truth_of(info)
@@ -158,7 +158,8 @@ def test_the_env_reports_the_ground_truth_and_never_observes_it():
 
 
 def test_drawn_commercial_acc_followers_are_calibrated_cars():
-    env = gym.make("TimeGapMonitor-v0", config={"degradation": {"kind_weights": {"commercial_acc": 1.0}}})
+    env = gym.make("TimeGapMonitor-v0", config={"degradation": {"kind_weights": {"commercial_acc": 1.0}}},
+                   truth_info=True)
     _, info = env.reset(seed=1)
     truth = truth_of(info)
     assert set(truth["kind"]) == {"commercial_acc"} and not truth["v2v"].any()

@@ -54,7 +54,7 @@ def test_the_profile_episode_is_one_degraded_midway():
     seeds = list(range(EVAL_SEED_START, EVAL_SEED_START + 12))
     ordered = heldout.profile_first("training_mix", seeds)
     assert sorted(ordered) == seeds
-    venv = gym.make_vec(timegap_env.ENV_ID, num_envs=1, vectorization_mode="vector_entry_point")
+    venv = gym.make_vec(timegap_env.ENV_ID, num_envs=1, vectorization_mode="vector_entry_point", truth_info=True)
     _, infos = venv.reset(seed=ordered[:1])
     truth = truth_of(infos)
     assert ((truth["kind"] != "none") & (truth["onset"] > 0) & np.isfinite(truth["onset"])).any()

@@ -11,7 +11,7 @@ import numpy as np
 
 from timegap_env.config import EnvConfig, shown
 from timegap_env.envs.action import action_space
-from timegap_env.envs.info import EPISODE_PREFIX, no_scores, of_env, prefixed, step_diagnostics_flag, step_scores
+from timegap_env.envs.info import EPISODE_PREFIX, info_flags, no_scores, of_env, prefixed, step_scores
 from timegap_env.envs.observation import observation_space
 from timegap_env.envs.rendering import DEFAULT_TIME_WINDOW
 from timegap_env.envs.task import PlatoonTask
@@ -75,12 +75,15 @@ class TimeGapMonitorEnv(gym.Env):
 
     ## Info
 
-    Flat and numeric, the same keys from reset on (:mod:`timegap_env.envs.info`): the monitor and
-    the platoon (``estimate``, ``lcl``, ``ucl``, ``alarm``, ``actual_time_gap``, ``setting``, ...),
-    ``reward_<term>`` (0 at reset), the ground truth ``truth_<name>``, and at the step that ends an
-    episode its summary ``episode_<name>``. ``timegap_env.envs.info.truth_of(info)`` and
+    Flat and numeric, the same keys from reset on (:mod:`timegap_env.envs.info`): the monitor's
+    view (``estimate``, ``estimate_std``, ``setting``, ``lcl``, ``ucl``, ``alarm``, ``v2v``,
+    ``skipped_measurements``), ``reward_<term>`` (0 at reset), and at the step that ends an episode
+    its summary ``episode_<name>``. ``truth_info=True`` adds what only the simulator knows: the
+    platoon's true state (``actual_time_gap``, ``ttc``, ``jerk``, ``collision``) and the ground truth
+    ``truth_<name>``, which oracles read. ``timegap_env.envs.info.truth_of(info)`` and
     ``summary_of(info)`` read the groups back as dicts. ``env.unwrapped.scenario`` names the leader. v1
-    (``info_keys="v1"``) adds ``vector_reward``, ``cost``, ``objectives`` and ``truth_regime``.
+    (``info_keys="v1"``) adds ``vector_reward``, ``cost``, ``objectives`` (and with ``truth_info``
+    ``truth_regime``).
 
     ## Starting State
 
@@ -97,9 +100,9 @@ class TimeGapMonitorEnv(gym.Env):
     [m/s at 10 Hz]; ``reset(options={"degradation": {"kind": "gain", "size": 0.7,
     "followers": [1, 2], "onset": 60.0, "end": None}})`` pins the degradation (a list of such
     dicts for several, None for none; see :mod:`timegap_env.sim.degradation`).
-    ``truth_of(info)`` is the ground truth of every step: each follower's degradation,
-    its true parameters and the smallest string-stable setting for them. It is for oracles
-    and evaluation; the observation never holds it.
+    ``truth_of(info)`` (with ``truth_info=True``) is the ground truth of every step: each
+    follower's degradation, its true parameters and the smallest string-stable setting for them.
+    It is for oracles and evaluation; the observation never holds it.
 
     ## Episode End
 
@@ -110,17 +113,20 @@ class TimeGapMonitorEnv(gym.Env):
 
     ## Arguments
 
-    ``gym.make("TimeGapMonitor-v1", config={...}, render_mode=None | "rgb_array" | "human", step_diagnostics=True)``;
+    ``gym.make("TimeGapMonitor-v1", config={...}, render_mode=None | "rgb_array" | "human", step_diagnostics=True,
+    truth_info=False)``;
     ``config`` overrides the version's defaults (``config.TASK_VERSIONS``, over
     :class:`timegap_env.config.EnvConfig`, units in its comments; ``version`` is the registered id's), nested
     configs as dicts, e.g. ``{"action_mode": "per_vehicle", "platoon": {"n_followers": 3}}``.
     Unknown keys and bad values raise ``ValueError``. ``step_diagnostics=False`` leaves the per-step keys
-    (monitor, reward terms, ground truth) out of ``reset``'s and ``step``'s info, for learners that never
-    read them (a step then costs a fraction as much, and the ground truth is never worked out); the
-    episode summary stays.
+    (monitor, reward terms) out of ``reset``'s and ``step``'s info, for learners that never read them; the
+    episode summary stays. ``truth_info=True`` adds the platoon's true state and the ground truth (see Info);
+    working out the ground truth costs several times the rest of a step, so it is off unless asked for.
 
     ## Version History
 
+    * Since 2026-11-27 (issue 27) the ground truth and the platoon's true state are in the info only with
+      ``truth_info=True`` (every version; episodes are unchanged bit for bit).
     * v1: the default task (``config.TASK_VERSIONS[1]``, docs/task.md): the ``variation_first`` reward weighting,
       the ``regimes`` leader family beside v0's four, and in the info ``vector_reward`` (the terms; the reward is
       the weights times it), ``cost``, ``objectives`` (natural units) and ``truth_regime``.
@@ -131,7 +137,7 @@ class TimeGapMonitorEnv(gym.Env):
     metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 10}
 
     def __init__(self, config: Mapping[str, Any] | None = None, render_mode: str | None = None,
-                 step_diagnostics: bool = True, version: int = 0) -> None:
+                 step_diagnostics: bool = True, version: int = 0, truth_info: bool = False) -> None:
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode = {render_mode!r}: must be None or one of {self.metadata['render_modes']}")
         self.config = EnvConfig.from_dict(config, version)
@@ -143,7 +149,7 @@ class TimeGapMonitorEnv(gym.Env):
         self.action_space = action_space(self.config)
         self._renderer: PlatoonRenderer | None = None
         self._needs_reset = True  # step() before reset() or after the episode ended raises gymnasium's ResetNeeded
-        self.step_diagnostics = step_diagnostics_flag(step_diagnostics)
+        self.step_diagnostics, self.truth_info = info_flags(step_diagnostics, truth_info)
         self._action = np.zeros((1, 1), dtype=np.int64)  # a Discrete action, as the task takes it
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict]:
@@ -193,8 +199,9 @@ class TimeGapMonitorEnv(gym.Env):
         return str(self.task.scenario[0])
 
     def _info(self) -> dict[str, np.ndarray]:
-        """The monitor, the platoon and the ground truth now (:mod:`timegap_env.envs.info`)."""
-        return of_env(self.task.step_info(), 0)
+        """The monitor's view now, and with ``truth_info`` the platoon's true state and the ground truth
+        (:mod:`timegap_env.envs.info`)."""
+        return of_env(self.task.step_info(self.truth_info), 0, copy=False)  # fresh arrays: views of them suffice
 
     def render(self) -> np.ndarray | None:
         if self.render_mode is None:

@@ -4,14 +4,19 @@ Every value is a NumPy array, shaped (n_followers,) per follower or () per plato
 plain string key (no nested dicts, no strings), so that gymnasium's vector envs, TorchRL's
 ``auto_register_info_dict`` and RLlib batch it as it is. A single env's info holds:
 
-- the monitor and the platoon now (:meth:`~timegap_env.envs.task.PlatoonTask.monitor_info`: ``estimate``,
-  ``lcl``, ``ucl``, ``alarm``, ``actual_time_gap``, ...);
+- the monitor's view now (:meth:`~timegap_env.envs.task.PlatoonTask.monitor_info`: ``estimate``,
+  ``estimate_std``, ``setting``, ``lcl``, ``ucl``, ``alarm``, ``v2v``, ``skipped_measurements``);
 - ``reward_<term>`` for each term of :data:`~timegap_env.envs.reward.REWARD_TERMS`, the last step's
   (0 at reset);
-- ``truth_<name>``, the ground truth (:meth:`~timegap_env.sim.degradation.DegradationTable.truth`;
-  ``truth_kind`` is an index of :data:`KIND_NAMES`): for oracles and evaluation, never in the observation;
 - at the step that ends an episode, ``episode_<name>``, its summary
-  (:meth:`~timegap_env.envs.totals.EpisodeTotals.summary`).
+  (:meth:`~timegap_env.envs.totals.EpisodeTotals.summary`);
+- only when the env is made with ``truth_info=True`` (it costs several times the rest of the step), what only
+  the simulator knows (:meth:`~timegap_env.envs.task.PlatoonTask.truth_info`): the platoon's true state
+  (``actual_time_gap``, ``ttc``, ``jerk``, ``collision``) and ``truth_<name>``, the ground truth
+  (:meth:`~timegap_env.sim.degradation.DegradationTable.truth`; ``truth_kind`` is an index of
+  :data:`KIND_NAMES`): for oracles and evaluation, never in the observation.
+
+``step_diagnostics=False`` leaves every per-step key out (the summary stays).
 
 With ``EnvConfig.info_keys = "v1"`` (``TimeGapMonitor-v1``'s default) it also holds, the last step's (0 at reset):
 
@@ -22,7 +27,7 @@ With ``EnvConfig.info_keys = "v1"`` (``TimeGapMonitor-v1``'s default) it also ho
 - ``objectives`` (n_terms,): what each term measures, in natural units, in the same order
   (:data:`~timegap_env.envs.reward.OBJECTIVES`: capacity [veh/h], time-gap variation [s], ...;
   :func:`objectives_of` gives them by name);
-- ``truth_regime`` (): the leader's regime now, an index into
+- with ``truth_info=True``, ``truth_regime`` (): the leader's regime now, an index into
   :func:`~timegap_env.leaders.scenarios.regime_names` (:func:`truth_of` gives the name).
 
 The native vector env's infos are what gymnasium's own vector envs make of these (arrays with a
@@ -46,12 +51,17 @@ REWARD_PREFIX, TRUTH_PREFIX, EPISODE_PREFIX = "reward_", "truth_", "episode_"
 VECTOR_REWARD, COST, OBJECTIVES_KEY = "vector_reward", "cost", "objectives"  # info_keys "v1"'s keys beside the terms
 
 
-def step_diagnostics_flag(value: object) -> bool:
-    """The envs' ``step_diagnostics`` argument (whether infos hold the per-step keys) checked: True or False,
+def info_flags(step_diagnostics: object, truth_info: object) -> tuple[bool, bool]:
+    """The envs' ``step_diagnostics`` (whether infos hold the per-step keys) and ``truth_info`` (whether they also
+    hold the ground truth) arguments checked: True or False each, ``truth_info`` only with ``step_diagnostics``;
     else ``ValueError`` naming the value."""
-    if not isinstance(value, (bool, np.bool_)):
-        raise ValueError(f"step_diagnostics = {value!r}: must be True or False")
-    return bool(value)
+    for name, value in (("step_diagnostics", step_diagnostics), ("truth_info", truth_info)):
+        if not isinstance(value, (bool, np.bool_)):
+            raise ValueError(f"{name} = {value!r}: must be True or False")
+    if truth_info and not step_diagnostics:
+        raise ValueError("truth_info = True with step_diagnostics = False: the ground truth is a per-step key; "
+                         "step_diagnostics=False leaves every per-step key out")
+    return bool(step_diagnostics), bool(truth_info)
 
 
 def prefixed(prefix: str, values: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
@@ -88,8 +98,11 @@ def with_masks(infos: Mapping[str, np.ndarray], mask: np.ndarray) -> dict[str, n
     return out
 
 
-def of_env(infos: Mapping[str, np.ndarray], env: int) -> dict[str, np.ndarray]:
-    """Env ``env``'s info out of batched ``infos`` (masks left out), each value a copy."""
+def of_env(infos: Mapping[str, np.ndarray], env: int, copy: bool = True) -> dict[str, np.ndarray]:
+    """Env ``env``'s info out of batched ``infos`` (masks left out), each value a copy, or with ``copy`` False a view
+    (for ``infos`` whose arrays nothing else holds)."""
+    if not copy:
+        return {key: value[env, ...] for key, value in infos.items() if not key.startswith("_")}
     return {key: np.array(value[env]) for key, value in infos.items() if not key.startswith("_")}
 
 
@@ -101,7 +114,8 @@ def truth_of(info: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
     """The ground truth in ``info`` (a single env's or batched) as ``{name: array}``, ``kind`` as names."""
     truth = _group(info, TRUTH_PREFIX)
     if "kind" not in truth:
-        raise KeyError(f"info has no ground truth ({TRUTH_PREFIX}* keys); its keys: {sorted(info)}")
+        raise KeyError(f"info has no ground truth ({TRUTH_PREFIX}* keys): make the env with truth_info=True; its keys: "
+                       f"{sorted(info)}")
     truth["kind"] = KIND_NAMES[np.asarray(truth["kind"], dtype=np.intp)]
     if "regime" in truth:
         truth["regime"] = np.array(regime_names(), dtype=object)[np.asarray(truth["regime"], dtype=np.intp)]
@@ -125,5 +139,5 @@ def objectives_of(info: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
 
 
 __all__ = ["COST", "EPISODE_PREFIX", "KIND_NAMES", "OBJECTIVES_KEY", "REWARD_PREFIX", "TRUTH_PREFIX", "VECTOR_REWARD",
-           "no_scores", "objectives_of", "of_env", "prefixed", "rewards_of", "step_diagnostics_flag",
+           "info_flags", "no_scores", "objectives_of", "of_env", "prefixed", "rewards_of",
            "step_scores", "summary_of", "truth_of", "with_masks"]

@@ -45,9 +45,10 @@ class MOTimeGapMonitorEnv(TimeGapMonitorEnv):
     """
 
     def __init__(self, config: Mapping[str, Any] | None = None, render_mode: str | None = None,
-                 step_diagnostics: bool = True, version: int = 1, objectives: Sequence[str] | None = None) -> None:
+                 step_diagnostics: bool = True, version: int = 1, objectives: Sequence[str] | None = None,
+                 truth_info: bool = False) -> None:
         self.objectives = chosen_objectives(objectives)
-        super().__init__(config, render_mode, step_diagnostics, version)
+        super().__init__(config, render_mode, step_diagnostics, version, truth_info)
         self._rows = np.array([REWARD_TERMS.index(name) for name in self.objectives])
         self.reward_dim = len(self.objectives)
         lows = term_lows(self.config)

@@ -281,23 +281,33 @@ class PlatoonTask:
         )
 
     def monitor_info(self) -> dict[str, np.ndarray]:
-        """Per-step diagnostics, each (n_envs, n_followers) unless noted."""
+        """The monitor's view now, what every info holds: fresh arrays, each (n_envs, n_followers)."""
         monitor, chart, platoon = self.loop.monitor, self.loop.chart, self.loop.platoon
-        half_width = self._scales.half_width
+        moments, center, half_width = monitor.moments, chart.center, self._scales.half_width
+        return {
+            "estimate": moments.mean_tau.copy(),  # posterior mean of tau [s]
+            "estimate_std": np.sqrt(moments.var_tau),  # [s]
+            "setting": platoon.setting.copy(),  # tau* asked for [s]
+            "lcl": center - half_width,  # [s]
+            "ucl": center + half_width,  # [s]
+            "alarm": chart.side != 0,
+            "v2v": platoon.v2v.copy(),  # the V2V flag the follower sees (CACC when True)
+            "skipped_measurements": monitor.skipped.copy(),  # since reset [-]
+        }
+
+    def truth_info(self) -> dict[str, np.ndarray]:
+        """What only the simulator knows, fresh arrays, each (n_envs, n_followers) unless noted: the platoon's true
+        state now (``actual_time_gap``, ``ttc``, ``jerk``, ``collision``) and the ground truth as ``truth_<name>``
+        (:meth:`ground_truth`). The opt-in part of the info (``truth_info=True``): the ground truth costs tens of
+        microseconds a step."""
+        platoon = self.loop.platoon
         return {
             # (s - s0) / v [s]; inf below TIME_GAP_MIN_SPEED, where it is not defined (never NaN)
             "actual_time_gap": np.where(platoon.v[:, 1:] >= TIME_GAP_MIN_SPEED, platoon.actual_time_gap, np.inf),
-            "estimate": monitor.tau_mean,  # posterior mean of tau [s]
-            "estimate_std": monitor.tau_std,  # [s]
-            "setting": platoon.setting.copy(),  # tau* asked for [s]
-            "lcl": chart.center - half_width,  # [s]
-            "ucl": chart.center + half_width,  # [s]
-            "alarm": chart.alarm.copy(),
             "ttc": self._readouts.min_ttc.copy(),  # smallest time-to-collision during the step [s], inf if never closing
             "jerk": np.sqrt(self._readouts.jerk_squared / self.ticks_per_decision),  # RMS jerk during the step [m/s^3]
-            "v2v": platoon.v2v.copy(),
             "collision": platoon.collided.any(axis=1),  # (n_envs,)
-            "skipped_measurements": monitor.skipped.copy(),  # since reset [-]
+            **prefixed(TRUTH_PREFIX, self.ground_truth()),
         }
 
     def objectives(self) -> tuple[np.ndarray, np.ndarray] | None:
@@ -305,10 +315,10 @@ class PlatoonTask:
         (n_envs,) (the task's own arrays, see :class:`StepResult`); else None."""
         return None if self.config.info_keys == "v0" else (self._result.objective_rows, self._result.cost)
 
-    def step_info(self) -> dict[str, np.ndarray]:
-        """Every env's info now, flat (:mod:`~timegap_env.envs.info`): :meth:`monitor_info` and the ground truth as
-        ``truth_<name>``, each array with a leading n_envs axis."""
-        return {**self.monitor_info(), **prefixed(TRUTH_PREFIX, self.ground_truth())}
+    def step_info(self, truth: bool) -> dict[str, np.ndarray]:
+        """Every env's info now, flat (:mod:`~timegap_env.envs.info`), fresh arrays with a leading n_envs axis:
+        :meth:`monitor_info`, and with ``truth`` :meth:`truth_info` too."""
+        return {**self.monitor_info(), **self.truth_info()} if truth else self.monitor_info()
 
     def ground_truth(self) -> dict[str, np.ndarray]:
         """Each follower's degradation now, its true parameters and the smallest string-stable setting for them,

@@ -21,7 +21,7 @@ from gymnasium.vector.utils import batch_space
 from timegap_env.config import EnvConfig, shown
 from timegap_env.envs.action import action_space
 from timegap_env.envs.info import (
-    EPISODE_PREFIX, TRUTH_PREFIX, no_scores, prefixed, step_diagnostics_flag, step_scores, truth_of, with_masks,
+    EPISODE_PREFIX, TRUTH_PREFIX, info_flags, no_scores, prefixed, step_scores, truth_of, with_masks,
 )
 from timegap_env.envs.episodes import RESET_OPTIONS
 from timegap_env.envs.observation import observation_space
@@ -86,9 +86,11 @@ class TimeGapMonitorVectorEnv(VectorEnv):
     A ``reset`` that raises leaves the sub-envs it was to reset (every one, if it raised before its mask was read)
     refusing to step, with ``ResetNeeded``, until a reset of theirs succeeds, as a single env does.
 
-    ``step_diagnostics=False`` leaves the per-step keys (monitor, reward terms, ground truth) out of
-    ``reset``'s and ``step``'s infos, for learners that never read them; the episode summaries stay. The
-    ground truth then is never worked out (its smallest string-stable settings take milliseconds per episode).
+    ``step_diagnostics=False`` leaves the per-step keys (monitor, reward terms) out of ``reset``'s and
+    ``step``'s infos, for learners that never read them; the episode summaries stay. ``truth_info=True`` adds the
+    platoon's true state and the ground truth (``truth_<name>``, what oracles read); without it the ground truth
+    is never worked out (its smallest string-stable settings take milliseconds per episode) unless
+    :meth:`ground_truth` asks.
     """
 
     metadata = {"autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": []}
@@ -101,6 +103,7 @@ class TimeGapMonitorVectorEnv(VectorEnv):
         step_diagnostics: bool = True,
         autoreset_mode: str | AutoresetMode = AutoresetMode.NEXT_STEP,
         version: int = 0,
+        truth_info: bool = False,
     ) -> None:
         if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) or num_envs < 1:
             raise ValueError(f"num_envs = {shown(num_envs)}: must be an integer >= 1")
@@ -117,7 +120,7 @@ class TimeGapMonitorVectorEnv(VectorEnv):
         self.action_space = batch_space(self.single_action_space, self.num_envs)
         self._rngs = [seeding.np_random()[0] for _ in range(self.num_envs)]
         self._steps = np.zeros(self.num_envs, dtype=np.int64)
-        self.step_diagnostics = step_diagnostics_flag(step_diagnostics)
+        self.step_diagnostics, self.truth_info = info_flags(step_diagnostics, truth_info)
         self._was_reset = False  # step() before the first reset() raises gymnasium's ResetNeeded
         self._ended = np.zeros(self.num_envs, dtype=bool)  # episodes that ended and are not reset yet
         self._half_reset = np.zeros(self.num_envs, dtype=bool)  # sub-envs whose last reset raised: step() refuses
@@ -154,12 +157,12 @@ class TimeGapMonitorVectorEnv(VectorEnv):
         self._ended[mask] = False
         if not self.step_diagnostics:
             return self._observations(), {}
-        infos = {**self.task.step_info(), **no_scores(self.num_envs, self.config.info_keys)}
+        infos = {**self.task.step_info(self.truth_info), **no_scores(self.num_envs, self.config.info_keys)}
         return self._observations(), with_masks(infos, mask)
 
     def ground_truth(self) -> dict[str, np.ndarray]:
         """The ground truth now, as :func:`~timegap_env.envs.info.truth_of` reads it from an info (``kind`` as
-        names), arrays (num_envs, n_followers), whatever ``step_diagnostics`` puts in the infos: for oracles and
+        names), arrays (num_envs, n_followers), whatever ``step_diagnostics`` and ``truth_info`` put in the infos: for oracles and
         evaluation, never in the observation."""
         return truth_of(prefixed(TRUTH_PREFIX, self.task.ground_truth()))
 
@@ -211,7 +214,7 @@ class TimeGapMonitorVectorEnv(VectorEnv):
         if self.autoreset_mode == AutoresetMode.SAME_STEP and done.any():
             final_info = prefixed(EPISODE_PREFIX, self.task.episode_summary())
             if self.step_diagnostics:
-                final_info = {**self.task.step_info(), **step_scores(terms, objectives), **final_info}
+                final_info = {**self.task.step_info(self.truth_info), **step_scores(terms, objectives), **final_info}
             final_obs = np.full(self.num_envs, None, dtype=object)
             for env, row in zip(np.flatnonzero(done), self._observations()[done]):
                 final_obs[env] = row
@@ -222,7 +225,7 @@ class TimeGapMonitorVectorEnv(VectorEnv):
             terms, objectives = terms.copy(), _copied(objectives)  # final_info keeps the step's; the envs just
             _zero(terms, objectives, done)  # reset get the reset's, as reset() gives
         if self.step_diagnostics:
-            infos.update(with_masks({**self.task.step_info(), **step_scores(terms, objectives)}, everyone))
+            infos.update(with_masks({**self.task.step_info(self.truth_info), **step_scores(terms, objectives)}, everyone))
         if self.autoreset_mode != AutoresetMode.SAME_STEP:
             if done.any():
                 infos.update(with_masks(prefixed(EPISODE_PREFIX, self.task.episode_summary()), done))

@@ -26,7 +26,6 @@ from timegap_env.agents.policies import NamedPolicy
 from timegap_env.agents.protocol import EVAL_SEED_START, MODEL_FILE
 from timegap_env.config import EnvConfig
 from timegap_env import cli
-from timegap_env.envs.info import truth_of
 from timegap_env.experiments.backends import Backend
 from timegap_env.experiments.registry import (
     FIXED_PREFIX, ORACLE, PPO, LearnedPolicyError, fixed_names, learned_exists, load_learned, make_oracle,
@@ -288,9 +287,9 @@ def profile_first(group: str, seeds: list[int]) -> list[int]:
     """``seeds`` with the first one whose episode degrades a follower midway (a hidden kind) moved to the front, so
     that profiles.png shows an onset; unchanged if there is none."""
     venv = TimeGapMonitorVectorEnv(num_envs=len(seeds), config=GROUPS[group].config, autoreset_mode="same_step")
-    _, infos = venv.reset(seed=seeds, options=GROUPS[group].options)
+    venv.reset(seed=seeds, options=GROUPS[group].options)
+    truth = venv.ground_truth()
     venv.close()
-    truth = truth_of(infos)
     midway = ((truth["kind"] != "none") & (truth["kind"] != "v2v_outage") & (truth["onset"] > 0)
               & np.isfinite(truth["onset"])).any(axis=1)
     if not midway.any():

@@ -140,7 +140,7 @@ def rollout_side_by_side(policies: Sequence[Any], config: Config, seeds: Sequenc
 
     ``step_diagnostics=False`` runs faster and leaves the reward terms, the ground truth and the time below the
     stable setting out of the records (the per-step infos hold none of them); oracles and choosers reading the
-    infos need it on. ``trace`` keeps env 0's every tick (of the first policy), for a profile.
+    infos need it on (it makes the env with ``truth_info=True``). ``trace`` keeps env 0's every tick (of the first policy), for a profile.
 
     In SUMO (``config``'s simulator "sumo", one simulation per process) every policy plays every seed in an env of
     its own, one after another, with the same records.
@@ -169,8 +169,8 @@ def _side_by_side(policies: Sequence[Any], config: Config, seeds: Sequence[int],
     if len(estimators) > 1:
         raise ValueError(f"policies read monitors of different estimators {sorted(estimators)}: run them apart")
     venv = TimeGapMonitorVectorEnv(num_envs=n * m, config=env_config(config, mode, estimators.pop()),
-                                   autoreset_mode="same_step",
-                                   step_diagnostics=step_diagnostics)
+                                   autoreset_mode="same_step", step_diagnostics=step_diagnostics,
+                                   truth_info=step_diagnostics)
     try:
         obs, infos = venv.reset(seed=list(seeds) * m, options=options)
         task, env_config_ = venv.unwrapped.task, venv.unwrapped.config
