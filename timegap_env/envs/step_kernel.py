@@ -7,10 +7,10 @@ settings (:class:`~timegap_env.envs.action.SettingLadder`), a changed setting ra
 re-centres that follower's prior and chart (:meth:`~timegap_env.monitoring.loop.MonitoredPlatoon.change_setting`),
 then the decision's ticks go through the platoon, the sensors, the monitor and the chart, and the step is
 scored, added to the episode totals and observed. Each stage is the same compiled function the staged
-path calls (``advance_env``, ``measure_env``, ``update_env``, ``count_excursions_env``, ``env_readouts``,
-...), so the arithmetic has one source; what is written here again is the glue the staged path does in
-NumPy (the ladder, re-centring, the charts' statistics, the leader's and V2V's ticks), and the tests
-check the two paths against each other bit for bit.
+path calls (``advance_env``, ``measure_env``, ``update_env``, ``chart_sides_env``, ``count_excursions_env``,
+``env_readouts``, ...), so the arithmetic has one source; what is written here again is the glue the staged
+path does in NumPy (the ladder, re-centring, the leader's and V2V's ticks), and the tests check the two paths
+against each other bit for bit.
 
 Working env by env keeps each env's state in cache while all its stages run, and re-centres only the
 followers whose setting changed. The kernel takes two structures, :class:`StepState` (every array it
@@ -29,7 +29,7 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
-from timegap_env.config import ACTION_MODES, CHART_KINDS, EnvConfig
+from timegap_env.config import ACTION_MODES, EnvConfig
 from timegap_env.envs.action import RELATIVE_STEPS
 from timegap_env.envs.observation import FollowerState, encode_env
 from timegap_env.envs.reward import (
@@ -37,18 +37,18 @@ from timegap_env.envs.reward import (
     env_weighted_sum,
 )
 from timegap_env.envs.totals import add_step_env
-from timegap_env.monitoring.charts import ChartMemory, ChartState, count_excursions_env
+from timegap_env.monitoring.charts import (
+    CUSUM, EWMA, ChartMemory, ChartRule, ChartState, chart_sides_env, count_excursions_env,
+)
 from timegap_env.monitoring.loop import SAME_SETTING
 from timegap_env.monitoring.monitor import MonitorTicks, WindowMemory, update_env
 from timegap_env.monitoring.posterior import Moments
 from timegap_env.monitoring.sensors import Readings, measure_env
 from timegap_env.sim.platoon import Controller, LeaderTicks, PlatoonState, PlatoonTicks, advance_env
 
-# The action modes and charts the kernel handles, and StepRules.action_mode and chart_kind as it compares them
-# (indices of the config's tuples)
-FUSED_ACTION_MODES, FUSED_CHARTS = ("platoon", "per_vehicle", "relative"), ("shewhart", "ewma", "cusum")
+# The action modes the kernel handles, and StepRules.action_mode as it compares them (indices of ACTION_MODES)
+FUSED_ACTION_MODES = ("platoon", "per_vehicle", "relative")
 PLATOON, PER_VEHICLE, RELATIVE = (ACTION_MODES.index(mode) for mode in FUSED_ACTION_MODES)
-SHEWHART, EWMA, CUSUM = (CHART_KINDS.index(kind) for kind in FUSED_CHARTS)
 
 
 
@@ -91,33 +91,24 @@ class StepRules(NamedTuple):
     v2v_enabled: bool  # PlatoonConfig.v2v: False keeps every follower in ACC
     ticks_per_step: int
     settle_ticks: int  # alarms wait this long after a change has ramped in [ticks]
-    chart_kind: int  # index of timegap_env.config.CHART_KINDS
-    half_width: float  # the charted statistic's limits are centre -/+ this [s]
-    ewma_lambda: float  # [-]
-    baseline_std: float  # sigma_desired [s]
-    cusum_k: float  # [sigma_desired]
-    cusum_h: float  # [sigma_desired]
+    chart: tuple  # ChartRule, the chart's (timegap_env.monitoring.charts)
     reward: tuple  # RewardConstants
     weights: np.ndarray  # (n_terms,) the reward weights, REWARD_TERMS order
     scales: tuple  # ObservationScales
 
     @classmethod
-    def from_config(cls, config: EnvConfig, chart_half_width: float, reward: tuple, weights: np.ndarray,
+    def from_config(cls, config: EnvConfig, chart: ChartRule, reward: tuple, weights: np.ndarray,
                     scales: tuple) -> StepRules:
-        """The rules of ``config``; ``chart_half_width`` [s] is the chart's (an EWMA's differs from the config's).
-        ``ValueError`` for an action mode or chart the fused step does not know (a new one must be added there)."""
-        chart = config.chart
-        if config.action_mode not in FUSED_ACTION_MODES or chart.kind not in FUSED_CHARTS:
-            raise ValueError(f"action_mode = {config.action_mode!r}, chart.kind = {chart.kind!r}: the fused step "
-                             f"(timegap_env.envs.step_kernel) handles {FUSED_ACTION_MODES} and {FUSED_CHARTS} only")
+        """The rules of ``config``; ``chart`` is the chart's own rule. ``ValueError`` for an action mode the fused
+        step does not know (a new one must be added there)."""
+        if config.action_mode not in FUSED_ACTION_MODES:
+            raise ValueError(f"action_mode = {config.action_mode!r}: the fused step (timegap_env.envs.step_kernel) "
+                             f"handles {FUSED_ACTION_MODES} only")
         return cls(
             action_mode=ACTION_MODES.index(config.action_mode), levels=np.asarray(config.setting_levels, dtype=float),
             relative_steps=np.asarray(RELATIVE_STEPS, dtype=np.int64), v2v_enabled=bool(config.platoon.v2v),
-            ticks_per_step=int(config.ticks_per_decision), settle_ticks=chart.settle_ticks,
-            chart_kind=CHART_KINDS.index(chart.kind), half_width=float(chart_half_width),
-            ewma_lambda=float(chart.ewma_lambda), baseline_std=float(chart.baseline_std),
-            cusum_k=float(chart.cusum_k), cusum_h=float(chart.cusum_h),
-            reward=reward, weights=weights, scales=scales,
+            ticks_per_step=int(config.ticks_per_decision), settle_ticks=config.chart.settle_ticks,
+            chart=tuple(chart), reward=reward, weights=weights, scales=scales,
         )
 
 
@@ -164,7 +155,7 @@ def fused_step(state, rules, action):  # noqa: ANN001, ANN201
         advance_env(state.platoon, leader, state.zoh, state.controller, state.faults, physics, e, 0)
         measure_env((physics.spacing, physics.speed), ticks_before, state.noise, state.sensor_faults, measured, e, 0)
         update_env(measured.speed, measured.spacing, memory, slot, rule, prior, estimates, posterior, e, 0)
-        _chart_sides(rules, estimates.tau_mean, physics.applied_setting, statistic, charted.side, e)
+        chart_sides_env(rules.chart, estimates.tau_mean, physics.applied_setting, statistic, charted.side, e, 0)
         count_excursions_env(chart_memory, chart_tick[0], charted, e, 0)
         env_readouts(ticks, 0, state.previous_accel, state.envelope, constants, readouts, e)
         collided = False
@@ -224,36 +215,13 @@ def _change_settings(platoon, controller, memory, chart, rules, action, changed,
         chart_memory.side[e, f], chart_memory.exceedance[e, f] = 0, False
         chart_memory.exceedances_in_window[e, f], chart_memory.run_length[e, f] = 0, 0
         chart_memory.restarted[e, f] = chart_tick[0]
-        if rules.chart_kind == EWMA:  # restarts at the centre line
+        chart_kind = ChartRule(*rules.chart).kind
+        if chart_kind == EWMA:  # restarts at the centre line
             statistic[e, f, 0] = applied
-        elif rules.chart_kind == CUSUM:  # its sums restart at 0
+        elif chart_kind == CUSUM:  # its sums restart at 0
             statistic[e, f, 0] = statistic[e, f, 1] = 0.0
         ramp_ticks = math.ceil(abs(setting - applied) / controller.max_setting_change)
         chart_memory.hold_off[e, f] = int(ramp_ticks + rules.settle_ticks)
-
-
-@numba.njit(cache=True, error_model="numpy", inline="always")
-def _chart_sides(rules, estimates, centers, statistic, sides, e):  # noqa: ANN001, ANN202
-    """The side (-1, 0, +1) of each tick's charted statistic against its limits, for env ``e``, into ``sides``
-    (column 0); EWMA and CUSUM statistics carry on in ``statistic`` (the charts' ``_sides``, tick by tick)."""
-    n_ticks, n_followers = estimates.shape[0], estimates.shape[2]
-    for k in range(n_ticks):
-        for f in range(n_followers):
-            estimate, line = estimates[k, 0, f], centers[k, 0, f]
-            if rules.chart_kind == CUSUM:  # of the standardised deviation
-                y = (estimate - line) / rules.baseline_std
-                upper = statistic[e, f, 0] = max(0.0, statistic[e, f, 0] + y - rules.cusum_k)
-                lower = statistic[e, f, 1] = max(0.0, statistic[e, f, 1] - y - rules.cusum_k)
-                above = upper > rules.cusum_h and upper >= lower
-                below = lower > rules.cusum_h and not above
-                sides[k, 0, f] = int(above) - int(below)
-                continue
-            if rules.chart_kind == SHEWHART:  # of the estimate itself
-                value = estimate
-            else:  # EWMA of the estimate
-                value = statistic[e, f, 0] = rules.ewma_lambda * estimate + (1.0 - rules.ewma_lambda) * statistic[e, f, 0]
-            low, high = line - rules.half_width, line + rules.half_width
-            sides[k, 0, f] = 1 if value > high else (-1 if value < low else 0)
 
 
 def _cache_follows(dispatcher: object, modules: tuple[str, ...]) -> None:

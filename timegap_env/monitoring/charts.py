@@ -40,7 +40,7 @@ from timegap_env.config import CHART_KINDS, ChartConfig
 from timegap_env.monitoring.batch import batch_array, batch_shape, check_finite, env_mask, setting_array, vehicle_mask
 
 __all__ = [
-    "ChartState", "ControlChart", "ShewhartChart", "EwmaChart", "CusumChart", "CHARTS", "make_chart", "switch_rule",
+    "ChartRule", "ChartState", "ControlChart", "ShewhartChart", "EwmaChart", "CusumChart", "CHARTS", "make_chart", "switch_rule",
 ]
 
 
@@ -72,13 +72,27 @@ class ChartMemory(NamedTuple):
     restarted: np.ndarray  # int64 chart tick of each vehicle's last (re)start; older starts do not count
 
 
+SHEWHART, EWMA, CUSUM = (CHART_KINDS.index(kind) for kind in ("shewhart", "ewma", "cusum"))  # ChartRule.kind
+
+
+class ChartRule(NamedTuple):
+    """A chart's constants, as its kernels take them."""
+
+    kind: int  # index of CHART_KINDS
+    half_width: float  # the charted statistic's limits are centre -/+ this [s] (Shewhart, EWMA)
+    ewma_lambda: float  # [-]
+    baseline_std: float  # sigma_desired [s]
+    cusum_k: float  # [sigma_desired]
+    cusum_h: float  # [sigma_desired]
+
+
 class ControlChart:
     """What every chart shares: excursions, their windowed count, run length, re-centring.
 
-    A subclass names its ``kind`` (its key in :data:`CHARTS`) and defines
-    ``_sides(estimates, centers)``: update its statistic through a block of ticks and say on which
-    side of its limits it lies after each (-1, 0, +1); ``_restart(mask)``: restart its statistic
-    for those vehicles. A statistic lives in ``statistic`` (n_envs, n_vehicles, 2), in place.
+    A subclass names its ``kind`` (its key in :data:`CHARTS`) and its limits' ``half_width``, and defines
+    ``_restart(mask)``: restart its statistic for those vehicles. How its statistic moves and on which side of
+    its limits it lies is the kind's branch of :func:`chart_sides_env`, the kernel both the chart and the
+    fused step run. A statistic lives in ``statistic`` (n_envs, n_vehicles, 2), in place.
 
     Public state, arrays (n_envs, n_vehicles): ``center`` [s], ``side``, ``alarm``,
     ``exceedance``, ``exceedances_in_window``, ``run_length`` [ticks], ``hold_off`` [ticks].
@@ -106,6 +120,9 @@ class ControlChart:
         self._tick = np.zeros(1, dtype=np.int64)  # ticks charted so far; this tick's ring slot is _tick % window
         # the statistic of EWMA (z [s] in column 0) and CUSUM (C+, C- [sigma_desired]) charts, unused by Shewhart's
         self.statistic = np.zeros(self.shape + (2,))
+        self.rule = ChartRule(kind=CHART_KINDS.index(self.kind), half_width=float(self.half_width),
+                              ewma_lambda=float(config.ewma_lambda), baseline_std=float(config.baseline_std),
+                              cusum_k=float(config.cusum_k), cusum_h=float(config.cusum_h))
         self.reset(None, center)
 
     side = property(lambda self: self._memory.side, doc="-1 below, +1 above the limits, 0 inside (n_envs, n_vehicles).")
@@ -158,12 +175,11 @@ class ControlChart:
         if centers.shape != estimates.shape:
             raise ValueError(f"centers has shape {centers.shape}: expected {estimates.shape} like tau_estimates")
         check_finite(tau_estimates=estimates, centers=centers)
-        sides = self._sides(estimates, centers).astype(np.int8, copy=False)
-        flags, counts = np.empty((2, *sides.shape), dtype=bool), np.empty((2, *sides.shape), dtype=np.int64)
-        block = ChartState(center=centers, alarm=flags[0], side=sides, exceedance=flags[1],
-                           exceedances_in_window=counts[0], run_length=counts[1])
-        _count_excursions(self._memory_args, self._tick[0], tuple(block))
-        self._tick[0] += len(sides)
+        flags, counts = np.empty((2, *estimates.shape), dtype=bool), np.empty((2, *estimates.shape), dtype=np.int64)
+        block = ChartState(center=centers, alarm=flags[0], side=np.empty(estimates.shape, dtype=np.int8),
+                           exceedance=flags[1], exceedances_in_window=counts[0], run_length=counts[1])
+        _chart_ticks(tuple(self.rule), self._memory_args, self._tick[0], estimates, self.statistic, tuple(block))
+        self._tick[0] += len(estimates)
         self.center[:] = centers[-1]
         return block
 
@@ -197,17 +213,8 @@ class ControlChart:
         vehicles = np.broadcast_to(env_mask(mask, self.shape[0])[:, None], self.shape)
         self.recenter(center, vehicles)
 
-    def _sides(self, estimates: np.ndarray, centers: np.ndarray) -> np.ndarray:
-        raise NotImplementedError
-
     def _restart(self, mask: np.ndarray) -> None:
         raise NotImplementedError
-
-
-@numba.vectorize(["int8(float64, float64, float64)"], cache=True)
-def _outside(value: float, low: float, high: float) -> int:
-    """-1 where value < low, +1 where value > high, else 0 (an int8 ufunc)."""
-    return 1 if value > high else (-1 if value < low else 0)
 
 
 class ShewhartChart(ControlChart):
@@ -227,10 +234,6 @@ class ShewhartChart(ControlChart):
     def ucl(self) -> np.ndarray:
         """Upper control limit (n_envs, n_vehicles) [s]."""
         return self.center + self.half_width
-
-    def _sides(self, estimates: np.ndarray, centers: np.ndarray) -> np.ndarray:
-        half_width = self.half_width
-        return _outside(estimates, centers - half_width, centers + half_width)
 
     def _restart(self, mask: np.ndarray) -> None:
         """Memoryless: nothing to restart."""
@@ -263,12 +266,6 @@ class EwmaChart(ControlChart):
         """Upper control limit of the EWMA (n_envs, n_vehicles) [s]."""
         return self.center + self.half_width
 
-    def _sides(self, estimates: np.ndarray, centers: np.ndarray) -> np.ndarray:
-        lam, ewmas = self.config.ewma_lambda, np.empty_like(estimates)
-        for k, estimate in enumerate(estimates):  # a recursion: tick by tick
-            self.ewma[:] = ewmas[k] = lam * estimate + (1.0 - lam) * self.ewma
-        return _outside(ewmas, centers - self.half_width, centers + self.half_width)
-
     def _restart(self, mask: np.ndarray) -> None:
         self.ewma[mask] = self.center[mask]
 
@@ -286,27 +283,54 @@ class CusumChart(ControlChart):
     upper_sum = property(lambda self: self.statistic[..., 0], doc="C+ (n_envs, n_vehicles) [sigma_desired].")
     lower_sum = property(lambda self: self.statistic[..., 1], doc="C- (n_envs, n_vehicles) [sigma_desired].")
 
-    def _sides(self, estimates: np.ndarray, centers: np.ndarray) -> np.ndarray:
-        cfg = self.config
-        deviations = (estimates - centers) / cfg.baseline_std
-        upper, lower = np.empty_like(estimates), np.empty_like(estimates)
-        for k, y in enumerate(deviations):  # a recursion: tick by tick
-            self.upper_sum[:] = upper[k] = np.maximum(0.0, self.upper_sum + y - cfg.cusum_k)
-            self.lower_sum[:] = lower[k] = np.maximum(0.0, self.lower_sum - y - cfg.cusum_k)
-        above = (upper > cfg.cusum_h) & (upper >= lower)
-        below = (lower > cfg.cusum_h) & ~above
-        return above.astype(np.int8) - below.astype(np.int8)
-
     def _restart(self, mask: np.ndarray) -> None:
         self.upper_sum[mask] = 0.0
         self.lower_sum[mask] = 0.0
 
 
 @numba.njit(cache=True, error_model="numpy")
-def _count_excursions(memory, first_tick, block):  # noqa: ANN001, ANN202
-    """What every chart does with its statistic's sides, env by env (:func:`count_excursions_env`), in place."""
-    for e in range(block[2].shape[1]):
+def _chart_ticks(rule, memory, first_tick, estimates, statistic, block):  # noqa: ANN001, ANN202, PLR0913
+    """A block of ticks charted env by env: the statistic's sides (:func:`chart_sides_env`), then what every chart
+    does with them (:func:`count_excursions_env`), in place; ``block`` (:class:`ChartState`) comes in with its
+    centre lines and leaves filled."""
+    centers, sides = block[0], block[2]
+    for e in range(estimates.shape[1]):
+        chart_sides_env(rule, estimates, centers, statistic, sides, e, e)
         count_excursions_env(memory, first_tick, block, e, e)
+
+
+@numba.njit(cache=True, error_model="numpy", inline="always")
+def chart_sides_env(rule, estimates, centers, statistic, sides, e, column):  # noqa: ANN001, ANN201, PLR0913
+    """Env ``e``'s charted statistic through a block of ticks and its side (-1, 0, +1) of its limits after each, into
+    ``sides``; ``estimates``, ``centers`` and ``sides`` are (n_ticks, n_columns, n_vehicles), env ``e`` in column
+    ``column``; ``rule`` is the chart's :class:`ChartRule` (a plain tuple), ``statistic`` its (n_envs, n_vehicles,
+    2) array, carried on in place. The one place each chart kind's statistic is written:
+
+    - Shewhart: the estimate itself against centre -/+ half_width;
+    - EWMA: z = lambda x + (1 - lambda) z, against centre -/+ half_width;
+    - CUSUM of y = (x - centre) / sigma_desired: C+ = max(0, C+ + y - k), C- = max(0, C- - y - k); above when
+      C+ > h (and C+ >= C-), below when C- > h.
+    """
+    rule = ChartRule(*rule)
+    n_ticks, n_vehicles = estimates.shape[0], estimates.shape[2]
+    c = column
+    for k in range(n_ticks):
+        for f in range(n_vehicles):
+            estimate, line = estimates[k, c, f], centers[k, c, f]
+            if rule.kind == CUSUM:
+                y = (estimate - line) / rule.baseline_std
+                upper = statistic[e, f, 0] = max(0.0, statistic[e, f, 0] + y - rule.cusum_k)
+                lower = statistic[e, f, 1] = max(0.0, statistic[e, f, 1] - y - rule.cusum_k)
+                above = upper > rule.cusum_h and upper >= lower
+                below = lower > rule.cusum_h and not above
+                sides[k, c, f] = int(above) - int(below)
+                continue
+            if rule.kind == SHEWHART:
+                value = estimate
+            else:  # EWMA
+                value = statistic[e, f, 0] = rule.ewma_lambda * estimate + (1.0 - rule.ewma_lambda) * statistic[e, f, 0]
+            low, high = line - rule.half_width, line + rule.half_width
+            sides[k, c, f] = 1 if value > high else (-1 if value < low else 0)
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always")
