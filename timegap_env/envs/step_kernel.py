@@ -7,10 +7,10 @@ settings (:class:`~timegap_env.envs.action.SettingLadder`), a changed setting ra
 re-centres that follower's prior and chart (:meth:`~timegap_env.monitoring.loop.MonitoredPlatoon.change_setting`),
 then the decision's ticks go through the platoon, the sensors, the monitor and the chart, and the step is
 scored, added to the episode totals and observed. Each stage is the same compiled function the staged
-path calls (``advance_env``, ``measure_env``, ``update_env``, ``chart_sides_env``, ``count_excursions_env``,
-``env_readouts``, ...), so the arithmetic has one source; what is written here again is the glue the staged
-path does in NumPy (the ladder, re-centring, the leader's and V2V's ticks), and the tests check the two paths
-against each other bit for bit.
+path calls (``ladder_env``, ``advance_env``, ``measure_env``, ``update_env``, ``chart_sides_env``,
+``count_excursions_env``, ``env_readouts``, ...), so the arithmetic has one source; what is written here again
+is the glue the staged path does in NumPy (re-centring, the leader's and V2V's ticks), and the tests check the
+two paths against each other bit for bit.
 
 Working env by env keeps each env's state in cache while all its stages run, and re-centres only the
 followers whose setting changed. The kernel takes two structures, :class:`StepState` (every array it
@@ -29,8 +29,8 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
-from timegap_env.config import ACTION_MODES, EnvConfig
-from timegap_env.envs.action import RELATIVE_STEPS
+from timegap_env.config import EnvConfig
+from timegap_env.envs.action import LadderRule, ladder_env
 from timegap_env.envs.observation import FollowerState, encode_env
 from timegap_env.envs.reward import (
     RewardConstants, RewardTerms, StepReadouts, StepTicks, env_objectives, env_readouts, env_reward_terms,
@@ -46,9 +46,6 @@ from timegap_env.monitoring.posterior import Moments
 from timegap_env.monitoring.sensors import Readings, measure_env
 from timegap_env.sim.platoon import Controller, LeaderTicks, PlatoonState, PlatoonTicks, advance_env
 
-# The action modes the kernel handles, and StepRules.action_mode as it compares them (indices of ACTION_MODES)
-FUSED_ACTION_MODES = ("platoon", "per_vehicle", "relative")
-PLATOON, PER_VEHICLE, RELATIVE = (ACTION_MODES.index(mode) for mode in FUSED_ACTION_MODES)
 
 
 
@@ -85,9 +82,7 @@ class StepState(NamedTuple):
 class StepRules(NamedTuple):
     """The config's constants of a step."""
 
-    action_mode: int  # index of timegap_env.config.ACTION_MODES
-    levels: np.ndarray  # the setting ladder [s]
-    relative_steps: np.ndarray  # int64 levels moved by each relative action [-]
+    ladder: tuple  # LadderRule, the action's (timegap_env.envs.action)
     v2v_enabled: bool  # PlatoonConfig.v2v: False keeps every follower in ACC
     ticks_per_step: int
     settle_ticks: int  # alarms wait this long after a change has ramped in [ticks]
@@ -97,16 +92,11 @@ class StepRules(NamedTuple):
     scales: tuple  # ObservationScales
 
     @classmethod
-    def from_config(cls, config: EnvConfig, chart: ChartRule, reward: tuple, weights: np.ndarray,
+    def from_config(cls, config: EnvConfig, ladder: LadderRule, chart: ChartRule, reward: tuple, weights: np.ndarray,
                     scales: tuple) -> StepRules:
-        """The rules of ``config``; ``chart`` is the chart's own rule. ``ValueError`` for an action mode the fused
-        step does not know (a new one must be added there)."""
-        if config.action_mode not in FUSED_ACTION_MODES:
-            raise ValueError(f"action_mode = {config.action_mode!r}: the fused step (timegap_env.envs.step_kernel) "
-                             f"handles {FUSED_ACTION_MODES} only")
+        """The rules of ``config``; ``ladder`` and ``chart`` are the action's and the chart's own rules."""
         return cls(
-            action_mode=ACTION_MODES.index(config.action_mode), levels=np.asarray(config.setting_levels, dtype=float),
-            relative_steps=np.asarray(RELATIVE_STEPS, dtype=np.int64), v2v_enabled=bool(config.platoon.v2v),
+            ladder=tuple(ladder), v2v_enabled=bool(config.platoon.v2v),
             ticks_per_step=int(config.ticks_per_decision), settle_ticks=config.chart.settle_ticks,
             chart=tuple(chart), reward=reward, weights=weights, scales=scales,
         )
@@ -141,9 +131,10 @@ def fused_step(state, rules, action):  # noqa: ANN001, ANN201
     terms, readouts, objectives = RewardTerms(*state.terms), StepReadouts(*state.readouts), RewardTerms(*state.objectives)
     constants = RewardConstants(*rules.reward)
     faults_start, faults_end = state.faults[0], state.faults[1]
+    targets = np.empty(n_followers)  # an env's settings from its action [s]
     last = n_ticks - 1
     for e in range(n_envs):
-        _change_settings(state.platoon, state.controller, memory, state.chart, rules, action, state.changed, e)
+        _change_settings(state.platoon, state.controller, memory, state.chart, rules, action, state.changed, targets, e)
         ticks_before = platoon.ticks[e]
         for k in range(n_ticks):  # the leader at the end of each tick (held after its episode), V2V during it
             tick = ticks_before + k
@@ -175,31 +166,18 @@ def fused_step(state, rules, action):  # noqa: ANN001, ANN201
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always")
-def _change_settings(platoon, controller, memory, chart, rules, action, changed, e):  # noqa: ANN001, ANN202, PLR0913
-    """Env ``e``'s new settings from its action; a follower whose setting changes (``changed``) ramps to it, its
-    prior and chart are re-centred (the window's data and the chart's history cleared) and its alarms held off
-    while it ramps and settles (see :meth:`~timegap_env.monitoring.loop.MonitoredPlatoon.change_setting`).
-    ``platoon``, ``controller``, ``memory`` (:class:`WindowMemory`) and ``chart`` are :class:`StepState`'s."""
+def _change_settings(platoon, controller, memory, chart, rules, action, changed, targets, e):  # noqa: ANN001, ANN202, PLR0913
+    """Env ``e``'s new settings from its action (:func:`~timegap_env.envs.action.ladder_env`, into ``targets``
+    (n_followers,)); a follower whose setting changes (``changed``) ramps to it, its prior and chart are re-centred
+    (the window's data and the chart's history cleared) and its alarms held off while it ramps and settles (see
+    :meth:`~timegap_env.monitoring.loop.MonitoredPlatoon.change_setting`). ``platoon``, ``controller``, ``memory``
+    (:class:`WindowMemory`) and ``chart`` are :class:`StepState`'s."""
     platoon, controller, memory = PlatoonState(*platoon), Controller(*controller), WindowMemory(*memory)
     chart_memory, center, statistic, chart_tick = chart
     chart_memory = ChartMemory(*chart_memory)
-    levels = rules.levels
-    n_followers = platoon.setting.shape[1]
-    level = 0
-    if rules.action_mode == RELATIVE:  # from the ladder level nearest the platoon's largest setting
-        largest = platoon.setting[e, 0]
-        for f in range(1, n_followers):
-            largest = max(largest, platoon.setting[e, f])
-        for i in range(1, levels.size):
-            if abs(levels[i] - largest) < abs(levels[level] - largest):
-                level = i
-        level = min(max(level + rules.relative_steps[action[e, 0]], 0), levels.size - 1)
-    for f in range(n_followers):
-        if rules.action_mode == PER_VEHICLE:
-            level = action[e, f]
-        elif rules.action_mode == PLATOON:
-            level = action[e, 0]
-        setting = levels[level]
+    ladder_env(rules.ladder, action, platoon.setting, e, targets)
+    for f in range(targets.shape[0]):
+        setting = targets[f]
         changed[e, f] = not abs(setting - platoon.setting[e, f]) <= SAME_SETTING
         if not changed[e, f]:
             continue
@@ -246,7 +224,7 @@ def _cache_follows(dispatcher: object, modules: tuple[str, ...]) -> None:
 
 
 _cache_follows(fused_step, tuple(f"timegap_env.{module}" for module in (
-    "sim.counter_noise", "sim.platoon", "monitoring.sensors", "monitoring.monitor", "monitoring.posterior",
-    "monitoring.charts", "envs.reward", "envs.totals", "envs.observation")))
+    "envs.action", "sim.counter_noise", "sim.platoon", "monitoring.sensors", "monitoring.monitor",
+    "monitoring.posterior", "monitoring.charts", "envs.reward", "envs.totals", "envs.observation")))
 
 __all__ = ["StepRules", "StepState", "fused_step"]

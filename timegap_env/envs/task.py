@@ -138,8 +138,9 @@ class PlatoonTask:
                                   terminated=np.zeros(n_envs, dtype=bool), truncated=np.zeros(n_envs, dtype=bool))
         self._changed = np.zeros((n_envs, self.n_followers), dtype=bool)
         self._observation = np.zeros((n_envs, self.n_followers, len(FEATURES)), dtype=np.float32)
-        self._rules = tuple(StepRules.from_config(config, self.loop.chart.rule, tuple(self._reward_constants),
-                                                  np.array(self._weights), tuple(self._scales)))
+        self._rules = tuple(StepRules.from_config(config, self.ladder.rule, self.loop.chart.rule,
+                                                  tuple(self._reward_constants), np.array(self._weights),
+                                                  tuple(self._scales)))
         self._state: tuple | None = None  # the fused step's StepState, built at each reset
 
     def __getstate__(self) -> dict[str, Any]:
