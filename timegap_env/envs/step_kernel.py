@@ -38,10 +38,10 @@ from timegap_env.envs.reward import (
 )
 from timegap_env.envs.totals import add_step_env
 from timegap_env.monitoring.charts import (
-    CUSUM, EWMA, ChartMemory, ChartRule, ChartState, chart_sides_env, count_excursions_env,
+    ChartMemory, ChartRule, ChartState, chart_sides_env, count_excursions_env, restart_env,
 )
 from timegap_env.monitoring.loop import SAME_SETTING
-from timegap_env.monitoring.monitor import MonitorTicks, WindowMemory, update_env
+from timegap_env.monitoring.monitor import MonitorTicks, recenter_env, update_env
 from timegap_env.monitoring.posterior import Moments
 from timegap_env.monitoring.sensors import Readings, measure_env
 from timegap_env.sim.platoon import Controller, LeaderTicks, PlatoonState, PlatoonTicks, advance_env
@@ -172,9 +172,8 @@ def _change_settings(platoon, controller, memory, chart, rules, action, changed,
     (the window's data and the chart's history cleared) and its alarms held off while it ramps and settles (see
     :meth:`~timegap_env.monitoring.loop.MonitoredPlatoon.change_setting`). ``platoon``, ``controller``, ``memory``
     (:class:`WindowMemory`) and ``chart`` are :class:`StepState`'s."""
-    platoon, controller, memory = PlatoonState(*platoon), Controller(*controller), WindowMemory(*memory)
+    platoon, controller = PlatoonState(*platoon), Controller(*controller)
     chart_memory, center, statistic, chart_tick = chart
-    chart_memory = ChartMemory(*chart_memory)
     ladder_env(rules.ladder, action, platoon.setting, e, targets)
     for f in range(targets.shape[0]):
         setting = targets[f]
@@ -182,24 +181,11 @@ def _change_settings(platoon, controller, memory, chart, rules, action, changed,
         if not changed[e, f]:
             continue
         platoon.setting[e, f] = setting
-        memory.prior_tau[e, f] = setting
-        window = memory.slots[e, f]  # (W + 1, N_SUMS)
-        for n in range(window.shape[1]):
-            memory.block_sum[e, f, n] = memory.window_sums[e, f, n] = 0.0
-            for m in range(window.shape[0]):
-                window[m, n] = 0.0
+        recenter_env(memory, setting, e, f)
         applied = platoon.applied_setting[e, f]
-        center[e, f] = applied
-        chart_memory.side[e, f], chart_memory.exceedance[e, f] = 0, False
-        chart_memory.exceedances_in_window[e, f], chart_memory.run_length[e, f] = 0, 0
-        chart_memory.restarted[e, f] = chart_tick[0]
-        chart_kind = ChartRule(*rules.chart).kind
-        if chart_kind == EWMA:  # restarts at the centre line
-            statistic[e, f, 0] = applied
-        elif chart_kind == CUSUM:  # its sums restart at 0
-            statistic[e, f, 0] = statistic[e, f, 1] = 0.0
+        restart_env(rules.chart, chart_memory, center, statistic, chart_tick[0], applied, e, f)
         ramp_ticks = math.ceil(abs(setting - applied) / controller.max_setting_change)
-        chart_memory.hold_off[e, f] = int(ramp_ticks + rules.settle_ticks)
+        ChartMemory(*chart_memory).hold_off[e, f] = int(ramp_ticks + rules.settle_ticks)
 
 
 def _cache_follows(dispatcher: object, modules: tuple[str, ...]) -> None:

@@ -89,10 +89,10 @@ class ChartRule(NamedTuple):
 class ControlChart:
     """What every chart shares: excursions, their windowed count, run length, re-centring.
 
-    A subclass names its ``kind`` (its key in :data:`CHARTS`) and its limits' ``half_width``, and defines
-    ``_restart(mask)``: restart its statistic for those vehicles. How its statistic moves and on which side of
-    its limits it lies is the kind's branch of :func:`chart_sides_env`, the kernel both the chart and the
-    fused step run. A statistic lives in ``statistic`` (n_envs, n_vehicles, 2), in place.
+    A subclass names its ``kind`` (its key in :data:`CHARTS`) and its limits' ``half_width``. How its statistic
+    moves, on which side of its limits it lies and how it restarts are the kind's branches of
+    :func:`chart_sides_env` and :func:`restart_env`, the kernels both the chart and the fused step run. A
+    statistic lives in ``statistic`` (n_envs, n_vehicles, 2), in place.
 
     Public state, arrays (n_envs, n_vehicles): ``center`` [s], ``side``, ``alarm``,
     ``exceedance``, ``exceedances_in_window``, ``run_length`` [ticks], ``hold_off`` [ticks].
@@ -191,13 +191,8 @@ class ControlChart:
         and ``run_length`` restarts at 0.
         """
         center, vehicles = setting_array(center, self.shape), vehicle_mask(mask, self.shape)
-        memory = self._memory
-        np.copyto(self.center, center, where=vehicles)
-        for state in (memory.side, memory.exceedance, memory.exceedances_in_window, memory.run_length,
-                      memory.hold_off):
-            np.copyto(state, 0, where=vehicles, casting="unsafe")  # 0, False
-        np.copyto(memory.restarted, self._tick[0], where=vehicles)  # their earlier starts no longer count
-        self._restart(vehicles)
+        _restart(tuple(self.rule), self._memory_args, self.center, self.statistic, self._tick[0],
+                 np.ascontiguousarray(center, dtype=float), np.ascontiguousarray(vehicles))
 
     def hold(self, ticks: ArrayLike, mask: ArrayLike | None = None) -> None:
         """Hold alarms off for the next ``ticks`` ticks (broadcast to (n_envs, n_vehicles)) where ``mask``.
@@ -213,8 +208,6 @@ class ControlChart:
         vehicles = np.broadcast_to(env_mask(mask, self.shape[0])[:, None], self.shape)
         self.recenter(center, vehicles)
 
-    def _restart(self, mask: np.ndarray) -> None:
-        raise NotImplementedError
 
 
 class ShewhartChart(ControlChart):
@@ -234,9 +227,6 @@ class ShewhartChart(ControlChart):
     def ucl(self) -> np.ndarray:
         """Upper control limit (n_envs, n_vehicles) [s]."""
         return self.center + self.half_width
-
-    def _restart(self, mask: np.ndarray) -> None:
-        """Memoryless: nothing to restart."""
 
 
 class EwmaChart(ControlChart):
@@ -266,9 +256,6 @@ class EwmaChart(ControlChart):
         """Upper control limit of the EWMA (n_envs, n_vehicles) [s]."""
         return self.center + self.half_width
 
-    def _restart(self, mask: np.ndarray) -> None:
-        self.ewma[mask] = self.center[mask]
-
 
 class CusumChart(ControlChart):
     """Two-sided tabular CUSUM of the standardised deviation y = (x - tau*) / sigma_desired.
@@ -283,9 +270,31 @@ class CusumChart(ControlChart):
     upper_sum = property(lambda self: self.statistic[..., 0], doc="C+ (n_envs, n_vehicles) [sigma_desired].")
     lower_sum = property(lambda self: self.statistic[..., 1], doc="C- (n_envs, n_vehicles) [sigma_desired].")
 
-    def _restart(self, mask: np.ndarray) -> None:
-        self.upper_sum[mask] = 0.0
-        self.lower_sum[mask] = 0.0
+
+@numba.njit(cache=True, error_model="numpy")
+def _restart(rule, memory, center, statistic, tick, centers, vehicles):  # noqa: ANN001, ANN202, PLR0913
+    """:func:`restart_env` for every vehicle of ``vehicles`` (n_envs, n_vehicles) bool, on ``centers`` [s]."""
+    for e in range(vehicles.shape[0]):
+        for f in range(vehicles.shape[1]):
+            if vehicles[e, f]:
+                restart_env(rule, memory, center, statistic, tick, centers[e, f], e, f)
+
+
+@numba.njit(cache=True, error_model="numpy", inline="always")
+def restart_env(rule, memory, center, statistic, tick, line, e, f):  # noqa: ANN001, ANN201, PLR0913
+    """Vehicle ``f`` of env ``e`` re-centred on ``line`` [s] at chart tick ``tick``: its excursion history is
+    cleared (it was measured against the old limits; starts before ``tick`` no longer count), its run length and
+    hold-off restart at 0, and its statistic restarts (EWMA at the centre line, CUSUM's sums at 0); ``rule`` is
+    :class:`ChartRule`, ``memory`` :class:`ChartMemory` (plain tuples)."""
+    rule, memory = ChartRule(*rule), ChartMemory(*memory)
+    center[e, f] = line
+    memory.side[e, f], memory.exceedance[e, f] = 0, False
+    memory.exceedances_in_window[e, f], memory.run_length[e, f], memory.hold_off[e, f] = 0, 0, 0
+    memory.restarted[e, f] = tick
+    if rule.kind == EWMA:
+        statistic[e, f, 0] = line
+    elif rule.kind == CUSUM:
+        statistic[e, f, 0] = statistic[e, f, 1] = 0.0
 
 
 @numba.njit(cache=True, error_model="numpy")

@@ -197,9 +197,7 @@ class TimeGapMonitor:
         """
         setting, vehicles = setting_array(setting, self.shape), vehicle_mask(mask, self.shape)
         memory = self._memory
-        np.copyto(memory.prior_tau, setting, where=vehicles)
-        for sums in (memory.block_sum, memory.window_sums, memory.slots):  # (n_envs, n_vehicles, ...)
-            np.copyto(sums, 0.0, where=vehicles.reshape(vehicles.shape + (1,) * (sums.ndim - 2)))
+        _recenter(self._kernel_args[0], np.ascontiguousarray(setting, dtype=float), np.ascontiguousarray(vehicles))
         if self._rule.raw_gap and self._moments is not None:  # the others keep their last tick's raw gap
             fresh = Moments(*np.zeros((len(Moments._fields),) + self.shape))
             _posterior_of_window(memory.window_sums, memory.prior_tau, tuple(self._prior), tuple(fresh))
@@ -280,6 +278,28 @@ class TimeGapMonitor:
             raise ValueError(f"lcl = {lcl!r}, ucl = {ucl!r}: need lcl <= ucl everywhere")
         moments = self._latest()
         return outside_probability(moments.mean_tau, moments.var_tau, low, high)
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _recenter(memory, settings, vehicles):  # noqa: ANN001, ANN202
+    """:func:`recenter_env` for every vehicle of ``vehicles`` (n_envs, n_vehicles) bool, on ``settings`` [s]."""
+    for e in range(vehicles.shape[0]):
+        for f in range(vehicles.shape[1]):
+            if vehicles[e, f]:
+                recenter_env(memory, settings[e, f], e, f)
+
+
+@numba.njit(cache=True, error_model="numpy", inline="always")
+def recenter_env(memory, setting, e, f):  # noqa: ANN001, ANN201
+    """Vehicle ``f`` of env ``e`` under a new setting [s]: its prior mean of tau moves there and its window's data
+    are cleared (see :meth:`TimeGapMonitor.recenter`); ``memory`` is :class:`WindowMemory` (a plain tuple)."""
+    memory = WindowMemory(*memory)
+    memory.prior_tau[e, f] = setting
+    window = memory.slots[e, f]  # (W + 1, N_SUMS)
+    for n in range(window.shape[1]):
+        memory.block_sum[e, f, n] = memory.window_sums[e, f, n] = 0.0
+        for m in range(window.shape[0]):
+            window[m, n] = 0.0
 
 
 @numba.njit(cache=True, error_model="numpy")
