@@ -9,6 +9,7 @@ import numba
 import numpy as np
 from gymnasium import spaces
 
+from timegap_env.compiled import STAGE_KERNEL
 from timegap_env.config import ACTION_MODES, EnvConfig, shown
 
 
@@ -82,7 +83,7 @@ def _ladder(rule, action, current, settings):  # noqa: ANN001, ANN202
         ladder_env(rule, action, current, e, settings[e])
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(**STAGE_KERNEL)
 def ladder_env(rule, action, current, e, out):  # noqa: ANN001, ANN201
     """Env ``e``'s settings [s] for its action, into ``out`` (n_followers,): ``action`` is int64 (n_envs, 1) (a
     ladder index or a relative step for the platoon) or (n_envs, N) (an index per follower), checked by

@@ -17,6 +17,7 @@ import numba
 import numpy as np
 from gymnasium import spaces
 
+from timegap_env.compiled import STAGE_KERNEL
 from timegap_env.config import EnvConfig
 from timegap_env.monitoring.posterior import outside_probability
 
@@ -139,7 +140,7 @@ def _encode(state, scales, out):  # noqa: ANN001, ANN202
         encode_env(state, scales, out, e)
 
 
-@numba.njit(cache=True, error_model="numpy", inline="always")
+@numba.njit(**STAGE_KERNEL)
 def encode_env(state, scales, out, e):  # noqa: ANN001, ANN201
     """Env ``e``'s row of :func:`_encode`."""
     state, scales = FollowerState(*state), ObservationScales(*scales)

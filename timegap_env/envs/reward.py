@@ -51,6 +51,7 @@ from typing import TYPE_CHECKING, Any, NamedTuple
 import numba
 import numpy as np
 
+from timegap_env.compiled import STAGE_KERNEL
 from timegap_env.config import TIME_GAP_MIN_SPEED, EnvConfig, RewardWeights
 
 if TYPE_CHECKING:  # mypy cannot see fields computed at import: a tuple of one term per field, read by name
@@ -268,7 +269,7 @@ def _step_readouts(step, previous_accel, envelope, constants, out):  # noqa: ANN
         env_readouts(step, e, previous_accel, envelope, constants, out, e)
 
 
-@numba.njit(cache=True, error_model="numpy", inline="always")
+@numba.njit(**STAGE_KERNEL)
 def env_readouts(step, column, previous_accel, envelope, constants, out, e):  # noqa: ANN001, ANN201, PLR0913
     """Env ``e``'s read-outs (into ``out``, a :class:`StepReadouts`) of column ``column`` of ``step`` (a
     :class:`StepTicks`); its acceleration envelopes are updated in place."""
@@ -319,7 +320,7 @@ def _reward_terms(readouts, setting, changed, constants, out):  # noqa: ANN001, 
         env_reward_terms(readouts, setting, changed, constants, out, e)
 
 
-@numba.njit(cache=True, error_model="numpy", inline="always")
+@numba.njit(**STAGE_KERNEL)
 def env_reward_terms(readouts, setting, changed, constants, out, e):  # noqa: ANN001, ANN201, PLR0913
     """Env ``e``'s terms (into ``out``, a :class:`RewardTerms` of (n_envs,) arrays) from its read-outs."""
     n_followers = setting.shape[1]
@@ -345,7 +346,7 @@ def env_reward_terms(readouts, setting, changed, constants, out, e):  # noqa: AN
     out.switching[e] = -(switching / n_followers)
 
 
-@numba.njit(cache=True, error_model="numpy", inline="always")
+@numba.njit(**STAGE_KERNEL)
 def env_objectives(readouts, setting, changed, terms, constants, out, cost, e):  # noqa: ANN001, ANN201, PLR0913
     """Env ``e``'s objectives of :data:`OBJECTIVES` in natural units (into ``out``, a :class:`RewardTerms` of
     (n_envs,) rows, each term's objective under its name) from its read-outs, and its cost (into ``cost``,
@@ -379,7 +380,7 @@ def _weighted_sum(terms, weights, out):  # noqa: ANN001, ANN202
         env_weighted_sum(terms, weights, out, e)
 
 
-@numba.njit(cache=True, error_model="numpy", inline="always")
+@numba.njit(**STAGE_KERNEL)
 def env_weighted_sum(terms, weights, out, e):  # noqa: ANN001, ANN201
     """``out[e]`` of :func:`_weighted_sum`."""
     out[e] = 0.0

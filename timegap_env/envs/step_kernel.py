@@ -29,6 +29,7 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
+from timegap_env.compiled import NO_ALLOCATION, STAGE_KERNEL
 from timegap_env.config import EnvConfig
 from timegap_env.envs.action import LadderRule, ladder_env
 from timegap_env.envs.observation import FollowerState, encode_env
@@ -77,6 +78,34 @@ class StepState(NamedTuple):
     terminated: np.ndarray  # (n_envs,) a collision ended the episode [bool]
     truncated: np.ndarray  # (n_envs,) the episode ran out of time or leader profile [bool]
     observation: np.ndarray  # (n_envs, n_followers, n_features) float32
+    scratch: tuple  # StepScratch
+
+
+class StepScratch(NamedTuple):
+    """Where the step puts one env's block of ticks, overwritten env by env: arrays (n_ticks, 1, n_followers), the
+    staged path's blocks with one env's column, allocated once so that the step allocates nothing."""
+
+    leader: tuple  # LeaderTicks, speed and acceleration (n_ticks, 1)
+    physics: tuple  # PlatoonTicks
+    measured: tuple  # Readings
+    estimates: tuple  # MonitorTicks
+    charted: tuple  # ChartState, its centre lines physics' applied settings
+    targets: np.ndarray  # (n_followers,) the env's settings from its action [s]
+
+    @classmethod
+    def empty(cls, n_ticks: int, n_followers: int) -> StepScratch:
+        block = (n_ticks, 1, n_followers)
+        physics = PlatoonTicks(np.empty(block), np.empty(block), np.empty(block), np.empty(block),
+                               np.empty(block, dtype=bool))
+        return cls(
+            leader=tuple(LeaderTicks(np.empty((n_ticks, 1)), np.empty((n_ticks, 1)), np.empty(block, dtype=bool))),
+            physics=tuple(physics), measured=tuple(Readings(np.empty(block), np.empty(block))),
+            estimates=tuple(MonitorTicks(np.empty(block, dtype=bool), np.empty(block), np.empty(block))),
+            charted=tuple(ChartState(physics.applied_setting, np.empty(block, dtype=bool), np.empty(block, dtype=np.int8),
+                                     np.empty(block, dtype=bool), np.empty(block, dtype=np.int64),
+                                     np.empty(block, dtype=np.int64))),
+            targets=np.empty(n_followers),
+        )
 
 
 class StepRules(NamedTuple):
@@ -102,7 +131,7 @@ class StepRules(NamedTuple):
         )
 
 
-@numba.njit(cache=True, error_model="numpy")
+@numba.njit(cache=True, error_model="numpy", **NO_ALLOCATION)  # allocates nothing (see timegap_env.compiled)
 def fused_step(state, rules, action):  # noqa: ANN001, ANN201
     """One decision step of every env: ``action`` (n_envs, 1) ladder indices or relative steps, or (n_envs,
     n_followers) indices per follower, int64, checked by :meth:`~timegap_env.envs.action.SettingLadder.check`
@@ -112,15 +141,9 @@ def fused_step(state, rules, action):  # noqa: ANN001, ANN201
     platoon = PlatoonState(*state.platoon)
     n_envs, n_followers = platoon.setting.shape
     n_ticks = rules.ticks_per_step
-    block = (n_ticks, 1, n_followers)  # one env's ticks, the layout of the staged path's blocks
-    leader = LeaderTicks(np.empty((n_ticks, 1)), np.empty((n_ticks, 1)), np.empty(block, dtype=np.bool_))
-    physics = PlatoonTicks(np.empty(block), np.empty(block), np.empty(block), np.empty(block),
-                           np.empty(block, dtype=np.bool_))
-    measured = Readings(np.empty(block), np.empty(block))
-    estimates = MonitorTicks(np.empty(block, dtype=np.bool_), np.empty(block), np.empty(block))
-    charted = ChartState(physics.applied_setting, np.empty(block, dtype=np.bool_), np.empty(block, dtype=np.int8),
-                         np.empty(block, dtype=np.bool_), np.empty(block, dtype=np.int64),
-                         np.empty(block, dtype=np.int64))
+    scratch = StepScratch(*state.scratch)
+    leader, physics, measured = LeaderTicks(*scratch.leader), PlatoonTicks(*scratch.physics), Readings(*scratch.measured)
+    estimates, charted = MonitorTicks(*scratch.estimates), ChartState(*scratch.charted)
     ticks = StepTicks(estimates.tau_mean, charted.center, physics.applied_setting, charted.alarm, charted.exceedance,
                       physics.collisions, leader.speed, leader.accel, physics.speed, physics.spacing, physics.accel)
     memory, slot, rule, prior, posterior = state.monitor
@@ -131,10 +154,10 @@ def fused_step(state, rules, action):  # noqa: ANN001, ANN201
     terms, readouts, objectives = RewardTerms(*state.terms), StepReadouts(*state.readouts), RewardTerms(*state.objectives)
     constants = RewardConstants(*rules.reward)
     faults_start, faults_end = state.faults[0], state.faults[1]
-    targets = np.empty(n_followers)  # an env's settings from its action [s]
     last = n_ticks - 1
     for e in range(n_envs):
-        _change_settings(state.platoon, state.controller, memory, state.chart, rules, action, state.changed, targets, e)
+        _change_settings(state.platoon, state.controller, memory, state.chart, rules, action, state.changed,
+                         scratch.targets, e)
         ticks_before = platoon.ticks[e]
         for k in range(n_ticks):  # the leader at the end of each tick (held after its episode), V2V during it
             tick = ticks_before + k
@@ -165,7 +188,7 @@ def fused_step(state, rules, action):  # noqa: ANN001, ANN201
     chart_tick[0] += n_ticks
 
 
-@numba.njit(cache=True, error_model="numpy", inline="always")
+@numba.njit(**STAGE_KERNEL)
 def _change_settings(platoon, controller, memory, chart, rules, action, changed, targets, e):  # noqa: ANN001, ANN202, PLR0913
     """Env ``e``'s new settings from its action (:func:`~timegap_env.envs.action.ladder_env`, into ``targets``
     (n_followers,)); a follower whose setting changes (``changed``) ramps to it, its prior and chart are re-centred
@@ -213,4 +236,4 @@ _cache_follows(fused_step, tuple(f"timegap_env.{module}" for module in (
     "envs.action", "sim.counter_noise", "sim.platoon", "monitoring.sensors", "monitoring.monitor",
     "monitoring.posterior", "monitoring.charts", "envs.reward", "envs.totals", "envs.observation")))
 
-__all__ = ["StepRules", "StepState", "fused_step"]
+__all__ = ["StepRules", "StepScratch", "StepState", "fused_step"]

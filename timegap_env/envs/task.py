@@ -32,7 +32,7 @@ from timegap_env.envs.rendering import DEFAULT_TIME_WINDOW, RenderFrame
 from timegap_env.envs.reward import (
     REWARD_TERMS, RewardConstants, StepReadouts, StepTicks, score_step, weights_of,
 )
-from timegap_env.envs.step_kernel import StepRules, StepState, fused_step
+from timegap_env.envs.step_kernel import StepRules, StepScratch, StepState, fused_step
 from timegap_env.envs.totals import EpisodeTotals
 from timegap_env.monitoring.loop import MonitoredPlatoon
 from timegap_env.sim.platoon import Platoon
@@ -141,6 +141,7 @@ class PlatoonTask:
         self._rules = tuple(StepRules.from_config(config, self.ladder.rule, self.loop.chart.rule,
                                                   tuple(self._reward_constants), np.array(self._weights),
                                                   tuple(self._scales)))
+        self._scratch = tuple(StepScratch.empty(self.ticks_per_decision, self.n_followers))
         self._state: tuple | None = None  # the fused step's StepState, built at each reset
 
     def __getstate__(self) -> dict[str, Any]:
@@ -210,6 +211,7 @@ class PlatoonTask:
             changed=self._changed, term_rows=result.term_rows, terms=tuple(result.term_rows), reward=result.reward,
             objectives=tuple(result.objective_rows), cost=result.cost,
             terminated=result.terminated, truncated=result.truncated, observation=self._observation,
+            scratch=self._scratch,
         ))
 
     def start_trace(self, keep: float | None = DEFAULT_TIME_WINDOW) -> Trace:

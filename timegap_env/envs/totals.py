@@ -7,6 +7,7 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
+from timegap_env.compiled import STAGE_KERNEL
 from timegap_env.config import EnvConfig
 from timegap_env.envs.reward import StepReadouts
 
@@ -73,7 +74,7 @@ def _add_step(totals, readouts, setting, changed, gap_per_vehicle):  # noqa: ANN
         add_step_env(totals, readouts, setting, changed, gap_per_vehicle, e)
 
 
-@numba.njit(cache=True, error_model="numpy", inline="always")
+@numba.njit(**STAGE_KERNEL)
 def add_step_env(totals, readouts, setting, changed, gap_per_vehicle, e):  # noqa: ANN001, ANN201, PLR0913
     """Env ``e``'s part of :func:`_add_step`."""
     totals, readouts = EpisodeTotals(*totals), StepReadouts(*readouts)

@@ -36,6 +36,7 @@ import numba
 import numpy as np
 from numpy.typing import ArrayLike
 
+from timegap_env.compiled import STAGE_KERNEL
 from timegap_env.config import CHART_KINDS, ChartConfig
 from timegap_env.monitoring.batch import batch_array, batch_shape, check_finite, env_mask, setting_array, vehicle_mask
 
@@ -280,7 +281,7 @@ def _restart(rule, memory, center, statistic, tick, centers, vehicles):  # noqa:
                 restart_env(rule, memory, center, statistic, tick, centers[e, f], e, f)
 
 
-@numba.njit(cache=True, error_model="numpy", inline="always")
+@numba.njit(**STAGE_KERNEL)
 def restart_env(rule, memory, center, statistic, tick, line, e, f):  # noqa: ANN001, ANN201, PLR0913
     """Vehicle ``f`` of env ``e`` re-centred on ``line`` [s] at chart tick ``tick``: its excursion history is
     cleared (it was measured against the old limits; starts before ``tick`` no longer count), its run length and
@@ -308,7 +309,7 @@ def _chart_ticks(rule, memory, first_tick, estimates, statistic, block):  # noqa
         count_excursions_env(memory, first_tick, block, e, e)
 
 
-@numba.njit(cache=True, error_model="numpy", inline="always")
+@numba.njit(**STAGE_KERNEL)
 def chart_sides_env(rule, estimates, centers, statistic, sides, e, column):  # noqa: ANN001, ANN201, PLR0913
     """Env ``e``'s charted statistic through a block of ticks and its side (-1, 0, +1) of its limits after each, into
     ``sides``; ``estimates``, ``centers`` and ``sides`` are (n_ticks, n_columns, n_vehicles), env ``e`` in column
@@ -342,7 +343,7 @@ def chart_sides_env(rule, estimates, centers, statistic, sides, e, column):  # n
             sides[k, c, f] = 1 if value > high else (-1 if value < low else 0)
 
 
-@numba.njit(cache=True, error_model="numpy", inline="always")
+@numba.njit(**STAGE_KERNEL)
 def count_excursions_env(memory, first_tick, block, e, column):  # noqa: ANN001, ANN201
     """What every chart does with its statistic's sides, tick by tick, for env ``e``, in place.
 

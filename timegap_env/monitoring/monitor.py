@@ -15,6 +15,7 @@ import numba
 import numpy as np
 from numpy.typing import ArrayLike
 
+from timegap_env.compiled import STAGE_KERNEL
 from timegap_env.config import MonitorConfig
 from timegap_env.monitoring.batch import batch_array, batch_shape, env_mask, setting_array, vehicle_mask
 from timegap_env.monitoring.posterior import Moments, Prior, WindowSums, outside_probability, posterior_moments
@@ -289,7 +290,7 @@ def _recenter(memory, settings, vehicles):  # noqa: ANN001, ANN202
                 recenter_env(memory, settings[e, f], e, f)
 
 
-@numba.njit(cache=True, error_model="numpy", inline="always")
+@numba.njit(**STAGE_KERNEL)
 def recenter_env(memory, setting, e, f):  # noqa: ANN001, ANN201
     """Vehicle ``f`` of env ``e`` under a new setting [s]: its prior mean of tau moves there and its window's data
     are cleared (see :meth:`TimeGapMonitor.recenter`); ``memory`` is :class:`WindowMemory` (a plain tuple)."""
@@ -316,7 +317,7 @@ def _update_kernel(speed, spacing, memory, slot, rule, prior, out, out_moments):
         update_env(speed, spacing, memory, slot, rule, prior, out, out_moments, e, e)
 
 
-@numba.njit(cache=True, error_model="numpy", inline="always")
+@numba.njit(**STAGE_KERNEL)
 def update_env(speed, spacing, memory, slot, rule, prior, out, out_moments, e, column):  # noqa: ANN001, ANN201, PLR0913
     """Env ``e``'s vehicles through a block of measurements, column ``column`` of ``speed``, ``spacing`` and
     ``out`` (the arguments of :func:`_update_kernel`), tick by tick and vehicle by vehicle, in place.
@@ -330,7 +331,6 @@ def update_env(speed, spacing, memory, slot, rule, prior, out, out_moments, e, c
     n_ticks, n_vehicles = speed.shape[0], speed.shape[2]
     window_ticks = slots.shape[1] - 1
     c = column
-    x = np.empty(N_SUMS)
     for k in range(n_ticks):
         p = slot[e]
         for i in range(n_vehicles):
@@ -342,7 +342,7 @@ def update_env(speed, spacing, memory, slot, rule, prior, out, out_moments, e, c
                 memory.skipped[e, i] += 1
             if not used:
                 v = s = 0.0
-            x[0], x[1], x[2], x[3], x[4] = (1.0 if used else 0.0), v, v * v, s, v * s
+            x = ((1.0 if used else 0.0), v, v * v, s, v * s)  # this tick's terms of the sums
             for n in range(N_SUMS):
                 if rule.forgetting < 1.0:
                     block_sum[i, n] *= rule.forgetting
@@ -376,7 +376,7 @@ def update_env(speed, spacing, memory, slot, rule, prior, out, out_moments, e, c
             slot[e] = 0
 
 
-@numba.njit(cache=True, error_model="numpy", inline="always")
+@numba.njit(**STAGE_KERNEL)
 def _raw_gap(speed, spacing, used, setting, prior):  # noqa: ANN001, ANN202
     """The raw-gap ablation's read-out of one tick (``MonitorConfig.estimator = "raw_gap"``), as :class:`Moments`:
     tau = (s - s0) / v with s0 the prior's mean, taken as known, and the spacing noise's variance sigma^2 / v^2;
