@@ -14,6 +14,7 @@ from collections.abc import Callable
 import numba
 import numpy as np
 
+from timegap_env.compiled import NO_ALLOCATION
 from timegap_env.envs.step_kernel import StepState, fused_step
 from timegap_env.envs.vector_env import TimeGapMonitorVectorEnv
 
@@ -30,9 +31,10 @@ class SingleEnvSplit:
 ARITHMETIC_ENVS = 256
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, **NO_ALLOCATION)
 def _unpack_only(state, rules, action):  # noqa: ANN001, ANN202
-    """Reads one value of what fused_step takes; its cost is numba's unpacking of the arguments."""
+    """Reads one value of what fused_step takes, compiled as fused_step is; its cost is numba's unpacking of the
+    arguments."""
     return StepState(*state).reward[0]
 
 

@@ -82,30 +82,25 @@ class StepState(NamedTuple):
 
 
 class StepScratch(NamedTuple):
-    """Where the step puts one env's block of ticks, overwritten env by env: arrays (n_ticks, 1, n_followers), the
-    staged path's blocks with one env's column, allocated once so that the step allocates nothing."""
+    """Where the step puts one env's block of ticks, overwritten env by env, allocated once so that the step
+    allocates nothing: the staged path's blocks with one env's column, (n_ticks, 1, n_followers) each, stacked by
+    dtype so that the step takes a handful of arrays (each stack's rows in the order noted)."""
 
-    leader: tuple  # LeaderTicks, speed and acceleration (n_ticks, 1)
-    physics: tuple  # PlatoonTicks
-    measured: tuple  # Readings
-    estimates: tuple  # MonitorTicks
-    charted: tuple  # ChartState, its centre lines physics' applied settings
+    floats: np.ndarray  # (8, n_ticks, 1, n_followers): PlatoonTicks' spacing, speed, accel, applied_setting; Readings'
+    #                     spacing, speed; MonitorTicks' tau_mean, tau_var
+    flags: np.ndarray  # (5, n_ticks, 1, n_followers) bool: LeaderTicks' v2v, PlatoonTicks' collisions, MonitorTicks'
+    #                    used, ChartState's alarm, exceedance
+    side: np.ndarray  # (n_ticks, 1, n_followers) int8, ChartState's
+    counts: np.ndarray  # (2, n_ticks, 1, n_followers) int64: ChartState's exceedances_in_window, run_length
+    leader: np.ndarray  # (2, n_ticks, 1): LeaderTicks' speed [m/s] and acceleration [m/s^2]
     targets: np.ndarray  # (n_followers,) the env's settings from its action [s]
 
     @classmethod
     def empty(cls, n_ticks: int, n_followers: int) -> StepScratch:
         block = (n_ticks, 1, n_followers)
-        physics = PlatoonTicks(np.empty(block), np.empty(block), np.empty(block), np.empty(block),
-                               np.empty(block, dtype=bool))
-        return cls(
-            leader=tuple(LeaderTicks(np.empty((n_ticks, 1)), np.empty((n_ticks, 1)), np.empty(block, dtype=bool))),
-            physics=tuple(physics), measured=tuple(Readings(np.empty(block), np.empty(block))),
-            estimates=tuple(MonitorTicks(np.empty(block, dtype=bool), np.empty(block), np.empty(block))),
-            charted=tuple(ChartState(physics.applied_setting, np.empty(block, dtype=bool), np.empty(block, dtype=np.int8),
-                                     np.empty(block, dtype=bool), np.empty(block, dtype=np.int64),
-                                     np.empty(block, dtype=np.int64))),
-            targets=np.empty(n_followers),
-        )
+        return cls(floats=np.empty((8, *block)), flags=np.empty((5, *block), dtype=bool),
+                   side=np.empty(block, dtype=np.int8), counts=np.empty((2, *block), dtype=np.int64),
+                   leader=np.empty((2, n_ticks, 1)), targets=np.empty(n_followers))
 
 
 class StepRules(NamedTuple):
@@ -142,8 +137,11 @@ def fused_step(state, rules, action):  # noqa: ANN001, ANN201
     n_envs, n_followers = platoon.setting.shape
     n_ticks = rules.ticks_per_step
     scratch = StepScratch(*state.scratch)
-    leader, physics, measured = LeaderTicks(*scratch.leader), PlatoonTicks(*scratch.physics), Readings(*scratch.measured)
-    estimates, charted = MonitorTicks(*scratch.estimates), ChartState(*scratch.charted)
+    floats, flags, counts = scratch.floats, scratch.flags, scratch.counts
+    leader = LeaderTicks(scratch.leader[0], scratch.leader[1], flags[0])
+    physics = PlatoonTicks(floats[0], floats[1], floats[2], floats[3], flags[1])
+    measured, estimates = Readings(floats[4], floats[5]), MonitorTicks(flags[2], floats[6], floats[7])
+    charted = ChartState(physics.applied_setting, flags[3], scratch.side, flags[4], counts[0], counts[1])
     ticks = StepTicks(estimates.tau_mean, charted.center, physics.applied_setting, charted.alarm, charted.exceedance,
                       physics.collisions, leader.speed, leader.accel, physics.speed, physics.spacing, physics.accel)
     memory, slot, rule, prior, posterior = state.monitor
