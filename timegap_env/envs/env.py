@@ -11,7 +11,7 @@ import numpy as np
 
 from timegap_env.config import EnvConfig, shown
 from timegap_env.envs.action import action_space
-from timegap_env.envs.info import EPISODE_PREFIX, info_flags, no_scores, of_env, prefixed, step_scores
+from timegap_env.envs.info import EPISODE_PREFIX, info_flags, no_scores, of_env, prefixed, scores_of_env
 from timegap_env.envs.observation import observation_space
 from timegap_env.envs.rendering import DEFAULT_TIME_WINDOW
 from timegap_env.envs.task import PlatoonTask
@@ -172,7 +172,7 @@ class TimeGapMonitorEnv(gym.Env):
             raise ResetNeeded("TimeGapMonitorEnv.step() called before reset() or after the episode ended "
                               "(terminated or truncated): call reset() first")
         result = self.task._run_step(self._checked(action))
-        info = {**self._info(), **of_env(step_scores(result.term_rows, self.task.objectives()), 0)} \
+        info = {**self._info(), **scores_of_env(result.term_rows, self.task.objectives(), 0)} \
             if self.step_diagnostics else {}
         terminated, truncated = bool(result.terminated[0]), bool(result.truncated[0])
         if terminated or truncated:

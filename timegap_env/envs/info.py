@@ -80,6 +80,18 @@ def step_scores(term_rows: np.ndarray, objectives: tuple[np.ndarray, np.ndarray]
     return scores
 
 
+def scores_of_env(term_rows: np.ndarray, objectives: tuple[np.ndarray, np.ndarray] | None, env: int
+                  ) -> dict[str, np.ndarray]:
+    """:func:`step_scores` of env ``env`` alone, as :func:`of_env` would give them, with fewer allocations: one copy of
+    the env's terms, each ``reward_<term>`` a 0-d view of it."""
+    terms = term_rows[:, env].copy()
+    scores = {REWARD_PREFIX + name: terms[i, ...] for i, name in enumerate(REWARD_TERMS)}
+    if objectives is not None:
+        scores[VECTOR_REWARD], scores[OBJECTIVES_KEY] = terms.copy(), objectives[0][:, env].copy()
+        scores[COST] = np.array(objectives[1][env])
+    return scores
+
+
 def no_scores(n_envs: int, info_keys: str) -> dict[str, np.ndarray]:
     """:func:`step_scores` of no step, zeros: what reset's info holds, so that step's keys are there too."""
     zeros = np.zeros((len(REWARD_TERMS), n_envs))
@@ -139,5 +151,5 @@ def objectives_of(info: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
 
 
 __all__ = ["COST", "EPISODE_PREFIX", "KIND_NAMES", "OBJECTIVES_KEY", "REWARD_PREFIX", "TRUTH_PREFIX", "VECTOR_REWARD",
-           "info_flags", "no_scores", "objectives_of", "of_env", "prefixed", "rewards_of",
+           "info_flags", "no_scores", "scores_of_env", "objectives_of", "of_env", "prefixed", "rewards_of",
            "step_scores", "summary_of", "truth_of", "with_masks"]
