@@ -42,7 +42,7 @@ from timegap_env.monitoring.charts import (
     ChartMemory, ChartRule, ChartState, chart_sides_env, count_excursions_env, restart_env,
 )
 from timegap_env.monitoring.loop import SAME_SETTING
-from timegap_env.monitoring.monitor import MonitorTicks, recenter_env, update_env
+from timegap_env.monitoring.monitor import UPDATE_WORK_ROWS, MonitorTicks, recenter_env, update_env
 from timegap_env.monitoring.posterior import Moments
 from timegap_env.monitoring.sensors import Readings, measure_env
 from timegap_env.sim.platoon import Controller, LeaderTicks, PlatoonState, PlatoonTicks, advance_env
@@ -94,13 +94,15 @@ class StepScratch(NamedTuple):
     counts: np.ndarray  # (2, n_ticks, 1, n_followers) int64: ChartState's exceedances_in_window, run_length
     leader: np.ndarray  # (2, n_ticks, 1): LeaderTicks' speed [m/s] and acceleration [m/s^2]
     targets: np.ndarray  # (n_followers,) the env's settings from its action [s]
+    work: np.ndarray  # (UPDATE_WORK_ROWS, n_ticks * n_followers): measure_env's uniforms, then update_env's scratch
 
     @classmethod
     def empty(cls, n_ticks: int, n_followers: int) -> StepScratch:
         block = (n_ticks, 1, n_followers)
         return cls(floats=np.empty((8, *block)), flags=np.empty((5, *block), dtype=bool),
                    side=np.empty(block, dtype=np.int8), counts=np.empty((2, *block), dtype=np.int64),
-                   leader=np.empty((2, n_ticks, 1)), targets=np.empty(n_followers))
+                   leader=np.empty((2, n_ticks, 1)), targets=np.empty(n_followers),
+                   work=np.empty((UPDATE_WORK_ROWS, n_ticks * n_followers)))
 
 
 class StepRules(NamedTuple):
@@ -165,8 +167,10 @@ def fused_step(state, rules, action):  # noqa: ANN001, ANN201
                 down = faults_start[e, f] <= tick < faults_end[e, f] and state.v2v_down[e, f]
                 leader.v2v[k, 0, f] = rules.v2v_enabled and not down
         advance_env(state.platoon, leader, state.zoh, state.controller, state.faults, physics, e, 0)
-        measure_env((physics.spacing, physics.speed), ticks_before, state.noise, state.sensor_faults, measured, e, 0)
-        update_env(measured.speed, measured.spacing, memory, slot, rule, prior, estimates, posterior, e, 0)
+        measure_env((physics.spacing, physics.speed), ticks_before, state.noise, state.sensor_faults, measured, e, 0,
+                    scratch.work[:3])
+        update_env(measured.speed, measured.spacing, memory, slot, rule, prior, estimates, posterior, e, 0,
+                   scratch.work)
         chart_sides_env(rules.chart, estimates.tau_mean, physics.applied_setting, statistic, charted.side, e, 0)
         count_excursions_env(chart_memory, chart_tick[0], charted, e, 0)
         env_readouts(ticks, 0, state.previous_accel, state.envelope, constants, readouts, e)

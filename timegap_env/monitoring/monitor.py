@@ -23,6 +23,7 @@ from timegap_env.monitoring.posterior import Moments, Prior, WindowSums, outside
 __all__ = ["MonitorTicks", "TimeGapMonitor"]
 
 N_SUMS = len(WindowSums._fields)  # channels of the window sums: n, sum V, sum V^2, sum S, sum V S
+UPDATE_WORK_ROWS = N_SUMS + 3  # rows of update_env's scratch: the window sums, prior mean, mean and variance of tau
 
 
 class MonitorTicks(NamedTuple):
@@ -313,27 +314,38 @@ def _update_kernel(speed, spacing, memory, slot, rule, prior, out, out_moments):
     ``out_moments`` (:class:`Moments` of (n_envs, n_vehicles) arrays) the whole posterior after the last
     tick; each structure comes as a plain tuple (see :mod:`timegap_env.sim.platoon`).
     """
-    for e in range(speed.shape[1]):
-        update_env(speed, spacing, memory, slot, rule, prior, out, out_moments, e, e)
+    n_ticks, n_envs, n_vehicles = speed.shape
+    work = np.empty((UPDATE_WORK_ROWS, n_ticks * n_vehicles))
+    for e in range(n_envs):
+        update_env(speed, spacing, memory, slot, rule, prior, out, out_moments, e, e, work)
 
 
 @numba.njit(**STAGE_KERNEL)
-def update_env(speed, spacing, memory, slot, rule, prior, out, out_moments, e, column):  # noqa: ANN001, ANN201, PLR0913
+def update_env(  # noqa: ANN201, PLR0913
+    speed, spacing, memory, slot, rule, prior, out, out_moments, e, column, work,  # noqa: ANN001
+):
     """Env ``e``'s vehicles through a block of measurements, column ``column`` of ``speed``, ``spacing`` and
-    ``out`` (the arguments of :func:`_update_kernel`), tick by tick and vehicle by vehicle, in place.
+    ``out`` (the arguments of :func:`_update_kernel`), in place; ``work`` (UPDATE_WORK_ROWS, n_ticks * n_vehicles)
+    float64 is scratch.
 
-    ``slot[e] = -1`` means no window: the window sums are the block sums, which never close.
-    The additions are those of the class docstring's drift guard, in the same order.
+    Vehicle by vehicle, tick by tick, the window sums after each tick go to ``work`` (column k n_vehicles + i), and
+    the whole posterior after the last tick to ``out_moments``; then each tick's mean and variance of tau from
+    ``work``, in one loop without branches (which the compiler vectorises). ``slot[e] = -1`` means no window: the window sums are
+    the block sums, which never close. The additions are those of the class docstring's drift guard, in the same
+    order, as if tick by tick.
     """
     memory, rule, prior = WindowMemory(*memory), WindowRule(*rule), Prior(*prior)
     out, out_moments = MonitorTicks(*out), Moments(*out_moments)
     slots, block_sum, window_sums = memory.slots[e], memory.block_sum[e], memory.window_sums[e]
     n_ticks, n_vehicles = speed.shape[0], speed.shape[2]
     window_ticks = slots.shape[1] - 1
-    c = column
-    for k in range(n_ticks):
-        p = slot[e]
-        for i in range(n_vehicles):
+    c, first_slot = column, slot[e]
+    sums, prior_taus, mean_tau, var_tau = work[:N_SUMS], work[N_SUMS], work[N_SUMS + 1], work[N_SUMS + 2]
+    decay = rule.forgetting
+    for i in range(n_vehicles):  # the sums in scalars: b the block's, w the window's
+        p, prior_tau = first_slot, memory.prior_tau[e, i]
+        b0, b1, b2, b3, b4 = block_sum[i, 0], block_sum[i, 1], block_sum[i, 2], block_sum[i, 3], block_sum[i, 4]
+        for k in range(n_ticks):
             v, s = speed[k, c, i], spacing[k, c, i]
             valid = -rule.max_speed <= v <= rule.max_speed and 0.0 <= s <= rule.max_spacing  # NaN -> False
             used = valid and v >= rule.min_speed
@@ -342,38 +354,53 @@ def update_env(speed, spacing, memory, slot, rule, prior, out, out_moments, e, c
                 memory.skipped[e, i] += 1
             if not used:
                 v = s = 0.0
-            x = ((1.0 if used else 0.0), v, v * v, s, v * s)  # this tick's terms of the sums
-            for n in range(N_SUMS):
-                if rule.forgetting < 1.0:
-                    block_sum[i, n] *= rule.forgetting
-                block_sum[i, n] += x[n]
-                if p < 0:
-                    window_sums[i, n] = block_sum[i, n]
-                else:
-                    slots[i, p, n] = x[n]
-                    window_sums[i, n] = slots[i, p + 1, n] * rule.suffix_weight[p] + block_sum[i, n]
-            sums = WindowSums(window_sums[i, 0], window_sums[i, 1], window_sums[i, 2], window_sums[i, 3],
-                              window_sums[i, 4])
-            if rule.raw_gap:
-                moments = _raw_gap(v, s, used, memory.prior_tau[e, i], prior)
+            x0, x1, x2, x3, x4 = (1.0 if used else 0.0), v, v * v, s, v * s  # this tick's terms of the sums
+            if decay < 1.0:
+                b0, b1, b2, b3, b4 = b0 * decay, b1 * decay, b2 * decay, b3 * decay, b4 * decay
+            b0, b1, b2, b3, b4 = b0 + x0, b1 + x1, b2 + x2, b3 + x3, b4 + x4
+            if p < 0:
+                w0, w1, w2, w3, w4 = b0, b1, b2, b3, b4
             else:
-                moments = posterior_moments(sums, memory.prior_tau[e, i], prior)
-            out.tau_mean[k, c, i], out.tau_var[k, c, i] = moments.mean_tau, moments.var_tau
-            if k == n_ticks - 1:  # field by field: a tuple indexed by a variable is slow in numba
-                out_moments.mean_s0[e, i], out_moments.mean_tau[e, i] = moments.mean_s0, moments.mean_tau
-                out_moments.var_s0[e, i], out_moments.cov_s0_tau[e, i] = moments.var_s0, moments.cov_s0_tau
-                out_moments.var_tau[e, i] = moments.var_tau
-        if p < 0:  # no window
-            continue
-        if p < window_ticks - 1:
-            slot[e] = p + 1
-        else:  # the block is full: turn it into suffix sums
-            for i in range(n_vehicles):
+                slots[i, p, 0], slots[i, p, 1], slots[i, p, 2], slots[i, p, 3], slots[i, p, 4] = x0, x1, x2, x3, x4
+                suffix, weight = slots[i, p + 1], rule.suffix_weight[p]
+                w0, w1, w2 = suffix[0] * weight + b0, suffix[1] * weight + b1, suffix[2] * weight + b2
+                w3, w4 = suffix[3] * weight + b3, suffix[4] * weight + b4
+            j = k * n_vehicles + i
+            sums[0, j], sums[1, j], sums[2, j], sums[3, j], sums[4, j], prior_taus[j] = w0, w1, w2, w3, w4, prior_tau
+            if rule.raw_gap:
+                moments = _raw_gap(v, s, used, prior_tau, prior)
+                mean_tau[j], var_tau[j] = moments.mean_tau, moments.var_tau
+                if k == n_ticks - 1:  # field by field: a tuple indexed by a variable is slow in numba
+                    out_moments.mean_s0[e, i], out_moments.mean_tau[e, i] = moments.mean_s0, moments.mean_tau
+                    out_moments.var_s0[e, i], out_moments.cov_s0_tau[e, i] = moments.var_s0, moments.cov_s0_tau
+                    out_moments.var_tau[e, i] = moments.var_tau
+            if p < 0:  # no window
+                continue
+            if p < window_ticks - 1:
+                p += 1
+            else:  # the block is full: turn it into suffix sums
                 for m in range(window_ticks - 2, -1, -1):
                     for n in range(N_SUMS):
                         slots[i, m, n] = slots[i, m, n] * rule.age_weight[m] + slots[i, m + 1, n]
-            block_sum[:, :] = 0.0
-            slot[e] = 0
+                b0 = b1 = b2 = b3 = b4 = 0.0
+                p = 0
+        block_sum[i, 0], block_sum[i, 1], block_sum[i, 2], block_sum[i, 3], block_sum[i, 4] = b0, b1, b2, b3, b4
+        window_sums[i, 0], window_sums[i, 1], window_sums[i, 2] = w0, w1, w2
+        window_sums[i, 3], window_sums[i, 4] = w3, w4
+        slot[e] = p
+        if not rule.raw_gap:  # the whole posterior after the last tick
+            moments = posterior_moments(WindowSums(w0, w1, w2, w3, w4), prior_tau, prior)
+            out_moments.mean_s0[e, i], out_moments.mean_tau[e, i] = moments.mean_s0, moments.mean_tau
+            out_moments.var_s0[e, i], out_moments.cov_s0_tau[e, i] = moments.var_s0, moments.cov_s0_tau
+            out_moments.var_tau[e, i] = moments.var_tau
+    if not rule.raw_gap:  # each tick's mean and variance of tau, in a loop without branches
+        for j in range(n_ticks * n_vehicles):
+            moments = posterior_moments(WindowSums(sums[0, j], sums[1, j], sums[2, j], sums[3, j], sums[4, j]),
+                                        prior_taus[j], prior)
+            mean_tau[j], var_tau[j] = moments.mean_tau, moments.var_tau
+    for k in range(n_ticks):
+        for i in range(n_vehicles):
+            out.tau_mean[k, c, i], out.tau_var[k, c, i] = mean_tau[k * n_vehicles + i], var_tau[k * n_vehicles + i]
 
 
 @numba.njit(**STAGE_KERNEL)

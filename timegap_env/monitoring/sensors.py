@@ -110,39 +110,41 @@ class Sensors:
 @numba.njit(cache=True, error_model="numpy")
 def _measure(true, ticks_before, noise, faults, out):  # noqa: ANN001, ANN202
     """:meth:`Sensors.measure`, env by env (:func:`measure_env`)."""
-    for e in range(true[0].shape[1]):
-        measure_env(true, ticks_before[e], noise, faults, out, e, e)
+    n_ticks, n_envs, n_followers = true[0].shape
+    uniforms = np.empty((_UNIFORM_STREAMS, n_ticks * n_followers))
+    for e in range(n_envs):
+        measure_env(true, ticks_before[e], noise, faults, out, e, e, uniforms)
 
 
 @numba.njit(**STAGE_KERNEL)
-def measure_env(true, ticks_before, noise, faults, out, e, column):  # noqa: ANN001, ANN201, PLR0913
+def measure_env(true, ticks_before, noise, faults, out, e, column, uniforms):  # noqa: ANN001, ANN201, PLR0913
     """Fill column ``column`` of ``out`` (:class:`Readings`) from that of ``true`` for env ``e``, whose block starts
     after ``ticks_before`` ticks since its reset, under ``noise`` (:class:`NoiseModel`) and ``faults``
-    (:class:`SensorFaults`), each a plain tuple (see :mod:`timegap_env.sim.platoon`)."""
+    (:class:`SensorFaults`), each a plain tuple (see :mod:`timegap_env.sim.platoon`).
+
+    ``uniforms`` (3, n_ticks * n_followers) float64 is scratch: the block's uniforms are drawn first, all of them
+    (integer hashing that the compiler vectorises), then turned into readings."""
     true, noise, faults, out = Readings(*true), NoiseModel(*noise), SensorFaults(*faults), Readings(*out)
     n_ticks, n_followers = true.spacing.shape[0], true.spacing.shape[2]
     c, key = column, noise.keys[e]
+    first = np.uint64(ticks_before + 1) * np.uint64(_UNIFORM_STREAMS * n_followers)  # the block's first counter
+    for j in range(n_ticks * n_followers):  # reading j = k n_followers + f: counter first + 3 j + stream
+        counter = first + np.uint64(_UNIFORM_STREAMS * j)
+        uniforms[0, j] = counter_uniform(key, counter)  # the Gaussian pair's
+        uniforms[1, j] = counter_uniform(key, counter + np.uint64(1))
+        uniforms[2, j] = counter_uniform(key, counter + np.uint64(2))  # the dropout's
     for k in range(n_ticks):
         tick = ticks_before + 1 + k
         for f in range(n_followers):
-            u0 = _uniform(key, tick, f, 0, n_followers)
-            u1 = _uniform(key, tick, f, 1, n_followers)
-            u2 = _uniform(key, tick, f, 2, n_followers)
-            if u2 < noise.dropout_probability[e]:
+            j = k * n_followers + f
+            if uniforms[2, j] < noise.dropout_probability[e]:
                 out.spacing[k, c, f] = out.speed[k, c, f] = np.nan
                 continue
-            radius = np.sqrt(-2.0 * np.log(u0))  # Box-Muller: two independent standard normals
-            angle = 2.0 * np.pi * u1
+            radius = np.sqrt(-2.0 * np.log(uniforms[0, j]))  # Box-Muller: two independent standard normals
+            angle = 2.0 * np.pi * uniforms[1, j]
             if faults.start[e, f] <= tick - 1 < faults.end[e, f]:  # the reading after physics tick tick - 1
                 out.spacing[k, c, f] = (true.spacing[k, c, f] + faults.spacing_bias[e, f]
                                         + faults.spacing_noise_std[e, f] * radius * np.cos(angle))
             else:
                 out.spacing[k, c, f] = true.spacing[k, c, f] + noise.spacing_noise_std * radius * np.cos(angle)
             out.speed[k, c, f] = true.speed[k, c, f] + noise.speed_noise_std * radius * np.sin(angle)
-
-
-@numba.njit(cache=True, error_model="numpy")
-def _uniform(key, tick, follower, stream, n_followers):  # noqa: ANN001, ANN202
-    """The uniform in (0, 1) of counter tick * 3 n_followers + 3 follower + stream under the env's key."""
-    counter = np.uint64(tick) * np.uint64(_UNIFORM_STREAMS * n_followers) + np.uint64(_UNIFORM_STREAMS * follower + stream)
-    return counter_uniform(key, counter)
