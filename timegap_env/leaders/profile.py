@@ -303,13 +303,20 @@ class LeaderProfiles:
 @numba.njit(cache=True)
 def _integrate_in_band(accel, initial_speed, dt, low, high):  # noqa: ANN001, ANN202
     """Speeds [m/s] integrated from ``initial_speed`` along each row of ``accel`` (n_profiles, n) [m/s^2], each step
-    clipped to [low, high], and the accelerations realised [m/s^2] (the speed's forward difference over ``dt``),
-    both (n_profiles, n)."""
+    clipped to [low, high] (:func:`_step_in_band`), and the accelerations realised [m/s^2] (the speed's forward
+    difference over ``dt``), both (n_profiles, n)."""
     speed, realised = np.empty(accel.shape), np.empty(accel.shape)
     for row in range(accel.shape[0]):
         now = initial_speed
         for k in range(accel.shape[1]):
-            after = min(max(now + accel[row, k] * dt, low), high)
-            speed[row, k], realised[row, k] = now, (after - now) / dt
-            now = after
+            speed[row, k] = now
+            now, realised[row, k] = _step_in_band(now, accel[row, k], dt, low, high)
     return speed, realised
+
+
+@numba.njit(cache=True)
+def _step_in_band(speed, accel, dt, low, high):  # noqa: ANN001, ANN202
+    """One tick of ``dt`` [s] at ``accel`` [m/s^2] from ``speed`` [m/s], the speed held within [low, high]: the speed
+    after [m/s] and the acceleration realised [m/s^2]."""
+    after = min(max(speed + accel * dt, low), high)
+    return after, (after - speed) / dt

@@ -187,7 +187,10 @@ class _Plan:
 def _move(change: float, accel: float, jerk: float, dt: float) -> np.ndarray:
     """The accelerations [m/s^2] of a move changing the speed by ``change`` [m/s] at up to ``accel`` [m/s^2] and
     ``jerk`` [m/s^3], one a tick of ``dt`` [s], the last at a = 0."""
-    return np.append(_speed_change(change, accel, jerk, dt), 0.0)
+    shape = _speed_change(change, accel, jerk, dt)
+    move = np.zeros(shape.size + 1)
+    move[:-1] = shape
+    return move
 
 
 def _free_flow(rng: np.random.Generator, params: RegimesConfig, plan: _Plan) -> None:

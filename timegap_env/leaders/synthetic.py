@@ -24,7 +24,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Sequence
-from typing import NamedTuple
+from typing import NamedTuple, TypeVar
 
 import numba
 import numpy as np
@@ -41,7 +41,7 @@ from timegap_env.config import (
     SinusoidConfig,
     StochasticHumanConfig,
 )
-from timegap_env.leaders.profile import LeaderProfile, LeaderProfiles
+from timegap_env.leaders.profile import LeaderProfile, LeaderProfiles, _step_in_band
 
 DRAWS_PER_PHASE = 3  # uniform numbers an aggressive cycle's phase draws: duration, magnitude, cruise or not
 
@@ -97,20 +97,30 @@ def sinusoid(
 def sinusoid_batch(
     seeds: Sequence[int | None], params: SinusoidConfig = SinusoidConfig(), leader: LeaderConfig = LeaderConfig()
 ) -> LeaderProfiles:
-    """:func:`sinusoid` of each seed, a row each."""
+    """:func:`sinusoid` of each seed, a row each: each seed's generator draws three uniform numbers, for the
+    amplitude [m/s], the period [s] and the phase [rad]."""
     low, high = leader.speed_band
-    drawn = np.empty((3, len(seeds)))  # amplitude [m/s], period [s], phase [rad] per seed
+    drawn = np.empty((len(seeds), 3))
     for row, seed in enumerate(seeds):
-        rng = np.random.default_rng(seed)
-        amplitude = min(rng.uniform(*params.amplitude_range), 0.5 * (high - low))
-        drawn[:, row] = amplitude, rng.uniform(*params.period_range), rng.uniform(0.0, 2.0 * np.pi)
-    amplitude, period, phase = drawn[:, :, None]
+        np.random.default_rng(seed).random(out=drawn[row])
+    amplitude = np.minimum(_uniform(params.amplitude_range, drawn[:, 0]), 0.5 * (high - low))
+    period = _uniform(params.period_range, drawn[:, 1])
+    phase = _uniform((0.0, 2.0 * np.pi), drawn[:, 2])
     mean = np.minimum(np.maximum(leader.initial_speed, low + amplitude), high - amplitude)
     omega = 2.0 * np.pi / period
-    t = np.arange(leader.n_samples) * leader.dt
-    speed = mean + amplitude * np.sin(omega * t + phase)
-    accel = amplitude * omega * np.cos(omega * t + phase)
+    speed, accel = np.empty((len(seeds), leader.n_samples)), np.empty((len(seeds), leader.n_samples))
+    _sinusoid_rows(amplitude, omega, phase, mean, float(leader.dt), speed, accel)
     return LeaderProfiles(speed=speed, accel=accel, dt=leader.dt, name="sinusoid")
+
+
+_Uniform = TypeVar("_Uniform", float, np.ndarray)  # a number in [0, 1), or an array of them
+
+
+def _uniform(bounds: tuple[float, float], u: _Uniform) -> _Uniform:
+    """What ``rng.uniform(*bounds)`` draws from the uniform number ``u`` in [0, 1) (a float or an array of them) that
+    ``rng.random()`` would have drawn in its place: low + (high - low) u, in numpy's order of operations."""
+    low, high = float(bounds[0]), float(bounds[1])
+    return low + (high - low) * u
 
 
 def hard_braking(
@@ -129,8 +139,9 @@ def hard_braking_batch(
     for row, seed in enumerate(seeds):
         rng = np.random.default_rng(seed)
         for event in range(params.n_events):
-            decel = rng.uniform(*params.decel_range)
-            drop = min(rng.uniform(*params.speed_drop_range), leader.initial_speed - leader.speed_band[0])
+            decel_draw, drop_draw = rng.random(2).tolist()
+            decel = _uniform(params.decel_range, decel_draw)
+            drop = min(_uniform(params.speed_drop_range, drop_draw), leader.initial_speed - leader.speed_band[0])
             brake_ticks = int(round(drop / decel / leader.dt))
             recover_ticks = int(round(drop / params.recovery_accel / leader.dt))
             latest_start = max(slot - brake_ticks - recover_ticks, 1)
@@ -317,16 +328,9 @@ def _speed_change(change: float, magnitude: float, max_jerk: float, dt: float) -
     ramp = max(1, math.ceil(planned / (max_jerk * dt) - 1e-9))  # ticks up to the plateau
     plateau = max(0, math.ceil(size / (planned * dt) - ramp - 1e-9))  # ticks at the plateau
     peak = size / (dt * (ramp + plateau))  # <= planned: the shape below sums to ramp + plateau
-    shape = np.concatenate((np.arange(1, ramp + 1) / ramp, np.ones(plateau), np.arange(ramp - 1, 0, -1) / ramp))
-    return math.copysign(peak, change) * shape
-
-
-class _HumanDraws(NamedTuple):
-    """The stochastic human's random draws, one per tick, a row per profile."""
-
-    innovations: np.ndarray  # (n_profiles, n) innovations of the AR(1) acceleration noise [m/s^2]
-    target_changes: np.ndarray  # (n_profiles, n) the target speed changes at this tick [bool]
-    new_targets: np.ndarray  # (n_profiles, n) the target speed if it changes [m/s]
+    ticks = np.arange(1, 2 * ramp + plateau)
+    steps = np.minimum(np.minimum(ticks, ticks[::-1]), ramp)  # 1, 2, .., ramp, then ramp for the plateau, .., 2, 1
+    return math.copysign(peak, change) * (steps / ramp)
 
 
 class _HumanMotion(NamedTuple):
@@ -334,6 +338,8 @@ class _HumanMotion(NamedTuple):
 
     initial_speed: float  # [m/s]
     noise_decay: float  # AR(1) factor of the acceleration noise per tick [-]
+    innovation_std: float  # std of the noise's innovation per tick [m/s^2]
+    change_chance: float  # chance per tick that the target speed changes [-]
     speed_gain: float  # pull of the speed towards the target [1/s]
     dt: float  # [s]
     low: float  # speed band [m/s]
@@ -357,19 +363,20 @@ def stochastic_human_batch(
     params: StochasticHumanConfig = StochasticHumanConfig(),
     leader: LeaderConfig = LeaderConfig(),
 ) -> LeaderProfiles:
-    """:func:`stochastic_human` of each seed, a row each."""
-    low, high = leader.speed_band
+    """:func:`stochastic_human` of each seed, a row each: each seed's generator draws n standard normal numbers (the
+    noise), then 2n uniform ones (where the target changes, then to what), n samples a profile."""
     n, dt = leader.n_samples, leader.dt
     decay = np.exp(-dt / params.accel_correlation_time)
-    draws = _HumanDraws(np.empty((len(seeds), n)), np.empty((len(seeds), n), dtype=bool), np.empty((len(seeds), n)))
+    normal, uniform = np.empty((len(seeds), n)), np.empty((len(seeds), 2 * n))
     for row, seed in enumerate(seeds):
         rng = np.random.default_rng(seed)
-        draws.innovations[row] = params.accel_std * np.sqrt(1.0 - decay**2) * rng.standard_normal(n)
-        draws.target_changes[row] = rng.random(n) < dt / params.target_change_interval
-        draws.new_targets[row] = rng.uniform(low, high, size=n)
-    motion = _HumanMotion(*(float(value) for value in (leader.initial_speed, decay, params.speed_gain, dt, low, high)))
-    return LeaderProfiles.from_acceleration(_pursue_targets(tuple(draws), tuple(motion)), leader,
-                                            name="stochastic_human")
+        rng.standard_normal(out=normal[row])
+        rng.random(out=uniform[row])
+    motion = _HumanMotion(*(float(value) for value in (
+        leader.initial_speed, decay, params.accel_std * np.sqrt(1.0 - decay**2), dt / params.target_change_interval,
+        params.speed_gain, dt, *leader.speed_band)))
+    speed, accel = _pursue_targets(normal, uniform, tuple(motion))
+    return LeaderProfiles(speed=speed, accel=accel, dt=dt, name="stochastic_human")
 
 
 class _CycleConstants(NamedTuple):
@@ -424,18 +431,36 @@ def _cycle_phases(accel, sign, draws, constants):  # noqa: ANN001, ANN202
 
 
 @numba.njit(cache=True)
-def _pursue_targets(draws, motion):  # noqa: ANN001, ANN202
-    """The stochastic human's accelerations [m/s^2] (n_profiles, n): speed_gain (target - v) plus an AR(1) noise;
-    ``draws`` (:class:`_HumanDraws`) and ``motion`` (:class:`_HumanMotion`) come as plain tuples, as in every
-    kernel."""
-    draws, motion = _HumanDraws(*draws), _HumanMotion(*motion)
-    accel = np.empty(draws.innovations.shape)
-    for row in range(accel.shape[0]):
-        speed, target, noise = motion.initial_speed, motion.initial_speed, 0.0
-        for k in range(accel.shape[1]):
-            if draws.target_changes[row, k]:
-                target = draws.new_targets[row, k]
-            noise = motion.noise_decay * noise + draws.innovations[row, k]
-            accel[row, k] = motion.speed_gain * (target - speed) + noise
-            speed = min(max(speed + accel[row, k] * motion.dt, motion.low), motion.high)
-    return accel
+def _sinusoid_rows(amplitude, omega, phase, mean, dt, speed, accel):  # noqa: ANN001, ANN202
+    """Fill row i of ``speed`` [m/s] with mean + amplitude sin(omega t + phase) and of ``accel`` [m/s^2] with
+    amplitude omega cos(omega t + phase), t = k dt [s] at sample k, from row i's ``amplitude`` [m/s], ``omega``
+    [rad/s], ``phase`` [rad] and ``mean`` [m/s]: NumPy's operations on the whole arrays, in the same order, so the
+    same numbers bit for bit, without their temporaries."""
+    for row in range(speed.shape[0]):
+        for k in range(speed.shape[1]):
+            angle = omega[row] * (k * dt) + phase[row]
+            speed[row, k] = mean[row] + amplitude[row] * np.sin(angle)
+            accel[row, k] = amplitude[row] * omega[row] * np.cos(angle)
+
+
+@numba.njit(cache=True)
+def _pursue_targets(normal, uniform, motion):  # noqa: ANN001, ANN202
+    """The stochastic human's speeds [m/s] and accelerations [m/s^2] (n_profiles, n): it pursues a target speed at
+    speed_gain (target - v) plus an AR(1) noise, within the band (:func:`_step_in_band`). A profile's row of
+    ``normal`` holds n standard normal numbers (the noise's innovations, in units of innovation_std), its row of
+    ``uniform`` 2n numbers in [0, 1): the target changes at tick k if the k-th is below change_chance, to
+    low + (high - low) times the (n + k)-th (what numpy's uniform draws); ``motion`` is a :class:`_HumanMotion`
+    tuple."""
+    motion = _HumanMotion(*motion)
+    n = normal.shape[1]
+    speed, accel = np.empty(normal.shape), np.empty(normal.shape)
+    for row in range(normal.shape[0]):
+        now, target, noise = motion.initial_speed, motion.initial_speed, 0.0
+        for k in range(n):
+            if uniform[row, k] < motion.change_chance:
+                target = motion.low + (motion.high - motion.low) * uniform[row, n + k]
+            noise = motion.noise_decay * noise + motion.innovation_std * normal[row, k]
+            speed[row, k] = now
+            now, accel[row, k] = _step_in_band(now, motion.speed_gain * (target - now) + noise, motion.dt, motion.low,
+                                               motion.high)
+    return speed, accel
