@@ -1,10 +1,12 @@
 """Episodes: what each reset draws, reproducible from the env's generator alone, and the user's own leader."""
 
+import gc
+
 import numpy as np
 import pytest
 
 from timegap_env.config import EnvConfig
-from timegap_env.envs.episodes import Episodes, check_reset_options
+from timegap_env.envs.episodes import Episodes, check_reset_options, collection_paused
 
 CONFIG = EnvConfig.from_dict({"degradation": {"follower_probability": 0.5}})
 
@@ -88,3 +90,18 @@ def test_a_random_initial_setting_is_drawn_last_and_leaves_the_episode_as_it_was
         np.testing.assert_array_equal(drawn.leader_speed, plain.leader_speed)
         assert drawn.degradations[0] == plain.degradations[0] and drawn.noise_keys[0] == plain.noise_keys[0]
     assert len(settings) >= 4
+
+
+@pytest.mark.parametrize("enabled", [True, False])
+def test_the_garbage_collector_is_paused_in_a_batched_draw_and_left_as_it_was(enabled):
+    was = gc.isenabled()
+    try:
+        (gc.enable if enabled else gc.disable)()
+        with collection_paused():
+            assert not gc.isenabled()
+        assert gc.isenabled() == enabled
+        with pytest.raises(ZeroDivisionError), collection_paused():
+            1 / 0
+        assert gc.isenabled() == enabled
+    finally:
+        (gc.enable if was else gc.disable)()

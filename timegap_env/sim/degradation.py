@@ -93,13 +93,11 @@ class Degradation:
     @classmethod
     def drawn(cls, kind: str, followers: tuple[int, ...], size: float | None = None, onset: float = 0.0,
               end: float | None = None, car: str | None = None) -> Degradation:
-        """A degradation as :func:`draw_degradation` draws it: valid by construction (a kind of DEGRADATIONS, follower
-        numbers as ints, times and size as floats in their ranges), so not checked again (the checks were a sixth
-        of a batched reset's time)."""
+        """A degradation as :meth:`DegradationDraw.draw` draws it: valid by construction (a kind of DEGRADATIONS,
+        follower numbers as ints, times and size as floats in their ranges), so not checked again (the checks were a
+        sixth of a batched reset's time)."""
         degradation = object.__new__(cls)
-        for name, value in (("kind", kind), ("followers", followers), ("size", size), ("onset", onset), ("end", end),
-                            ("car", car)):
-            object.__setattr__(degradation, name, value)
+        degradation.__dict__.update(kind=kind, followers=followers, size=size, onset=onset, end=end, car=car)
         return degradation
 
     def _time_or_size(self, field: str, rule: str) -> None:
@@ -168,45 +166,57 @@ class Categorical:
         return bisect.bisect_right(self._cumulative, rng.random())
 
 
-@functools.lru_cache(maxsize=16)
-def _kind_draw(kind_weights: tuple[tuple[str, float], ...]) -> tuple[tuple[str, ...], Categorical]:
-    """The kinds of ``kind_weights`` ((kind, weight) pairs) and the draw of one of them."""
-    return tuple(kind for kind, _ in kind_weights), Categorical([weight for _, weight in kind_weights])
+class DegradationDraw:
+    """The degradations of an episode of a platoon of ``n_followers`` at tick ``dt`` [s], drawn as ``config`` says
+    (:class:`~timegap_env.config.DegradationConfig`): :meth:`draw` draws one episode's. What is the same for every
+    episode (the kinds' chances, the drawn kinds' ranges) is worked out once, here."""
+
+    def __init__(self, config: DegradationConfig, n_followers: int, dt: float) -> None:
+        self.config, self.n_followers, self.dt = config, n_followers, dt
+        self._kinds = tuple(config.kind_weights)
+        self._kind_draw = Categorical(list(config.kind_weights.values()))
+        drawn = [DEGRADATIONS[kind] for kind in self._kinds if kind != "none"]
+        self._sizes = {kind.name: config.size_range(kind.name) for kind in drawn
+                       if kind.range_field is not None}  # kind -> the (low, high) its size is drawn from
+        self._durations = {kind.name: getattr(config, kind.duration_field) for kind in drawn
+                           if kind.duration_field is not None}  # kind -> the (low, high) its length is drawn from [s]
+
+    def draw(self, rng: np.random.Generator, duration: float) -> tuple[Degradation, ...]:
+        """The degradations of one episode of ``duration`` [s], drawn from ``rng``; () when it draws none."""
+        config, dt, n_followers = self.config, self.dt, self.n_followers
+        kind = self._kinds[self._kind_draw.draw(rng)]
+        hit = rng.random(n_followers).tolist()
+        forced = int(rng.integers(n_followers))  # at least one follower
+        followers = tuple(f + 1 for f in range(n_followers) if hit[f] < config.follower_probability or f == forced)
+        midway, recovers = rng.random() < config.midway_onset_probability, rng.random() < config.recovery_probability
+        onset = round_to_tick(_uniform(rng, 0.25, 0.75) * duration, dt) if midway else 0.0
+        end = round_to_tick(onset + _uniform(rng, 0.2, 0.5) * duration, dt) if recovers else None
+        end = end if end is not None and onset < end < duration else None  # (in a one-tick episode both round to 0)
+        if kind == "none":
+            return ()
+        if kind in self._durations:
+            length = max(round_to_tick(_uniform(rng, *self._durations[kind]), dt), dt)  # at least a tick
+            onset = round_to_tick(_uniform(rng, 0.0, max(duration - length, 0.0)), dt)
+            end = onset + length
+        if kind == "commercial_acc":
+            from timegap_env.sim.presets import COMMERCIAL_ACC, acc_presets  # scipy-backed: imported when used
+
+            cars = sorted(car for car in acc_presets() if car != COMMERCIAL_ACC)
+            return tuple(Degradation.drawn(kind, (f,), car=cars[rng.integers(len(cars))]) for f in followers)
+        if kind not in self._sizes:
+            return (Degradation.drawn(kind, followers, onset=float(onset), end=end),)
+        record = DEGRADATIONS[kind]
+        size = _uniform(rng, *self._sizes[kind])
+        if record.whole_ticks:
+            size = round_to_tick(size, dt)
+        if record.signed and rng.random() < 0.5:
+            size = -size
+        return (Degradation.drawn(kind, followers, size=size, onset=float(onset), end=end),)
 
 
-def draw_degradation(rng: np.random.Generator, config: DegradationConfig, n_followers: int,
-                     duration: float, dt: float) -> tuple[Degradation, ...]:
-    """The degradations of one episode of ``duration`` [s] at tick ``dt`` [s], drawn from ``rng`` (see
-    :class:`~timegap_env.config.DegradationConfig`); () when it draws none."""
-    kinds, kind_draw = _kind_draw(tuple(config.kind_weights.items()))
-    kind = kinds[kind_draw.draw(rng)]
-    hit = rng.random(n_followers) < config.follower_probability
-    hit[rng.integers(n_followers)] = True  # at least one follower
-    followers = tuple(f + 1 for f, is_hit in enumerate(hit.tolist()) if is_hit)
-    midway, recovers = rng.random() < config.midway_onset_probability, rng.random() < config.recovery_probability
-    onset = round_to_tick(rng.uniform(0.25, 0.75) * duration, dt) if midway else 0.0
-    end = round_to_tick(onset + rng.uniform(0.2, 0.5) * duration, dt) if recovers else None
-    end = end if end is not None and onset < end < duration else None  # (in a one-tick episode both round to 0)
-    if kind == "none":
-        return ()
-    record = DEGRADATIONS[kind]
-    if record.duration_field is not None:
-        length = max(round_to_tick(rng.uniform(*getattr(config, record.duration_field)), dt), dt)  # at least a tick
-        onset = round_to_tick(rng.uniform(0.0, max(duration - length, 0.0)), dt)
-        end = onset + length
-    if kind == "commercial_acc":
-        from timegap_env.sim.presets import COMMERCIAL_ACC, acc_presets  # scipy-backed: imported when used
-
-        cars = sorted(car for car in acc_presets() if car != COMMERCIAL_ACC)
-        return tuple(Degradation.drawn(kind, (f,), car=cars[rng.integers(len(cars))]) for f in followers)
-    if record.range_field is None:
-        return (Degradation.drawn(kind, followers, onset=float(onset), end=end),)
-    size = float(rng.uniform(*config.size_range(kind)))
-    if record.whole_ticks:
-        size = round_to_tick(size, dt)
-    if record.signed and rng.random() < 0.5:
-        size = -size
-    return (Degradation.drawn(kind, followers, size=size, onset=float(onset), end=end),)
+def _uniform(rng: np.random.Generator, low: float, high: float) -> float:
+    """What ``rng.uniform(low, high)`` draws (low + (high - low) u, u = ``rng.random()``), without its checks."""
+    return low + (high - low) * rng.random()
 
 
 def round_to_tick(time: float, dt: float) -> float:
