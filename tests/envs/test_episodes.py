@@ -5,8 +5,11 @@ import gc
 import numpy as np
 import pytest
 
-from timegap_env.config import EnvConfig
+from timegap_env.config import EnvConfig, LeaderConfig
 from timegap_env.envs.episodes import Episodes, check_reset_options, collection_paused
+from timegap_env.leaders.profile import LeaderProfile
+from timegap_env.leaders.regimes import RegimesConfig, regime_schedule
+from timegap_env.leaders.scenarios import LEADER_FAMILIES, LeaderFamily, register_family, regime_names
 
 CONFIG = EnvConfig.from_dict({"degradation": {"follower_probability": 0.5}})
 
@@ -90,6 +93,50 @@ def test_a_random_initial_setting_is_drawn_last_and_leaves_the_episode_as_it_was
         np.testing.assert_array_equal(drawn.leader_speed, plain.leader_speed)
         assert drawn.degradations[0] == plain.degradations[0] and drawn.noise_keys[0] == plain.noise_keys[0]
     assert len(settings) >= 4
+
+
+def expected_regimes(episodes: Episodes, env: int, family: str, codes: np.ndarray,
+                     names: tuple[str, ...]) -> np.ndarray:
+    """``env``'s regime row from its family's schedule (``codes`` into ``names``): the ground truth's codes, cut to
+    the episode and held at the last one after it."""
+    lookup = {name: code for code, name in enumerate(regime_names())}
+    row = np.array([lookup[f"{family}:{name}"] for name in names])[codes[: episodes.episode_ticks[env] + 1]]
+    return np.concatenate((row, np.full(episodes.regime.shape[1] - row.size, row[-1])))
+
+
+def test_the_regimes_of_v1_episodes_are_their_leaders_schedules():
+    config = EnvConfig.from_dict({"episode_duration": 60.0}, version=1)
+    episodes = Episodes(config, 5)
+    rngs = [np.random.default_rng(seed) for seed in range(5)]
+    episodes.draw_many(np.arange(5), rngs, check_reset_options({"scenario": "regimes"}))
+    for env in range(5):
+        leader_seed = int(np.random.default_rng(env).integers(2**31))  # the first draw with the scenario pinned
+        codes, names = regime_schedule(leader_seed, RegimesConfig(), config.leader)
+        np.testing.assert_array_equal(episodes.regime[env], expected_regimes(episodes, env, "regimes", codes, names))
+
+
+def test_a_familys_schedule_gives_the_regimes_when_its_batch_does_not():
+    def flat(seed: int | None, params: None, leader: LeaderConfig) -> LeaderProfile:
+        return LeaderProfile.from_speed(np.full(leader.n_samples, 20.0), dt=leader.dt, name="flat")
+
+    def schedule(seed: int | None, params: None, leader: LeaderConfig) -> tuple[np.ndarray, tuple[str, ...]]:
+        change = seed % leader.n_samples  # the tick it turns busy
+        return (np.arange(leader.n_samples) >= change).astype(np.int8), ("calm", "busy")
+
+    saved = dict(LEADER_FAMILIES)
+    try:
+        register_family(LeaderFamily("flat", flat, "20 m/s.", regimes=("calm", "busy"), schedule=schedule))
+        config = EnvConfig.from_dict({"episode_duration": 60.0}, version=1)
+        episodes = Episodes(config, 3)
+        episodes.draw_many(np.arange(3), [np.random.default_rng(seed) for seed in range(3)],
+                           check_reset_options({"scenario": "flat"}))
+        for env in range(3):
+            leader_seed = int(np.random.default_rng(env).integers(2**31))
+            codes, names = schedule(leader_seed, None, config.leader)
+            np.testing.assert_array_equal(episodes.regime[env], expected_regimes(episodes, env, "flat", codes, names))
+    finally:
+        LEADER_FAMILIES.clear()
+        LEADER_FAMILIES.update(saved)
 
 
 @pytest.mark.parametrize("enabled", [True, False])

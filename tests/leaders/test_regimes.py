@@ -49,6 +49,7 @@ def test_a_batch_holds_each_seeds_own_profile():
     batch = regimes_batch([seed if seed is not None else 9 for seed in seeds])
     for row, seed in enumerate(seeds):
         np.testing.assert_array_equal(batch.speed[row], regimes(seed if seed is not None else 9).speed)
+        np.testing.assert_array_equal(batch.regime[row], regime_schedule(seed if seed is not None else 9)[0])
 
 
 @pytest.mark.parametrize(("dt", "duration"), [(0.1, 0.1), (0.1, 2.0), (0.01, 1.37), (1.0, 3.0), (0.5, 4.5),

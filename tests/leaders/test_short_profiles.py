@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from timegap_env.config import LeaderConfig
-from timegap_env.leaders import scenarios, synthetic
+from timegap_env.leaders import scenarios
 
 BATCH_FAMILIES = [name for name, family in scenarios.LEADER_FAMILIES.items() if family.batch]
 # (dt [s], duration [s]): one tick (the shortest episode), a few ticks, odd lengths, the issue's 2 s
@@ -22,7 +22,8 @@ LENGTHS = [(0.1, 0.1), (0.1, 0.2), (0.1, 0.7), (0.1, 2.0), (0.1, 3.3), (0.1, 5.9
 def test_every_family_builds_a_profile_of_any_length(family, dt, duration):
     leader = LeaderConfig(dt=dt, duration=duration)
     seeds = [0, 1, 2, 3, 2**31 - 1]
-    batch = getattr(synthetic, f"{family}_batch")(seeds, leader=leader)
+    record = scenarios.LEADER_FAMILIES[family]
+    batch = record.batch(seeds, record.params(), leader)
     assert batch.speed.shape == (len(seeds), leader.n_samples) and batch.dt == dt
     assert batch.speed.min() >= 0.0 and batch.speed.max() <= leader.speed_band[1] + 1e-9
     assert np.isfinite(batch.accel).all()
@@ -62,8 +63,9 @@ def test_vector_env_autoresets_into_short_emergency_braking_episodes():
 
 
 # sha256 (first 16 hex digits) of the speeds then accelerations of each family's batch of SEEDS at the default
-# 250 s, recorded with the code before the fix (6636d96): the fix must not change a bit of them. numpy's and
-# libm's sin, exp and pow may differ in the last bit on another platform; on this one they do not.
+# 250 s, recorded with the code before the fix (6636d96; regimes with ebee3a3's regimes_batch, before it was the
+# family's batch builder): the fix must not change a bit of them. numpy's and libm's sin, exp and pow may differ in
+# the last bit on another platform; on this one they do not.
 SEEDS = [0, 1, 7, 2**31 - 1]
 DIGESTS_250_S = {
     "aggressive_cycles": "76016fd86cf39d11",
@@ -72,6 +74,7 @@ DIGESTS_250_S = {
     "stochastic_human": "406893e41f2fcb36",
     "stop_and_go": "cae2132c3e126a4c",
     "emergency_braking": "ef718177f70cd7cb",
+    "regimes": "8d4a03ce255fa5a0",
 }
 
 

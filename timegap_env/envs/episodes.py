@@ -137,8 +137,9 @@ class Episodes:
                 profile = LeaderProfile.from_speed(options["leader_speed"], dt, "user")
             except ValueError as error:
                 raise ValueError(f"reset option leader_speed: {error}") from None
-            self._load_leaders(envs, LeaderProfiles.of(profile))
-            self._load_regimes(envs, USER, [None] * len(envs))
+            profiles = LeaderProfiles.of(profile)
+            self._load_leaders(envs, profiles)
+            self._load_regimes(envs, USER, profiles, [None] * len(envs))
         else:
             families: dict[str, tuple[list[int], list[int]]] = {}  # family -> its envs and their leaders' seeds
             for env in envs.tolist():
@@ -158,10 +159,10 @@ class Episodes:
                     for batch in batches:
                         if not math.isclose(batch.dt, dt, rel_tol=1e-9):
                             raise ValueError(f"scenario {family!r} has dt = {batch.dt} s; the env runs at {dt} s")
-                        self._load_leaders(np.array(members[loaded : loaded + len(batch)]), batch)
+                        batch_envs = np.array(members[loaded : loaded + len(batch)])
+                        self._load_leaders(batch_envs, batch)
+                        self._load_regimes(batch_envs, family, batch, seeds[loaded : loaded + len(batch)])
                         loaded += len(batch)
-                    self._load_regimes(np.array(members[first : first + LEADER_BATCH]), family,
-                                       seeds[first : first + LEADER_BATCH])
         durations = (self.episode_ticks * dt).tolist()  # [s]
         dropout_low, dropout_high = cfg.dropout_probability_range
         dropouts, keys = [], []  # each env's, written after the loop
@@ -191,23 +192,32 @@ class Episodes:
         self.episode_ticks[envs] = ticks
         self.scenario[envs] = profiles.name
 
-    def _load_regimes(self, envs: np.ndarray, scenario: str, seeds: Sequence[int | None]) -> None:
-        """Each env of ``envs``'s regime at every tick (with ``info_keys`` "v1"): its family's schedule for its
-        leader's seed, or the family (USER: the user's leader) throughout; after :meth:`_load_leaders`."""
+    def _load_regimes(self, envs: np.ndarray, scenario: str, profiles: LeaderProfiles,
+                      seeds: Sequence[int | None]) -> None:
+        """Each env of ``envs``'s regime at every tick (with ``info_keys`` "v1"), cut and padded as
+        :meth:`_load_leaders` cuts and pads ``profiles``, its leaders (a row per env, or one row for all; after
+        :meth:`_load_leaders`): the regimes ``profiles`` give, else its family's schedule for its leader's seed, or the
+        family (USER: the user's leader) throughout."""
         if self.regime is None:
             return
         names = {name: code for code, name in enumerate(regime_names())}
         family = None if scenario == USER else LEADER_FAMILIES[SCENARIOS[scenario].leader_family]
-        for env, seed in zip(envs.tolist(), seeds):
-            if family is None or family.schedule is None:
-                self.regime[env] = names[USER if family is None else family.name]
-                continue
+        if family is None or family.schedule is None:
+            self.regime[envs] = names[USER if family is None else family.name]
+            return
+
+        def ground_truth_codes(codes: np.ndarray, regimes: Sequence[str]) -> np.ndarray:
+            """``codes`` (indices into the family's ``regimes``) as indices into regime_names()."""
+            return np.array([names[f"{family.name}:{regime}"] for regime in regimes], dtype=np.int16)[codes]
+
+        if profiles.regime is not None:
+            rows = ground_truth_codes(profiles.regime, family.regimes)
+        else:
             params = self._params.get(family.name) or (family.params() if family.params is not None else None)
-            codes, regimes = family.schedule(seed, params, self.config.leader)
-            ticks = int(self.episode_ticks[env])
-            row = np.array([names[f"{family.name}:{regime}"] for regime in regimes], dtype=np.int16)[codes[: ticks + 1]]
-            self.regime[env, : row.size] = row
-            self.regime[env, row.size :] = row[-1]
+            rows = np.stack([ground_truth_codes(*family.schedule(seed, params, self.config.leader)) for seed in seeds])
+        n = min(rows.shape[1], int(self.episode_ticks[envs[0]]) + 1)
+        self.regime[envs, :n] = rows[:, :n]
+        self.regime[envs, n:] = rows[:, n - 1 : n]
 
     def leader_at(self, ticks: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The leader's speed [m/s] and acceleration [m/s^2] at ``ticks`` (n_ticks, n_envs), held after the episode."""

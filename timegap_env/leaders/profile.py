@@ -258,6 +258,9 @@ class LeaderProfiles:
     accel: np.ndarray  # (n_profiles, n) [m/s^2]
     dt: float  # [s]
     name: str = "custom"
+    regime: np.ndarray | None = None  # (n_profiles, n) int8 the regime of each sample, an index into its family's
+    # ``regimes`` (:class:`~timegap_env.leaders.scenarios.LeaderFamily`), from the plan the profile comes from;
+    # None: not given
 
     def __post_init__(self) -> None:
         if not (isinstance(self.dt, (int, float)) and math.isfinite(self.dt) and self.dt > 0):
@@ -274,6 +277,9 @@ class LeaderProfiles:
             raise ValueError(
                 f"LeaderProfiles.accel has shape {self.accel.shape}, speed has {self.speed.shape}: must match"
             )
+        if self.regime is not None and np.shape(self.regime) != self.speed.shape:
+            raise ValueError(f"LeaderProfiles.regime has shape {np.shape(self.regime)}, speed has {self.speed.shape}: "
+                             "must match")
         check_speeds(self.speed, f"LeaderProfiles {self.name!r}: ")
 
     def __len__(self) -> int:
@@ -289,14 +295,15 @@ class LeaderProfiles:
         return cls(speed=profile.speed[None], accel=profile.accel[None], dt=profile.dt, name=profile.name)
 
     @classmethod
-    def from_acceleration(cls, accel: np.ndarray, leader: LeaderConfig = LeaderConfig(),
-                          name: str = "integrated") -> LeaderProfiles:
-        """:meth:`LeaderProfile.from_acceleration` of each row of ``accel`` (n_profiles, n) [m/s^2]."""
+    def from_acceleration(cls, accel: np.ndarray, leader: LeaderConfig = LeaderConfig(), name: str = "integrated",
+                          regime: np.ndarray | None = None) -> LeaderProfiles:
+        """:meth:`LeaderProfile.from_acceleration` of each row of ``accel`` (n_profiles, n) [m/s^2], with the
+        ``regime`` of each sample if given."""
         accel = np.ascontiguousarray(accel, dtype=float)
         if accel.ndim != 2 or accel.shape[1] < 2:
             raise ValueError(f"accel has shape {accel.shape}: must be (n_profiles, n >= 2)")
         speed, realised = _integrate_in_band(accel, leader.initial_speed, leader.dt, *leader.speed_band)
-        return cls(speed=speed, accel=realised, dt=leader.dt, name=name)
+        return cls(speed=speed, accel=realised, dt=leader.dt, name=name, regime=regime)
 
 
 # Runs in order: every step depends on the speed reached so far.

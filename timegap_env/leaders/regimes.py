@@ -135,9 +135,11 @@ def regimes(seed: int | None, params: RegimesConfig = RegimesConfig(),
 
 def regimes_batch(seeds: Sequence[int | None], params: RegimesConfig = RegimesConfig(),
                   leader: LeaderConfig = LeaderConfig()) -> LeaderProfiles:
-    """:func:`regimes` of each seed, a row each."""
-    accel = np.stack([_plan(seed, params, leader)[0] for seed in seeds])
-    return LeaderProfiles.from_acceleration(accel, _down_to_standstill(leader), name="regimes")
+    """:func:`regimes` of each seed, a row each, with the regime of each sample (``regime``, indices into
+    :data:`REGIMES`) from the same plan."""
+    plans = [_plan(seed, params, leader) for seed in seeds]
+    return LeaderProfiles.from_acceleration(np.stack([accel for accel, _ in plans]), _down_to_standstill(leader),
+                                            name="regimes", regime=np.stack([codes for _, codes in plans]))
 
 
 def regime_schedule(seed: int | None, params: RegimesConfig = RegimesConfig(),

@@ -46,8 +46,10 @@ class LeaderFamily:
     None. ``batch(seeds, params, leader)``, optional, builds many seeds' profiles at once (one length), row ``i``
     equal to ``build(seeds[i], params, leader)``: batched resets use it. A family whose traffic changes within an
     episode names its ``regimes`` and gives their ``schedule(seed, params, leader)``: a code per tick of ``build``'s
-    profile (an index into ``regimes``) and the names; the ground truth reports it (:func:`regime_names`). A family
-    without is one regime throughout, named after itself.
+    profile (an index into ``regimes``) and the names; the ground truth reports it (:func:`regime_names`). Its
+    ``batch`` may give those codes with the profiles (``LeaderProfiles.regime``, indices into ``regimes``), worked
+    out once for both: a batched reset then reads them there instead of calling ``schedule``. A family without
+    regimes is one regime throughout, named after itself.
     """
 
     name: str  # the scenario name that draws it
@@ -133,7 +135,7 @@ LEADER_FAMILIES: dict[str, LeaderFamily] = {family.name: family for family in (
                  synthetic.EmergencyBrakingConfig, synthetic.emergency_braking_batch),
     LeaderFamily("regimes", regimes.regimes,
                  "Traffic that changes within an episode: free flow, slow oscillation, aggressive cycles, "
-                 "stop-and-go and hard braking regimes in turn.", regimes.RegimesConfig,
+                 "stop-and-go and hard braking regimes in turn.", regimes.RegimesConfig, regimes.regimes_batch,
                  regimes=regimes.REGIMES, schedule=regimes.regime_schedule),
     LeaderFamily("ngsim", lambda seed, params, leader: ngsim_leader(seed, leader, within_band=False),
                  "A real NGSIM I-80 driver's recorded speed."),
