@@ -45,7 +45,7 @@ def _say_when_compiling() -> None:
         user_wide = Path(AppDirs(appname="numba", appauthor=False).user_cache_dir)
         cached = [*Path(__file__).parent.glob(f"envs/__pycache__/{kernel}"), *user_wide.glob(f"envs_*/{kernel}")]
     if not cached:
-        _log.warning("timegap_env: the first run compiles the simulator's kernels (about 12 CPU-seconds, "
+        _log.warning("timegap_env: the first run compiles the simulator's kernels (about 10 CPU-seconds, "
                      "cached for every later run)")
 
 

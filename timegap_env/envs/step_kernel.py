@@ -235,7 +235,7 @@ def _cache_follows(dispatcher: object, modules: tuple[str, ...]) -> None:
 
 
 _cache_follows(fused_step, tuple(f"timegap_env.{module}" for module in (
-    "envs.action", "sim.counter_noise", "sim.platoon", "monitoring.sensors", "monitoring.monitor",
+    "compiled", "envs.action", "sim.counter_noise", "sim.platoon", "monitoring.sensors", "monitoring.monitor",
     "monitoring.posterior", "monitoring.charts", "envs.reward", "envs.totals", "envs.observation")))
 
 __all__ = ["StepRules", "StepScratch", "StepState", "fused_step"]

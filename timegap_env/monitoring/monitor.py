@@ -15,7 +15,7 @@ import numba
 import numpy as np
 from numpy.typing import ArrayLike
 
-from timegap_env.compiled import STAGE_KERNEL
+from timegap_env.compiled import INLINED_STAGE_KERNEL, STAGE_KERNEL
 from timegap_env.config import MonitorConfig
 from timegap_env.monitoring.batch import batch_array, batch_shape, env_mask, setting_array, vehicle_mask
 from timegap_env.monitoring.posterior import Moments, Prior, WindowSums, outside_probability, posterior_moments
@@ -320,7 +320,7 @@ def _update_kernel(speed, spacing, memory, slot, rule, prior, out, out_moments):
         update_env(speed, spacing, memory, slot, rule, prior, out, out_moments, e, e, work)
 
 
-@numba.njit(**STAGE_KERNEL)
+@numba.njit(**INLINED_STAGE_KERNEL)
 def update_env(  # noqa: ANN201, PLR0913
     speed, spacing, memory, slot, rule, prior, out, out_moments, e, column, work,  # noqa: ANN001
 ):

@@ -20,7 +20,7 @@ from typing import NamedTuple, cast
 import numba
 import numpy as np
 
-from timegap_env.compiled import STAGE_KERNEL
+from timegap_env.compiled import INLINED_STAGE_KERNEL
 from timegap_env.config import SensorConfig
 from timegap_env.sim.counter_noise import counter_uniform
 
@@ -116,7 +116,7 @@ def _measure(true, ticks_before, noise, faults, out):  # noqa: ANN001, ANN202
         measure_env(true, ticks_before[e], noise, faults, out, e, e, uniforms)
 
 
-@numba.njit(**STAGE_KERNEL)
+@numba.njit(**INLINED_STAGE_KERNEL)
 def measure_env(true, ticks_before, noise, faults, out, e, column, uniforms):  # noqa: ANN001, ANN201, PLR0913
     """Fill column ``column`` of ``out`` (:class:`Readings`) from that of ``true`` for env ``e``, whose block starts
     after ``ticks_before`` ticks since its reset, under ``noise`` (:class:`NoiseModel`) and ``faults``

@@ -42,7 +42,7 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
-from timegap_env.compiled import STAGE_KERNEL
+from timegap_env.compiled import INLINED_STAGE_KERNEL
 from timegap_env.config import PlatoonConfig
 from timegap_env.sim.counter_noise import counter_uniform
 
@@ -450,7 +450,7 @@ def _advance(state, leader, zoh, controller, faults, out):  # noqa: ANN001, ANN2
         advance_env(state, leader, zoh, controller, faults, out, e, e)
 
 
-@numba.njit(**STAGE_KERNEL)
+@numba.njit(**INLINED_STAGE_KERNEL)
 def advance_env(state, leader, zoh, controller, faults, out, e, column):  # noqa: ANN001, ANN201, PLR0913
     """Env ``e``'s platoon through the block's ticks, in place; its leader and V2V flags are column ``column`` of
     ``leader``'s arrays and its records go to column ``column`` of ``out``'s (the structures of :func:`_advance`,
