@@ -199,8 +199,10 @@ def test_truth_info_needs_step_diagnostics() -> None:
 
 @pytest.mark.slow
 def test_an_edit_to_a_stage_function_recompiles_the_fused_step(tmp_path):
-    """The fused step inlines functions of other files; numba's cache checks only the kernel's own file, so the
-    step's cache also follows those files (a copy of the package is edited, never the repository's)."""
+    """The fused step inlines or calls kernels of other files; numba's cache checks only the kernel's own file, so
+    the caches of the step and of every kernel it runs follow all those files (a copy of the package is edited,
+    never the repository's): an edit to a called stage's file (action.py) recompiles the step as one to an inlined
+    one's (platoon.py) does."""
     import shutil
     import subprocess
     import sys
@@ -223,9 +225,9 @@ def test_an_edit_to_a_stage_function_recompiles_the_fused_step(tmp_path):
 
     assert hits_and_misses() == [0, 1]  # compiled and cached
     assert hits_and_misses() == [1, 0]  # loaded from the cache
-    platoon = package / "sim" / "platoon.py"
-    platoon.write_text(platoon.read_text() + "\n# an edit\n")
-    assert hits_and_misses() == [0, 1]  # compiled again
+    for edited in (package / "sim" / "platoon.py", package / "envs" / "action.py"):
+        edited.write_text(edited.read_text() + "\n# an edit\n")
+        assert hits_and_misses() == [0, 1]  # compiled again
 
 
 def test_without_v2v_the_followers_stay_in_acc() -> None:

@@ -9,8 +9,8 @@ then the decision's ticks go through the platoon, the sensors, the monitor and t
 scored, added to the episode totals and observed. Each stage is the same compiled function the staged
 path calls (``ladder_env``, ``advance_env``, ``measure_env``, ``update_env``, ``chart_sides_env``,
 ``count_excursions_env``, ``env_readouts``, ...), so the arithmetic has one source; what is written here again
-is the glue the staged path does in NumPy (re-centring, the leader's and V2V's ticks), and the tests check the
-two paths against each other bit for bit.
+is the glue the staged path does in NumPy (which followers changed setting and how long their alarms are held off,
+the leader's and V2V's ticks), and the tests check the two paths against each other bit for bit.
 
 Working env by env keeps each env's state in cache while all its stages run, and re-centres only the
 followers whose setting changed. The kernel takes two structures, :class:`StepState` (every array it
@@ -20,16 +20,13 @@ reads or writes, the objects' own) and :class:`StepRules` (the config's constant
 
 from __future__ import annotations
 
-import hashlib
 import math
-import sys
-from pathlib import Path
 from typing import NamedTuple
 
 import numba
 import numpy as np
 
-from timegap_env.compiled import NO_ALLOCATION, STAGE_KERNEL
+from timegap_env.compiled import NO_ALLOCATION, STAGE_KERNEL, follow_sources
 from timegap_env.config import EnvConfig
 from timegap_env.envs.action import LadderRule, ladder_env
 from timegap_env.envs.observation import FollowerState, encode_env
@@ -213,29 +210,9 @@ def _change_settings(platoon, controller, memory, chart, rules, action, changed,
         ChartMemory(*chart_memory).hold_off[e, f] = int(ramp_ticks + rules.settle_ticks)
 
 
-def _cache_follows(dispatcher: object, modules: tuple[str, ...]) -> None:
-    """Make ``dispatcher``'s numba cache go stale when one of ``modules`` (imported, by name) changes, as when its
-    own file does.
-
-    numba reloads a cached kernel while the kernel's own file is unchanged; the fused step carries compiled
-    code of other files (the stage functions it inlines and calls), so an edit there alone would leave it
-    running the old code. The cache's source stamp becomes its own file's and a hash of those files' contents.
-    numba 0.68 keeps it in the dispatcher's ``_cache._cache_file._source_stamp``;
-    should that move, the kernel's own file alone decides, as numba does.
-    """
-    cache_file = getattr(getattr(dispatcher, "_cache", None), "_cache_file", None)
-    if cache_file is None or not hasattr(cache_file, "_source_stamp"):
-        return
-    digest = hashlib.sha256()
-    for module in modules:
-        source = sys.modules[module].__file__
-        assert source is not None  # the package's modules are files
-        digest.update(Path(source).read_bytes())
-    cache_file._source_stamp = (cache_file._source_stamp, digest.hexdigest())
-
-
-_cache_follows(fused_step, tuple(f"timegap_env.{module}" for module in (
+follow_sources(tuple(f"timegap_env.{module}" for module in (  # every kernel the step runs, and the step
     "compiled", "envs.action", "sim.counter_noise", "sim.platoon", "monitoring.sensors", "monitoring.monitor",
-    "monitoring.posterior", "monitoring.charts", "envs.reward", "envs.totals", "envs.observation")))
+    "monitoring.posterior", "monitoring.charts", "envs.reward", "envs.totals", "envs.observation",
+    "envs.step_kernel")))
 
 __all__ = ["StepRules", "StepScratch", "StepState", "fused_step"]

@@ -301,8 +301,8 @@ class PlatoonTask:
     def truth_info(self) -> dict[str, np.ndarray]:
         """What only the simulator knows, fresh arrays, each (n_envs, n_followers) unless noted: the platoon's true
         state now (``actual_time_gap``, ``ttc``, ``jerk``, ``collision``) and the ground truth as ``truth_<name>``
-        (:meth:`ground_truth`). The opt-in part of the info (``truth_info=True``): the ground truth costs tens of
-        microseconds a step."""
+        (:meth:`ground_truth`). The opt-in part of the info (``truth_info=True``): working the ground truth out costs
+        several times the rest of a step (``make bench``)."""
         platoon = self.loop.platoon
         return {
             # (s - s0) / v [s]; inf below TIME_GAP_MIN_SPEED, where it is not defined (never NaN)

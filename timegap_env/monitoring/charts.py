@@ -74,6 +74,8 @@ class ChartMemory(NamedTuple):
 
 
 SHEWHART, EWMA, CUSUM = (CHART_KINDS.index(kind) for kind in ("shewhart", "ewma", "cusum"))  # ChartRule.kind
+if len(CHART_KINDS) != 3:  # chart_sides_env and restart_env handle these three; a new kind is a branch in each
+    raise ImportError(f"timegap_env.config.CHART_KINDS {CHART_KINDS}: the chart kernels know shewhart, ewma, cusum")
 
 
 class ChartRule(NamedTuple):
@@ -335,9 +337,8 @@ def chart_sides_env(rule, estimates, centers, statistic, sides, e, column):  # n
                 below = lower > rule.cusum_h and not above
                 sides[k, c, f] = int(above) - int(below)
                 continue
-            if rule.kind == SHEWHART:
-                value = estimate
-            else:  # EWMA
+            value = estimate  # Shewhart's
+            if rule.kind == EWMA:
                 value = statistic[e, f, 0] = rule.ewma_lambda * estimate + (1.0 - rule.ewma_lambda) * statistic[e, f, 0]
             low, high = line - rule.half_width, line + rule.half_width
             sides[k, c, f] = 1 if value > high else (-1 if value < low else 0)
