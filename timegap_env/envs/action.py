@@ -50,9 +50,8 @@ class SettingLadder:
         self.rule = LadderRule.from_config(config)
         self.levels = self.rule.levels  # [s]
         self.n_followers = config.platoon.n_followers
-        self.relative = config.action_mode == "relative"
         self.shape = (n_envs, self.n_followers) if config.action_mode == "per_vehicle" else (n_envs,)  # of an action
-        self.n_actions = len(RELATIVE_STEPS) if self.relative else self.levels.size  # per entry of an action
+        self.n_actions = len(RELATIVE_STEPS) if self.rule.mode == RELATIVE else self.levels.size  # per entry of an action
 
     def check(self, action: np.ndarray) -> np.ndarray:
         """``action`` (integers of shape ``shape``, each in [0, n_actions); bools count as 0 and 1, as gymnasium's

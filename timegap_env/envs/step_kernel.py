@@ -41,7 +41,7 @@ from timegap_env.monitoring.charts import (
 from timegap_env.monitoring.loop import SAME_SETTING
 from timegap_env.monitoring.monitor import UPDATE_WORK_ROWS, MonitorTicks, recenter_env, update_env
 from timegap_env.monitoring.posterior import Moments
-from timegap_env.monitoring.sensors import Readings, measure_env
+from timegap_env.monitoring.sensors import UNIFORM_STREAMS, Readings, measure_env
 from timegap_env.sim.platoon import Controller, LeaderTicks, PlatoonState, PlatoonTicks, advance_env
 
 
@@ -91,7 +91,7 @@ class StepScratch(NamedTuple):
     counts: np.ndarray  # (2, n_ticks, 1, n_followers) int64: ChartState's exceedances_in_window, run_length
     leader: np.ndarray  # (2, n_ticks, 1): LeaderTicks' speed [m/s] and acceleration [m/s^2]
     targets: np.ndarray  # (n_followers,) the env's settings from its action [s]
-    work: np.ndarray  # (UPDATE_WORK_ROWS, n_ticks * n_followers): measure_env's uniforms, then update_env's scratch
+    work: np.ndarray  # (rows, n_ticks * n_followers): measure_env's uniforms, then update_env's scratch
 
     @classmethod
     def empty(cls, n_ticks: int, n_followers: int) -> StepScratch:
@@ -99,7 +99,7 @@ class StepScratch(NamedTuple):
         return cls(floats=np.empty((8, *block)), flags=np.empty((5, *block), dtype=bool),
                    side=np.empty(block, dtype=np.int8), counts=np.empty((2, *block), dtype=np.int64),
                    leader=np.empty((2, n_ticks, 1)), targets=np.empty(n_followers),
-                   work=np.empty((UPDATE_WORK_ROWS, n_ticks * n_followers)))
+                   work=np.empty((max(UPDATE_WORK_ROWS, UNIFORM_STREAMS), n_ticks * n_followers)))
 
 
 class StepRules(NamedTuple):
@@ -165,7 +165,7 @@ def fused_step(state, rules, action):  # noqa: ANN001, ANN201
                 leader.v2v[k, 0, f] = rules.v2v_enabled and not down
         advance_env(state.platoon, leader, state.zoh, state.controller, state.faults, physics, e, 0)
         measure_env((physics.spacing, physics.speed), ticks_before, state.noise, state.sensor_faults, measured, e, 0,
-                    scratch.work[:3])
+                    scratch.work[:UNIFORM_STREAMS])
         update_env(measured.speed, measured.spacing, memory, slot, rule, prior, estimates, posterior, e, 0,
                    scratch.work)
         chart_sides_env(rules.chart, estimates.tau_mean, physics.applied_setting, statistic, charted.side, e, 0)

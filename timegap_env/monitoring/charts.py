@@ -73,7 +73,7 @@ class ChartMemory(NamedTuple):
     restarted: np.ndarray  # int64 chart tick of each vehicle's last (re)start; older starts do not count
 
 
-SHEWHART, EWMA, CUSUM = (CHART_KINDS.index(kind) for kind in ("shewhart", "ewma", "cusum"))  # ChartRule.kind
+EWMA, CUSUM = CHART_KINDS.index("ewma"), CHART_KINDS.index("cusum")  # ChartRule.kind; the third, Shewhart, the default
 if len(CHART_KINDS) != 3:  # chart_sides_env and restart_env handle these three; a new kind is a branch in each
     raise ImportError(f"timegap_env.config.CHART_KINDS {CHART_KINDS}: the chart kernels know shewhart, ewma, cusum")
 

@@ -24,7 +24,7 @@ from timegap_env.compiled import INLINED_STAGE_KERNEL
 from timegap_env.config import SensorConfig
 from timegap_env.sim.counter_noise import counter_uniform
 
-_UNIFORM_STREAMS = 3  # per follower and tick: two for the Gaussian pair, one for the dropout
+UNIFORM_STREAMS = 3  # per follower and tick: two for the Gaussian pair, one for the dropout
 
 
 class Readings(NamedTuple):
@@ -111,7 +111,7 @@ class Sensors:
 def _measure(true, ticks_before, noise, faults, out):  # noqa: ANN001, ANN202
     """:meth:`Sensors.measure`, env by env (:func:`measure_env`)."""
     n_ticks, n_envs, n_followers = true[0].shape
-    uniforms = np.empty((_UNIFORM_STREAMS, n_ticks * n_followers))
+    uniforms = np.empty((UNIFORM_STREAMS, n_ticks * n_followers))
     for e in range(n_envs):
         measure_env(true, ticks_before[e], noise, faults, out, e, e, uniforms)
 
@@ -127,9 +127,9 @@ def measure_env(true, ticks_before, noise, faults, out, e, column, uniforms):  #
     true, noise, faults, out = Readings(*true), NoiseModel(*noise), SensorFaults(*faults), Readings(*out)
     n_ticks, n_followers = true.spacing.shape[0], true.spacing.shape[2]
     c, key = column, noise.keys[e]
-    first = np.uint64(ticks_before + 1) * np.uint64(_UNIFORM_STREAMS * n_followers)  # the block's first counter
+    first = np.uint64(ticks_before + 1) * np.uint64(UNIFORM_STREAMS * n_followers)  # the block's first counter
     for j in range(n_ticks * n_followers):  # reading j = k n_followers + f: counter first + 3 j + stream
-        counter = first + np.uint64(_UNIFORM_STREAMS * j)
+        counter = first + np.uint64(UNIFORM_STREAMS * j)
         uniforms[0, j] = counter_uniform(key, counter)  # the Gaussian pair's
         uniforms[1, j] = counter_uniform(key, counter + np.uint64(1))
         uniforms[2, j] = counter_uniform(key, counter + np.uint64(2))  # the dropout's
