@@ -51,7 +51,7 @@ from typing import TYPE_CHECKING, Any, NamedTuple
 import numba
 import numpy as np
 
-from timegap_env.compiled import STAGE_KERNEL
+from timegap_env.compiled import STAGE_KERNEL, Stacked
 from timegap_env.config import TIME_GAP_MIN_SPEED, EnvConfig, RewardWeights
 
 if TYPE_CHECKING:  # mypy cannot see fields computed at import: a tuple of one term per field, read by name
@@ -104,6 +104,10 @@ class StepReadouts(NamedTuple):
         """Uninitialised read-outs of ``n_envs`` envs of ``n_followers`` followers."""
         per_follower, per_env = np.empty((3, n_envs, n_followers)), np.empty((6, n_envs))  # in field order
         return cls(*(*per_follower, *per_env, np.empty(n_envs, dtype=bool)))  # collided last
+
+
+READOUT_STACKS = Stacked(StepReadouts, (StepReadouts._fields[:3], StepReadouts._fields[3:9]))  # per follower, per env
+TERM_STACKS = Stacked(RewardTerms, (REWARD_TERMS,))  # an owner's terms: the rows of one (n_terms, n_envs) array
 
 
 class RewardConstants(NamedTuple):

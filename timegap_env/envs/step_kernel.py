@@ -15,7 +15,9 @@ the leader's and V2V's ticks), and the tests check the two paths against each ot
 Working env by env keeps each env's state in cache while all its stages run, and re-centres only the
 followers whose setting changed. The kernel takes two structures, :class:`StepState` (every array it
 reads or writes, the objects' own) and :class:`StepRules` (the config's constants), as plain tuples
-(see :mod:`timegap_env.sim.platoon`).
+(see :mod:`timegap_env.sim.platoon`). numba unpacks every array handed to it from Python at every call, so the
+state's structures come in their :class:`~timegap_env.compiled.Stacked` forms (a few stacks each, about 50 arrays
+in all rather than about 120) and are made again inside.
 """
 
 from __future__ import annotations
@@ -31,46 +33,50 @@ from timegap_env.config import EnvConfig
 from timegap_env.envs.action import LadderRule, ladder_env
 from timegap_env.envs.observation import FollowerState, encode_env
 from timegap_env.envs.reward import (
-    RewardConstants, RewardTerms, StepReadouts, StepTicks, env_objectives, env_readouts, env_reward_terms,
-    env_weighted_sum,
+    READOUT_STACKS, TERM_STACKS, RewardConstants, RewardTerms, StepReadouts, StepTicks, env_objectives, env_readouts,
+    env_reward_terms, env_weighted_sum,
 )
-from timegap_env.envs.totals import add_step_env
+from timegap_env.envs.totals import TOTAL_STACKS, add_step_env
 from timegap_env.monitoring.charts import (
-    ChartMemory, ChartRule, ChartState, chart_sides_env, count_excursions_env, restart_env,
+    CHART_MEMORY_STACKS, ChartMemory, ChartRule, ChartState, chart_sides_env, count_excursions_env, restart_env,
 )
 from timegap_env.monitoring.loop import SAME_SETTING
-from timegap_env.monitoring.monitor import UPDATE_WORK_ROWS, MonitorTicks, recenter_env, update_env
-from timegap_env.monitoring.posterior import Moments
-from timegap_env.monitoring.sensors import UNIFORM_STREAMS, Readings, measure_env
-from timegap_env.sim.platoon import Controller, LeaderTicks, PlatoonState, PlatoonTicks, advance_env
+from timegap_env.monitoring.monitor import UPDATE_WORK_ROWS, WINDOW_STACKS, MonitorTicks, recenter_env, update_env
+from timegap_env.monitoring.posterior import MOMENT_STACKS, Moments
+from timegap_env.monitoring.sensors import SENSOR_FAULT_STACKS, UNIFORM_STREAMS, Readings, measure_env
+from timegap_env.sim.platoon import (
+    FAULT_STACKS, PLATOON_STACKS, ZOH_STACKS, Controller, LeaderTicks, PlatoonState, PlatoonTicks, advance_env,
+)
 
 
 
 
 class StepState(NamedTuple):
-    """Every array the step reads or writes, the objects' own (in place); shapes as noted."""
+    """Every array the step reads or writes, the objects' own (in place); shapes as noted. A structure with a
+    ``Stacked`` layout comes in its form (:meth:`~timegap_env.compiled.Stacked.form`)."""
 
-    platoon: tuple  # PlatoonState
-    zoh: tuple  # ZOHCoefficients, nominal
+    platoon: tuple  # PlatoonState, PLATOON_STACKS' form
+    zoh: tuple  # ZOHCoefficients, nominal, ZOH_STACKS' form
     controller: tuple  # Controller
-    faults: tuple  # FollowerFaults (kernel tuple)
+    faults: tuple  # FollowerFaults, FAULT_STACKS' form
     v2v_down: np.ndarray  # (n_envs, n_followers) the follower's degradation takes V2V down while it acts [bool]
     leader_speed: np.ndarray  # (n_envs, max_ticks + 1) the leader's speed at every tick [m/s]
     leader_accel: np.ndarray  # (n_envs, max_ticks + 1) [m/s^2]
     episode_ticks: np.ndarray  # (n_envs,) ticks in each env's episode
     noise: tuple  # NoiseModel
-    sensor_faults: tuple  # SensorFaults
-    monitor: tuple  # (WindowMemory, slot, WindowRule, Prior, Moments) of TimeGapMonitor.kernel_args
-    chart: tuple  # (ChartMemory, center, statistic, tick) of ControlChart.kernel_args
-    readouts: tuple  # StepReadouts of the last step
+    sensor_faults: tuple  # SensorFaults, SENSOR_FAULT_STACKS' form
+    monitor: tuple  # (WindowMemory, slot, WindowRule, Prior, Moments) of TimeGapMonitor.kernel_args, the memory in
+    #                 WINDOW_STACKS' form, the moments in MOMENT_STACKS'
+    chart: tuple  # (ChartMemory, center, statistic, tick) of ControlChart.kernel_args, the memory in
+    #               CHART_MEMORY_STACKS' form
+    readouts: tuple  # StepReadouts of the last step, READOUT_STACKS' form
     previous_accel: np.ndarray  # (n_envs, n_followers) acceleration before the step's first tick [m/s^2]
     envelope: np.ndarray  # (n_envs, 1 + n_followers) acceleration envelopes, the leader first [m/s^2]
-    totals: tuple  # EpisodeTotals
+    totals: tuple  # EpisodeTotals, TOTAL_STACKS' form
     changed: np.ndarray  # (n_envs, n_followers) the step changed the follower's setting [bool]
-    term_rows: np.ndarray  # (n_terms, n_envs) the reward terms, REWARD_TERMS order
-    terms: tuple  # RewardTerms: the rows of term_rows, by name
+    terms: tuple  # RewardTerms in TERM_STACKS' form: (term_rows,), the terms (n_terms, n_envs) in REWARD_TERMS order
     reward: np.ndarray  # (n_envs,)
-    objectives: tuple  # RewardTerms: each term's objective in its natural unit, by the term's name, rows (n_envs,)
+    objectives: tuple  # RewardTerms, each term's objective in its natural unit, TERM_STACKS' form
     cost: np.ndarray  # (n_envs,) the step's cost, >= 0
     terminated: np.ndarray  # (n_envs,) a collision ended the episode [bool]
     truncated: np.ndarray  # (n_envs,) the episode ran out of time or leader profile [bool]
@@ -132,7 +138,14 @@ def fused_step(state, rules, action):  # noqa: ANN001, ANN201
     (numba checks no bounds; a raise here would cost seconds of compilation); ``state`` (:class:`StepState`) is
     updated in place under ``rules`` (:class:`StepRules`)."""
     state, rules = StepState(*state), StepRules(*rules)
-    platoon = PlatoonState(*state.platoon)
+    platoon_args, zoh, faults = unstack_platoon(state.platoon), unstack_zoh(state.zoh), unstack_faults(state.faults)
+    sensor_faults, readout_args = unstack_sensor_faults(state.sensor_faults), unstack_readouts(state.readouts)
+    window_form, slot, rule, prior, moment_form = state.monitor
+    memory, posterior = unstack_window(window_form), unstack_moments(moment_form)
+    chart_form, center, statistic, chart_tick = state.chart
+    chart_memory = unstack_chart_memory(chart_form)
+    chart_args = (chart_memory, center, statistic, chart_tick)
+    platoon = PlatoonState(*platoon_args)
     n_envs, n_followers = platoon.setting.shape
     n_ticks = rules.ticks_per_step
     scratch = StepScratch(*state.scratch)
@@ -143,17 +156,16 @@ def fused_step(state, rules, action):  # noqa: ANN001, ANN201
     charted = ChartState(physics.applied_setting, flags[3], scratch.side, flags[4], counts[0], counts[1])
     ticks = StepTicks(estimates.tau_mean, charted.center, physics.applied_setting, charted.alarm, charted.exceedance,
                       physics.collisions, leader.speed, leader.accel, physics.speed, physics.spacing, physics.accel)
-    memory, slot, rule, prior, posterior = state.monitor
-    chart_memory, center, statistic, chart_tick = state.chart
     chart, moments = ChartMemory(*chart_memory), Moments(*posterior)
     follower = FollowerState(moments.mean_tau, moments.var_tau, center, chart.side, chart.exceedances_in_window,
                              chart.run_length, platoon.setting, platoon.v[:, 1:], platoon.v2v)
-    terms, readouts, objectives = RewardTerms(*state.terms), StepReadouts(*state.readouts), RewardTerms(*state.objectives)
+    terms, objectives = RewardTerms(*unstack_terms(state.terms)), RewardTerms(*unstack_terms(state.objectives))
+    readouts, totals = StepReadouts(*readout_args), unstack_totals(state.totals)
     constants = RewardConstants(*rules.reward)
-    faults_start, faults_end = state.faults[0], state.faults[1]
+    faults_start, faults_end = faults[0], faults[1]
     last = n_ticks - 1
     for e in range(n_envs):
-        _change_settings(state.platoon, state.controller, memory, state.chart, rules, action, state.changed,
+        _change_settings(platoon_args, state.controller, memory, chart_args, rules, action, state.changed,
                          scratch.targets, e)
         ticks_before = platoon.ticks[e]
         for k in range(n_ticks):  # the leader at the end of each tick (held after its episode), V2V during it
@@ -163,8 +175,8 @@ def fused_step(state, rules, action):  # noqa: ANN001, ANN201
             for f in range(n_followers):
                 down = faults_start[e, f] <= tick < faults_end[e, f] and state.v2v_down[e, f]
                 leader.v2v[k, 0, f] = rules.v2v_enabled and not down
-        advance_env(state.platoon, leader, state.zoh, state.controller, state.faults, physics, e, 0)
-        measure_env((physics.spacing, physics.speed), ticks_before, state.noise, state.sensor_faults, measured, e, 0,
+        advance_env(platoon_args, leader, zoh, state.controller, faults, physics, e, 0)
+        measure_env((physics.spacing, physics.speed), ticks_before, state.noise, sensor_faults, measured, e, 0,
                     scratch.work[:UNIFORM_STREAMS])
         update_env(measured.speed, measured.spacing, memory, slot, rule, prior, estimates, posterior, e, 0,
                    scratch.work)
@@ -178,9 +190,9 @@ def fused_step(state, rules, action):  # noqa: ANN001, ANN201
             state.previous_accel[e, f] = physics.accel[last, 0, f]
             collided = collided or platoon.collided[e, f]
         env_reward_terms(readouts, platoon.setting, state.changed, constants, terms, e)
-        env_weighted_sum(state.term_rows, rules.weights, state.reward, e)
+        env_weighted_sum(state.terms[0], rules.weights, state.reward, e)
         env_objectives(readouts, platoon.setting, state.changed, terms, constants, objectives, state.cost, e)
-        add_step_env(state.totals, state.readouts, platoon.setting, state.changed, constants.gap_per_vehicle, e)
+        add_step_env(totals, readout_args, platoon.setting, state.changed, constants.gap_per_vehicle, e)
         state.terminated[e] = collided
         state.truncated[e] = platoon.ticks[e] >= state.episode_ticks[e] and not collided
         encode_env(follower, rules.scales, state.observation, e)
@@ -210,6 +222,10 @@ def _change_settings(platoon, controller, memory, chart, rules, action, changed,
         ChartMemory(*chart_memory).hold_off[e, f] = int(ramp_ticks + rules.settle_ticks)
 
 
+unstack_platoon, unstack_zoh, unstack_faults = PLATOON_STACKS.unstack, ZOH_STACKS.unstack, FAULT_STACKS.unstack
+unstack_sensor_faults, unstack_window = SENSOR_FAULT_STACKS.unstack, WINDOW_STACKS.unstack
+unstack_moments, unstack_chart_memory = MOMENT_STACKS.unstack, CHART_MEMORY_STACKS.unstack
+unstack_readouts, unstack_totals, unstack_terms = READOUT_STACKS.unstack, TOTAL_STACKS.unstack, TERM_STACKS.unstack
 follow_sources(tuple(f"timegap_env.{module}" for module in (  # every kernel the step runs, and the step
     "compiled", "envs.action", "sim.counter_noise", "sim.platoon", "monitoring.sensors", "monitoring.monitor",
     "monitoring.posterior", "monitoring.charts", "envs.reward", "envs.totals", "envs.observation",

@@ -23,6 +23,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from timegap_env.compiled import restack
 from timegap_env.config import TIME_GAP_MIN_SPEED, EnvConfig
 from timegap_env.envs.action import SettingLadder
 from timegap_env.envs.episodes import Episodes, check_reset_options
@@ -30,10 +31,11 @@ from timegap_env.envs.info import TRUTH_PREFIX, prefixed
 from timegap_env.envs.observation import FEATURES, FollowerState, ObservationScales, observe_into
 from timegap_env.envs.rendering import DEFAULT_TIME_WINDOW, RenderFrame
 from timegap_env.envs.reward import (
-    REWARD_TERMS, RewardConstants, StepReadouts, StepTicks, score_step, weights_of,
+    READOUT_STACKS, REWARD_TERMS, TERM_STACKS, RewardConstants, RewardTerms, StepReadouts, StepTicks, score_step,
+    weights_of,
 )
 from timegap_env.envs.step_kernel import StepRules, StepScratch, StepState, fused_step
-from timegap_env.envs.totals import EpisodeTotals
+from timegap_env.envs.totals import TOTAL_STACKS, EpisodeTotals
 from timegap_env.monitoring.loop import MonitoredPlatoon
 from timegap_env.sim.platoon import Platoon
 
@@ -145,13 +147,14 @@ class PlatoonTask:
         self._state: tuple | None = None  # the fused step's StepState, built at each reset
 
     def __getstate__(self) -> dict[str, Any]:
-        """For copy and pickle: everything but the fused step's state, whose views of the task's arrays (the reward
-        terms' rows) a copy would detach from them; :meth:`__setstate__` builds it again from the copy's arrays."""
+        """For copy and pickle: everything but the fused step's state, whose stacks of the task's arrays a copy
+        would detach from them; :meth:`__setstate__` builds it again from the copy's arrays."""
         return {**self.__dict__, "_state": None, "_state_built": self._state is not None}
 
     def __setstate__(self, state: dict[str, Any]) -> None:
         built = state.pop("_state_built")
         self.__dict__.update(state)
+        restack(self)  # a copy holds each row of the objects' stacks apart (see timegap_env.compiled.Stacked)
         if built:
             self._state = self._step_state()
 
@@ -198,18 +201,18 @@ class PlatoonTask:
         return self.loop.degradation.v2v_up(ticks) & self.config.platoon.v2v
 
     def _step_state(self) -> tuple:
-        """The fused step's :class:`~timegap_env.envs.step_kernel.StepState`: the objects' own arrays."""
+        """The fused step's :class:`~timegap_env.envs.step_kernel.StepState`: the objects' own arrays, in their kernel forms."""
         loop, episodes, result = self.loop, self.episodes, self._result
-        platoon_state, zoh, controller, faults = loop.platoon.kernel_args
-        noise, sensor_faults = loop.sensors.kernel_args
+        platoon_state, zoh, controller, faults = loop.platoon.kernel_form
+        noise, sensor_faults = loop.sensors.kernel_form
         return tuple(StepState(
             platoon=platoon_state, zoh=zoh, controller=controller, faults=faults, v2v_down=loop.degradation.v2v_down,
             leader_speed=episodes.leader_speed, leader_accel=episodes.leader_accel,
             episode_ticks=episodes.episode_ticks, noise=noise, sensor_faults=sensor_faults,
-            monitor=loop.monitor.kernel_args, chart=loop.chart.kernel_args, readouts=tuple(self._readouts),
-            previous_accel=self._previous_accel, envelope=self._accel_envelope, totals=tuple(self.totals),
-            changed=self._changed, term_rows=result.term_rows, terms=tuple(result.term_rows), reward=result.reward,
-            objectives=tuple(result.objective_rows), cost=result.cost,
+            monitor=loop.monitor.kernel_form, chart=loop.chart.kernel_form, readouts=READOUT_STACKS.form(self._readouts),
+            previous_accel=self._previous_accel, envelope=self._accel_envelope, totals=TOTAL_STACKS.form(self.totals),
+            changed=self._changed, terms=TERM_STACKS.form(RewardTerms(*result.term_rows)), reward=result.reward,
+            objectives=TERM_STACKS.form(RewardTerms(*result.objective_rows)), cost=result.cost,
             terminated=result.terminated, truncated=result.truncated, observation=self._observation,
             scratch=self._scratch,
         ))

@@ -7,7 +7,7 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
-from timegap_env.compiled import STAGE_KERNEL
+from timegap_env.compiled import STAGE_KERNEL, Stacked
 from timegap_env.config import EnvConfig
 from timegap_env.envs.reward import StepReadouts
 
@@ -65,6 +65,9 @@ class EpisodeTotals(NamedTuple):
             "collision": self.collision.astype(bool),
             "duration": self.steps * config.decision_interval,  # [s]
         }
+
+
+TOTAL_STACKS = Stacked(EpisodeTotals, (EpisodeTotals._fields,))  # the totals: the rows of one stack
 
 
 @numba.njit(cache=True, error_model="numpy")

@@ -36,7 +36,7 @@ import numba
 import numpy as np
 from numpy.typing import ArrayLike
 
-from timegap_env.compiled import STAGE_KERNEL
+from timegap_env.compiled import STAGE_KERNEL, Stacked
 from timegap_env.config import CHART_KINDS, ChartConfig
 from timegap_env.monitoring.batch import batch_array, batch_shape, check_finite, env_mask, setting_array, vehicle_mask
 
@@ -72,6 +72,8 @@ class ChartMemory(NamedTuple):
     starts: np.ndarray  # (n_envs, n_vehicles, window ticks) int64 ring: chart tick of an excursion start, -1 none
     restarted: np.ndarray  # int64 chart tick of each vehicle's last (re)start; older starts do not count
 
+
+CHART_MEMORY_STACKS = Stacked(ChartMemory, (("exceedances_in_window", "run_length", "hold_off", "restarted"),))
 
 EWMA, CUSUM = CHART_KINDS.index("ewma"), CHART_KINDS.index("cusum")  # ChartRule.kind; the third, Shewhart, the default
 if len(CHART_KINDS) != 3:  # chart_sides_env and restart_env handle these three; a new kind is a branch in each
@@ -110,14 +112,15 @@ class ControlChart:
         self.shape = batch_shape(n_envs, n_vehicles)
         self.center = np.empty(self.shape)  # the centre line, the applied setting tau* [s]
         # A start counts only if it is no older than the vehicle's last (re)start, so re-centring never clears the ring.
+        counts = np.zeros((4, *self.shape), dtype=np.int64)  # CHART_MEMORY_STACKS' group
         self._memory = ChartMemory(
             side=np.zeros(self.shape, dtype=np.int8),
             exceedance=np.zeros(self.shape, dtype=bool),
-            exceedances_in_window=np.zeros(self.shape, dtype=np.int64),
-            run_length=np.zeros(self.shape, dtype=np.int64),
-            hold_off=np.zeros(self.shape, dtype=np.int64),
+            exceedances_in_window=counts[0],
+            run_length=counts[1],
+            hold_off=counts[2],
             starts=np.full(self.shape + (config.exceedance_window_ticks,), -1, dtype=np.int64),
-            restarted=np.zeros(self.shape, dtype=np.int64),
+            restarted=counts[3],
         )
         self._memory_args = tuple(self._memory)  # the same arrays, as the kernel takes them
         self._tick = np.zeros(1, dtype=np.int64)  # ticks charted so far; this tick's ring slot is _tick % window
@@ -143,6 +146,9 @@ class ControlChart:
 
     kernel_args = property(lambda self: (self._memory_args, self.center, self.statistic, self._tick),
                            doc="(memory, center, statistic, tick): the chart's own arrays, as a fused step takes them.")
+    kernel_form = property(lambda self: (CHART_MEMORY_STACKS.form(self._memory), self.center, self.statistic, self._tick),
+                           doc=":attr:`kernel_args` with the memory in its stacks (CHART_MEMORY_STACKS' form), as the "
+                               "fused step is handed them from Python.")
 
     @property
     def alarm(self) -> np.ndarray:

@@ -15,10 +15,12 @@ import numba
 import numpy as np
 from numpy.typing import ArrayLike
 
-from timegap_env.compiled import INLINED_STAGE_KERNEL, STAGE_KERNEL
+from timegap_env.compiled import INLINED_STAGE_KERNEL, STAGE_KERNEL, Stacked
 from timegap_env.config import MonitorConfig
 from timegap_env.monitoring.batch import batch_array, batch_shape, env_mask, setting_array, vehicle_mask
-from timegap_env.monitoring.posterior import Moments, Prior, WindowSums, outside_probability, posterior_moments
+from timegap_env.monitoring.posterior import (
+    MOMENT_STACKS, Moments, Prior, WindowSums, outside_probability, posterior_moments,
+)
 
 __all__ = ["MonitorTicks", "TimeGapMonitor"]
 
@@ -43,6 +45,9 @@ class WindowMemory(NamedTuple):
     window_sums: np.ndarray  # (n_envs, n_vehicles, N_SUMS) forgetting-weighted sum of the window
     skipped: np.ndarray  # (n_envs, n_vehicles) int64 measurements skipped since reset [-]
     prior_tau: np.ndarray  # (n_envs, n_vehicles) prior mean of tau, the setting tau* [s]
+
+
+WINDOW_STACKS = Stacked(WindowMemory, (("block_sum", "window_sums"),))
 
 
 class WindowRule(NamedTuple):
@@ -110,10 +115,11 @@ class TimeGapMonitor:
         self.shape = batch_shape(n_envs, n_vehicles)
         sums_shape = self.shape + (N_SUMS,)
         W, decay = config.window_ticks or 0, float(config.forgetting)  # W = 0: no window
+        sums = np.zeros((2, *sums_shape))  # WINDOW_STACKS' group
         self._memory = WindowMemory(
             slots=np.zeros(self.shape + (W + 1, N_SUMS)),
-            block_sum=np.zeros(sums_shape),
-            window_sums=np.zeros(sums_shape),
+            block_sum=sums[0],
+            window_sums=sums[1],
             skipped=np.zeros(self.shape, dtype=np.int64),
             prior_tau=np.empty(self.shape),
         )
@@ -167,6 +173,13 @@ class TimeGapMonitor:
         that runs ``update_env`` itself then calls :meth:`posterior_written`."""
         memory, rule, prior = self._kernel_args
         return memory, self._slot, rule, prior, tuple(self._posterior)
+
+    @property
+    def kernel_form(self) -> tuple[tuple, np.ndarray, tuple, tuple, tuple]:
+        """:attr:`kernel_args` with the memory and the posterior in their stacks (WINDOW_STACKS' and MOMENT_STACKS'
+        forms), as the fused step is handed them from Python."""
+        _, rule, prior = self._kernel_args
+        return WINDOW_STACKS.form(self._memory), self._slot, rule, prior, MOMENT_STACKS.form(self._posterior)
 
     def posterior_written(self) -> None:
         """Every env's posterior after its last tick is in the arrays of :attr:`kernel_args` (see there)."""

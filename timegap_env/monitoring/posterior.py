@@ -32,7 +32,9 @@ import numba
 import numpy as np
 from numpy.typing import ArrayLike
 
-__all__ = ["Moments", "Prior", "WindowSums", "outside_probability", "posterior", "posterior_moments",
+from timegap_env.compiled import Stacked
+
+__all__ = ["MOMENT_STACKS", "Moments", "Prior", "WindowSums", "outside_probability", "posterior", "posterior_moments",
            "prior_precision"]
 
 
@@ -80,6 +82,9 @@ class Moments(NamedTuple):
         row_s0 = np.stack([self.var_s0, self.cov_s0_tau], axis=-1)
         row_tau = np.stack([self.cov_s0_tau, self.var_tau], axis=-1)
         return np.stack([row_s0, row_tau], axis=-2)
+
+
+MOMENT_STACKS = Stacked(Moments, (Moments._fields,))  # an owner's moments: the rows of one stack
 
 
 def posterior(

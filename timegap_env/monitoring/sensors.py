@@ -20,7 +20,7 @@ from typing import NamedTuple, cast
 import numba
 import numpy as np
 
-from timegap_env.compiled import INLINED_STAGE_KERNEL
+from timegap_env.compiled import INLINED_STAGE_KERNEL, Stacked
 from timegap_env.config import SensorConfig
 from timegap_env.sim.counter_noise import counter_uniform
 
@@ -55,8 +55,12 @@ class SensorFaults(NamedTuple):
     def none(cls, n_envs: int, n_followers: int, spacing_noise_std: float) -> SensorFaults:
         """No degradation: empty windows, no bias, the config's noise."""
         shape = (n_envs, n_followers)
-        return cls(np.zeros(shape, dtype=np.int64), np.zeros(shape, dtype=np.int64), np.zeros(shape),
-                   np.full(shape, float(spacing_noise_std)))
+        window, radar = np.zeros((2, *shape), dtype=np.int64), np.zeros((2, *shape))  # SENSOR_FAULT_STACKS' groups
+        radar[1] = float(spacing_noise_std)
+        return cls(*window, *radar)
+
+
+SENSOR_FAULT_STACKS = Stacked(SensorFaults, (("start", "end"), ("spacing_bias", "spacing_noise_std")))
 
 
 class Sensors:
@@ -91,6 +95,9 @@ class Sensors:
     )
     kernel_args = property(lambda self: (self._noise_args, self._fault_args),
                            doc="(noise, faults): the sensors' own arrays as :func:`measure_env` takes them.")
+    kernel_form = property(lambda self: (self._noise_args, SENSOR_FAULT_STACKS.form(self._faults)),
+                           doc=":attr:`kernel_args` with the faults in their stacks (SENSOR_FAULT_STACKS' form), as the "
+                               "fused step is handed them from Python.")
 
     def measure(self, true: Readings, ticks_before: np.ndarray) -> Readings:
         """Readings of the ``true`` spacings and speeds of a block of ticks; env e's block starts after

@@ -42,7 +42,7 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
-from timegap_env.compiled import INLINED_STAGE_KERNEL
+from timegap_env.compiled import INLINED_STAGE_KERNEL, Stacked
 from timegap_env.config import PlatoonConfig
 from timegap_env.sim.counter_noise import counter_uniform
 
@@ -70,21 +70,20 @@ class ZOHCoefficients(NamedTuple):
         lag = np.asarray(lag, dtype=float)
         gain = np.asarray(gain, dtype=float)
         decayed = -np.expm1(-dt / lag)  # 1 - e, accurate for small dt/T
-        return cls(
-            a_from_a=1.0 - decayed,
-            a_from_u=decayed * gain,
-            v_from_a=lag * decayed,
-            v_from_u=(dt - lag * decayed) * gain,
-            x_from_a=lag * (dt - lag * decayed),
-            x_from_u=(0.5 * dt**2 - lag * dt + lag**2 * decayed) * gain,
-            dt=float(dt),
-        )
+        rows = np.empty((len(ZOH_STACKS.groups[0]), *np.broadcast_shapes(lag.shape, gain.shape)))  # ZOH_STACKS'
+        rows[0], rows[1] = 1.0 - decayed, decayed * gain  # a_from_a, a_from_u
+        rows[2], rows[3] = lag * decayed, (dt - lag * decayed) * gain  # v_from_a, v_from_u
+        rows[4], rows[5] = lag * (dt - lag * decayed), (0.5 * dt**2 - lag * dt + lag**2 * decayed) * gain  # x_from_*
+        return cls(rows[0], rows[1], rows[2], rows[3], rows[4], rows[5], float(dt))
 
     def step(
         self, x: np.ndarray, v: np.ndarray, a: np.ndarray, u: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Position [m], speed [m/s] and acceleration [m/s^2] one tick later under held command u [m/s^2]."""
         return glvd_tick(x, v, a, u, self)
+
+
+ZOH_STACKS = Stacked(ZOHCoefficients, (ZOHCoefficients._fields[:-1],))  # the coefficients, rows of one stack
 
 
 @numba.njit(cache=True, error_model="numpy")
@@ -151,6 +150,10 @@ class PlatoonState(NamedTuple):
     ticks: np.ndarray  # (n_envs,) int64 ticks since each env's reset [-]
 
 
+PLATOON_STACKS = Stacked(PlatoonState, (("x", "v", "a", "u"), ("setting", "applied_setting", "received_accel"),
+                                         ("v2v", "collided")))
+
+
 class Controller(NamedTuple):
     """The CTH controller's constants, from :class:`PlatoonConfig`."""
 
@@ -195,17 +198,23 @@ class FollowerFaults(NamedTuple):
     def none(cls, config: PlatoonConfig, nominal: ZOHCoefficients, n_envs: int) -> FollowerFaults:
         """No degradation: empty windows, nominal parameters (copies), no delay, loss or bias."""
         shape = (n_envs, config.n_followers)
-        return cls(
-            start=np.zeros(shape, dtype=np.int64), end=np.zeros(shape, dtype=np.int64),
-            dynamics=ZOHCoefficients._make((*(np.broadcast_to(c, shape).copy() for c in nominal[:-1]), nominal.dt)),
-            k_s=np.full(shape, float(config.k_s)), k_v=np.full(shape, float(config.k_v)),
-            accel_max=np.full(shape, float(config.accel_max)), extra_delay=np.zeros(shape, dtype=np.int64),
-            packet_loss=np.zeros(shape), spacing_bias=np.zeros(shape), keys=np.zeros(n_envs, dtype=np.uint64),
-        )
+        windows = np.zeros((3, *shape), dtype=np.int64)  # start, end, extra_delay (FAULT_STACKS' groups)
+        dynamics = np.empty((len(nominal) - 1, *shape))
+        dynamics[:] = np.stack(nominal[:-1])
+        gains = np.zeros((5, *shape))  # k_s, k_v, accel_max, packet_loss, spacing_bias
+        gains[0], gains[1], gains[2] = float(config.k_s), float(config.k_v), float(config.accel_max)
+        return cls(start=windows[0], end=windows[1], dynamics=ZOHCoefficients._make((*dynamics, nominal.dt)), k_s=gains[0],
+                   k_v=gains[1], accel_max=gains[2], extra_delay=windows[2], packet_loss=gains[3],
+                   spacing_bias=gains[4], keys=np.zeros(n_envs, dtype=np.uint64))
 
     def as_kernel_tuple(self) -> tuple:
         """The plain nested tuple the kernel takes (see the module docstring)."""
         return (*self[:2], tuple(self.dynamics), *self[3:])
+
+
+FAULT_STACKS = Stacked(FollowerFaults, (("start", "end", "extra_delay"),
+                                         ("k_s", "k_v", "accel_max", "packet_loss", "spacing_bias")),
+                       nested={"dynamics": ZOH_STACKS})
 
 
 class LeaderTicks(NamedTuple):
@@ -247,17 +256,21 @@ class Platoon:
         self.n_envs = int(n_envs)
         self.n_followers = config.n_followers
         vehicles, followers = (self.n_envs, self.n_followers + 1), (self.n_envs, self.n_followers)
+        motion, settings = np.zeros((4, *vehicles)), np.zeros((3, *followers))  # PLATOON_STACKS' groups
+        settings[:2] = config.initial_setting
+        flags = np.zeros((2, *followers), dtype=bool)
+        flags[0] = bool(config.v2v)
         self._state = PlatoonState(
-            x=np.zeros(vehicles),
-            v=np.zeros(vehicles),
-            a=np.zeros(vehicles),
-            u=np.zeros(vehicles),
-            setting=np.full(followers, config.initial_setting),
-            applied_setting=np.full(followers, config.initial_setting),
-            v2v=np.full(followers, bool(config.v2v)),
-            collided=np.zeros(followers, dtype=bool),
+            x=motion[0],
+            v=motion[1],
+            a=motion[2],
+            u=motion[3],
+            setting=settings[0],
+            applied_setting=settings[1],
+            v2v=flags[0],
+            collided=flags[1],
             predecessor_accel=np.zeros((self.n_envs, config.v2v_delay_ticks + config.max_v2v_latency_ticks + 1, self.n_followers)),
-            received_accel=np.zeros(followers),
+            received_accel=settings[2],
             ticks=np.zeros(self.n_envs, dtype=np.int64),
         )
         self._controller = Controller.from_config(config)
@@ -287,6 +300,13 @@ class Platoon:
         """(state, zoh, controller, faults): the platoon's own arrays and constants as :func:`advance_env` takes them."""
         state, controller = self._kernel_args
         return state, self._zoh_args, controller, self._fault_args
+
+    @property
+    def kernel_form(self) -> tuple[tuple, tuple, tuple, tuple]:
+        """:attr:`kernel_args` with the state, the dynamics and the faults in their stacks (PLATOON_STACKS',
+        ZOH_STACKS' and FAULT_STACKS' forms), as the fused step is handed them from Python."""
+        return (PLATOON_STACKS.form(self._state), ZOH_STACKS.form(self._zoh), self._kernel_args[1],
+                FAULT_STACKS.form(self._faults))
 
     @property
     def spacing(self) -> np.ndarray:

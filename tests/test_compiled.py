@@ -1,0 +1,120 @@
+"""timegap_env.compiled's Stacked: a structure handed to a kernel as a few stacks, made again inside, and kept
+stacked through copies and pickles."""
+
+from __future__ import annotations
+
+import copy
+import pickle
+from typing import NamedTuple
+
+import numba
+import numpy as np
+import pytest
+
+from timegap_env.compiled import Stacked, restack
+from timegap_env.envs.step_kernel import StepState
+from timegap_env.envs.vector_env import TimeGapMonitorVectorEnv
+
+
+class Inner(NamedTuple):
+    p: np.ndarray
+    q: np.ndarray
+    scale: float
+
+
+class Outer(NamedTuple):
+    a: np.ndarray
+    flags: np.ndarray
+    inner: Inner
+    b: np.ndarray
+    count: np.ndarray
+
+
+INNER = Stacked(Inner, (("p", "q"),))
+OUTER = Stacked(Outer, (("a", "b"),), nested={"inner": INNER})
+unstack_outer = OUTER.unstack  # a kernel calls it by a global name, as numba types no other object's attribute
+
+
+@numba.njit
+def _write_through(form):  # noqa: ANN001, ANN202
+    a, flags, inner, b, count = unstack_outer(form)
+    a[0, 1], b[1, 0], inner[1][0] = 1.5, 2.5, 3.5
+    count[0] += 1
+    return inner[2]
+
+
+def outer() -> Outer:
+    ab, pq = np.zeros((2, 2, 3)), np.zeros((2, 4))
+    return Outer(a=ab[0], flags=np.zeros(3, dtype=bool), inner=Inner(*pq, scale=0.5), b=ab[1],
+                 count=np.zeros(1, dtype=np.int64))
+
+
+def test_the_form_holds_each_group_as_its_stack_and_the_kernel_writes_through_the_rows():
+    value = outer()
+    form = OUTER.form(value)
+    assert len(form) == 4 and form[0].shape == (2, 2, 3) and form[2][0].shape == (2, 4)  # a+b, flags, inner, count
+    assert _write_through(form) == 0.5
+    assert value.a[0, 1] == 1.5 and value.b[1, 0] == 2.5 and value.inner.q[0] == 3.5 and value.count[0] == 1
+
+
+def test_fields_that_are_not_the_rows_of_one_stack_are_refused_by_name():
+    value = outer()._replace(b=np.zeros((2, 3)))
+    with pytest.raises(ValueError, match=r"Outer fields \('a', 'b'\): must be the rows"):
+        OUTER.form(value)
+    swapped = outer()
+    with pytest.raises(ValueError, match="in this order"):
+        OUTER.form(swapped._replace(a=swapped.b, b=swapped.a))
+
+
+def test_a_layout_naming_an_unknown_or_repeated_field_is_refused():
+    with pytest.raises(ValueError, match="distinct fields"):
+        Stacked(Inner, (("p", "r"),))
+    with pytest.raises(ValueError, match="distinct fields"):
+        Stacked(Inner, (("p", "q"), ("q",)))
+
+
+def test_restack_makes_a_copys_rows_one_stack_again_and_every_reference_follows():
+    class Holder:  # an owner keeping the structure and a plain tuple of the same arrays, as the components do
+        __module__ = "timegap_env.tests"
+
+        def __init__(self) -> None:
+            self.value = outer()
+            self.args = tuple(self.value)
+
+    twin = copy.deepcopy(Holder())
+    with pytest.raises(ValueError):
+        OUTER.form(twin.value)  # deepcopy copied each row apart
+    restack(twin)
+    form = OUTER.form(twin.value)
+    _write_through(form)
+    assert twin.args[0] is twin.value.a and twin.args[3] is twin.value.b and twin.args[0][0, 1] == 1.5
+
+
+@pytest.mark.parametrize("how", ["deepcopy", "pickle"])
+def test_a_copied_vector_env_steps_like_the_original(how):
+    """A copy's fused step writes into the copy's stacks, which its observations and the staged path read."""
+    env = TimeGapMonitorVectorEnv(3, autoreset_mode="same_step")
+    env.reset(seed=4)
+    action = np.array([5, 2, 7])
+    for _ in range(3):
+        env.step(action)
+    twin = copy.deepcopy(env) if how == "deepcopy" else pickle.loads(pickle.dumps(env))
+    staged = copy.deepcopy(env)
+    staged.task.fused = False
+    for _ in range(4):
+        results = [e.step(action) for e in (env, twin, staged)]
+        for other in results[1:]:
+            np.testing.assert_array_equal(other[0], results[0][0])
+            np.testing.assert_array_equal(other[1], results[0][1])
+
+
+def test_the_fused_step_is_handed_about_fifty_arrays():
+    env = TimeGapMonitorVectorEnv(2)
+    env.reset(seed=0)
+
+    def arrays(value: object) -> int:
+        if isinstance(value, np.ndarray):
+            return 1
+        return sum(arrays(part) for part in value) if isinstance(value, tuple) else 0
+
+    assert arrays(StepState(*env.task._state)) <= 60  # about 120 before the structures came stacked
