@@ -201,7 +201,10 @@ class TimeGapMonitorEnv(gym.Env):
     def _info(self) -> dict[str, np.ndarray]:
         """The monitor's view now, and with ``truth_info`` the platoon's true state and the ground truth
         (:mod:`timegap_env.envs.info`)."""
-        return of_env(self.task.step_info(self.truth_info), 0, copy=False)  # fresh arrays: views of them suffice
+        info = self.task.monitor_info(env=0)
+        if self.truth_info:
+            info.update(of_env(self.task.truth_info(), 0, copy=False))  # fresh arrays: views of them suffice
+        return info
 
     def render(self) -> np.ndarray | None:
         if self.render_mode is None:

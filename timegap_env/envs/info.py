@@ -38,8 +38,10 @@ groups back as dicts, with the kinds as names.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 
+import numba
 import numpy as np
 
 from timegap_env.envs.reward import OBJECTIVES, REWARD_TERMS
@@ -49,6 +51,26 @@ from timegap_env.sim.degradation import KINDS
 KIND_NAMES = np.array(KINDS, dtype=object)  # truth_kind -> the degradation's name ("none": not hit)
 REWARD_PREFIX, TRUTH_PREFIX, EPISODE_PREFIX = "reward_", "truth_", "episode_"
 VECTOR_REWARD, COST, OBJECTIVES_KEY = "vector_reward", "cost", "objectives"  # info_keys "v1"'s keys beside the terms
+
+
+_REWARD_KEYS = tuple(REWARD_PREFIX + name for name in REWARD_TERMS)
+_TERM_INDEXES = tuple((i, Ellipsis) for i in range(len(REWARD_TERMS)))  # each term's 0-d view of an env's terms
+VIEW_FLOATS = ("estimate", "estimate_std", "setting", "lcl", "ucl")  # the monitor's view, float rows of monitor_view
+VIEW_FLAGS = ("alarm", "v2v")  # and its bool rows
+
+
+@numba.njit(cache=True, error_model="numpy")
+def monitor_view(mean_tau, var_tau, setting, center, half_width, side, v2v, floats, flags):  # noqa: ANN001, ANN201, PLR0913
+    """The monitor's view of every follower into ``floats`` (len(VIEW_FLOATS), n_envs, n_followers) and ``flags``
+    (len(VIEW_FLAGS), ...) bool, their rows in those names' order: the posterior mean ``mean_tau`` [s] and the
+    square root of ``var_tau`` [s^2], the ``setting`` [s], the chart's limits, ``center`` [s] -/+ ``half_width``
+    [s]; whether the chart's ``side`` is not 0, the ``v2v`` flag. One compiled pass, so that an info is two copies."""
+    for e in range(mean_tau.shape[0]):
+        for f in range(mean_tau.shape[1]):
+            floats[0, e, f], floats[1, e, f] = mean_tau[e, f], math.sqrt(var_tau[e, f])
+            floats[2, e, f] = setting[e, f]
+            floats[3, e, f], floats[4, e, f] = center[e, f] - half_width, center[e, f] + half_width
+            flags[0, e, f], flags[1, e, f] = side[e, f] != 0, v2v[e, f]
 
 
 def info_flags(step_diagnostics: object, truth_info: object) -> tuple[bool, bool]:
@@ -85,7 +107,7 @@ def scores_of_env(term_rows: np.ndarray, objectives: tuple[np.ndarray, np.ndarra
     """:func:`step_scores` of env ``env`` alone, as :func:`of_env` would give them, with fewer allocations: one copy of
     the env's terms, each ``reward_<term>`` a 0-d view of it."""
     terms = term_rows[:, env].copy()
-    scores = {REWARD_PREFIX + name: terms[i, ...] for i, name in enumerate(REWARD_TERMS)}
+    scores = dict(zip(_REWARD_KEYS, map(terms.__getitem__, _TERM_INDEXES)))
     if objectives is not None:
         scores[VECTOR_REWARD], scores[OBJECTIVES_KEY] = terms.copy(), objectives[0][:, env].copy()
         scores[COST] = np.array(objectives[1][env])

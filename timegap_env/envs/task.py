@@ -27,7 +27,7 @@ from timegap_env.compiled import restack
 from timegap_env.config import TIME_GAP_MIN_SPEED, EnvConfig
 from timegap_env.envs.action import SettingLadder
 from timegap_env.envs.episodes import Episodes, check_reset_options
-from timegap_env.envs.info import TRUTH_PREFIX, prefixed
+from timegap_env.envs.info import TRUTH_PREFIX, VIEW_FLAGS, VIEW_FLOATS, monitor_view, prefixed
 from timegap_env.envs.observation import FEATURES, FollowerState, ObservationScales, observe_into
 from timegap_env.envs.rendering import DEFAULT_TIME_WINDOW, RenderFrame
 from timegap_env.envs.reward import (
@@ -140,11 +140,14 @@ class PlatoonTask:
                                   terminated=np.zeros(n_envs, dtype=bool), truncated=np.zeros(n_envs, dtype=bool))
         self._changed = np.zeros((n_envs, self.n_followers), dtype=bool)
         self._observation = np.zeros((n_envs, self.n_followers, len(FEATURES)), dtype=np.float32)
+        self._view = (np.empty((len(VIEW_FLOATS), n_envs, self.n_followers)),  # what monitor_info copies
+                      np.empty((len(VIEW_FLAGS), n_envs, self.n_followers), dtype=bool))
         self._rules = tuple(StepRules.from_config(config, self.ladder.rule, self.loop.chart.rule,
                                                   tuple(self._reward_constants), np.array(self._weights),
                                                   tuple(self._scales)))
         self._scratch = tuple(StepScratch.empty(self.ticks_per_decision, self.n_followers))
-        self._state: tuple | None = None  # the fused step's StepState, built at each reset
+        self._state: tuple | None = None  # the fused step's StepState, built at the first reset (the objects' arrays
+        #                                    are changed in place, never replaced)
 
     def __getstate__(self) -> dict[str, Any]:
         """For copy and pickle: everything but the fused step's state, whose stacks of the task's arrays a copy
@@ -193,7 +196,8 @@ class PlatoonTask:
         self._readouts.jerk_squared[mask] = 0.0
         self.totals.restart(mask)
         observe_into(self._follower_state(), self._scales, self._observation, mask)
-        self._state = self._step_state()
+        if self._state is None:
+            self._state = self._step_state()
 
     def _v2v_during(self, ticks: np.ndarray) -> np.ndarray:
         """Each follower's V2V flag during tick ``ticks`` (..., n_envs) since reset: down while a degradation takes it
@@ -286,20 +290,18 @@ class PlatoonTask:
             speed=platoon.v[:, 1:], v2v=platoon.v2v,
         )
 
-    def monitor_info(self) -> dict[str, np.ndarray]:
-        """The monitor's view now, what every info holds: fresh arrays, each (n_envs, n_followers)."""
+    def monitor_info(self, env: int | None = None) -> dict[str, np.ndarray]:
+        """The monitor's view now, what every info holds: fresh arrays, each (n_envs, n_followers), or with ``env``
+        that env's alone (n_followers,). ``estimate``: the posterior mean of tau [s]; ``estimate_std`` [s];
+        ``setting``: tau* asked for [s]; ``lcl``, ``ucl``: the chart's limits [s]; ``alarm``; ``v2v``: the flag the
+        follower sees (CACC when True); ``skipped_measurements`` since reset [-] (:func:`~timegap_env.envs.info.monitor_view`)."""
         monitor, chart, platoon = self.loop.monitor, self.loop.chart, self.loop.platoon
-        moments, center, half_width = monitor.moments, chart.center, self._scales.half_width
-        return {
-            "estimate": moments.mean_tau.copy(),  # posterior mean of tau [s]
-            "estimate_std": np.sqrt(moments.var_tau),  # [s]
-            "setting": platoon.setting.copy(),  # tau* asked for [s]
-            "lcl": center - half_width,  # [s]
-            "ucl": center + half_width,  # [s]
-            "alarm": chart.side != 0,
-            "v2v": platoon.v2v.copy(),  # the V2V flag the follower sees (CACC when True)
-            "skipped_measurements": monitor.skipped.copy(),  # since reset [-]
-        }
+        moments, (floats, flags) = monitor.moments, self._view
+        monitor_view(moments.mean_tau, moments.var_tau, platoon.setting, chart.center, self._scales.half_width,
+                     chart.side, platoon.v2v, floats, flags)
+        rows = slice(None) if env is None else env
+        return {**dict(zip(VIEW_FLOATS, floats[:, rows].copy())), **dict(zip(VIEW_FLAGS, flags[:, rows].copy())),
+                "skipped_measurements": monitor.skipped[rows].copy()}
 
     def truth_info(self) -> dict[str, np.ndarray]:
         """What only the simulator knows, fresh arrays, each (n_envs, n_followers) unless noted: the platoon's true
