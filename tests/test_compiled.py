@@ -108,6 +108,18 @@ def test_a_copied_vector_env_steps_like_the_original(how):
             np.testing.assert_array_equal(other[1], results[0][1])
 
 
+def test_the_fused_step_follows_dynamics_set_after_the_first_reset():
+    """The fused state is built once; set_dynamics changes the arrays it holds, as the staged path reads them."""
+    envs = [TimeGapMonitorVectorEnv(2, autoreset_mode="same_step") for _ in range(2)]
+    envs[1].task.fused = False
+    for env in envs:
+        env.reset(seed=1)
+        env.task.loop.platoon.set_dynamics(np.array([[0.9], [0.3]]), 0.7)
+    for _ in range(5):
+        (fused, *_), (staged, *_) = (env.step(np.array([2, 6])) for env in envs)
+        np.testing.assert_array_equal(fused, staged)
+
+
 def test_the_fused_step_is_handed_about_fifty_arrays():
     env = TimeGapMonitorVectorEnv(2)
     env.reset(seed=0)

@@ -149,8 +149,9 @@ def _reachable(root: Any) -> Iterable[Any]:
 
 
 def _ours(item: Any) -> bool:
-    """``item`` is an object of one of the package's classes, with attributes."""
-    return type(item).__module__.startswith(_PACKAGE) and hasattr(item, "__dict__")
+    """``item`` is an object of one of the package's classes or of a subclass of one, with attributes."""
+    return hasattr(item, "__dict__") and any(
+        cls.__module__.split(".")[0] == _PACKAGE for cls in type(item).__mro__[:-1])
 
 
 def _replace_rows(item: Any, rows: dict[int, np.ndarray], done: dict[int, Any]) -> Any:

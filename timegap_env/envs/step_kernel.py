@@ -227,7 +227,7 @@ unstack_sensor_faults, unstack_window = SENSOR_FAULT_STACKS.unstack, WINDOW_STAC
 unstack_moments, unstack_chart_memory = MOMENT_STACKS.unstack, CHART_MEMORY_STACKS.unstack
 unstack_readouts, unstack_totals, unstack_terms = READOUT_STACKS.unstack, TOTAL_STACKS.unstack, TERM_STACKS.unstack
 follow_sources(tuple(f"timegap_env.{module}" for module in (  # every kernel the step runs, and the step
-    "compiled", "envs.action", "sim.counter_noise", "sim.platoon", "monitoring.sensors", "monitoring.monitor",
+    "compiled", "config", "envs.action", "sim.counter_noise", "sim.platoon", "monitoring.sensors", "monitoring.monitor",
     "monitoring.posterior", "monitoring.charts", "envs.reward", "envs.totals", "envs.observation",
     "envs.step_kernel")))
 

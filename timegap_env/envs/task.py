@@ -291,8 +291,8 @@ class PlatoonTask:
         )
 
     def monitor_info(self, env: int | None = None) -> dict[str, np.ndarray]:
-        """The monitor's view now, what every info holds: fresh arrays, each (n_envs, n_followers), or with ``env``
-        that env's alone (n_followers,). ``estimate``: the posterior mean of tau [s]; ``estimate_std`` [s];
+        """The monitor's view now, what every info holds: arrays nothing else holds (rows of fresh copies), each
+        (n_envs, n_followers), or with ``env`` that env's alone (n_followers,). ``estimate``: the posterior mean of tau [s]; ``estimate_std`` [s];
         ``setting``: tau* asked for [s]; ``lcl``, ``ucl``: the chart's limits [s]; ``alarm``; ``v2v``: the flag the
         follower sees (CACC when True); ``skipped_measurements`` since reset [-] (:func:`~timegap_env.envs.info.monitor_view`)."""
         monitor, chart, platoon = self.loop.monitor, self.loop.chart, self.loop.platoon
@@ -324,8 +324,8 @@ class PlatoonTask:
         return None if self.config.info_keys == "v0" else (self._result.objective_rows, self._result.cost)
 
     def step_info(self, truth: bool) -> dict[str, np.ndarray]:
-        """Every env's info now, flat (:mod:`~timegap_env.envs.info`), fresh arrays with a leading n_envs axis:
-        :meth:`monitor_info`, and with ``truth`` :meth:`truth_info` too."""
+        """Every env's info now, flat (:mod:`~timegap_env.envs.info`), arrays nothing else holds, with a leading
+        n_envs axis: :meth:`monitor_info`, and with ``truth`` :meth:`truth_info` too."""
         return {**self.monitor_info(), **self.truth_info()} if truth else self.monitor_info()
 
     def ground_truth(self) -> dict[str, np.ndarray]:

@@ -274,6 +274,8 @@ class Platoon:
             ticks=np.zeros(self.n_envs, dtype=np.int64),
         )
         self._controller = Controller.from_config(config)
+        self._zoh = ZOHCoefficients._make((*np.zeros((len(ZOH_STACKS.groups[0]), *followers)), float(config.dt)))
+        self._zoh_args = tuple(self._zoh)
         self.set_dynamics(config.per_follower("actuation_lag"), config.per_follower("actuation_gain"))
         self._faults = FollowerFaults.none(config, self._zoh, self.n_envs)
         self._kernel_args = (tuple(self._state), tuple(self._controller))  # the same arrays, as the kernel takes them
@@ -320,7 +322,8 @@ class Platoon:
 
     # ----------------------------------------------------------------- setup
     def set_dynamics(self, lag: np.ndarray, gain: np.ndarray) -> None:
-        """Set GLVD lag T [s] and gain K [-], each broadcastable to (n_envs, n_followers)."""
+        """Set GLVD lag T [s] and gain K [-], each broadcastable to (n_envs, n_followers): the nominal transition's
+        arrays change in place."""
         follower_shape = (self.n_envs, self.n_followers)
         for name, values in (("actuation_lag", lag), ("actuation_gain", gain)):
             values = np.asarray(values, dtype=float)
@@ -330,10 +333,11 @@ class Platoon:
                 raise ValueError(f"{name} has shape {values.shape}: must broadcast to {follower_shape}") from None
             if not np.all(np.isfinite(values)) or np.any(values <= 0):
                 raise ValueError(f"{name} = {values}: every value must be finite and > 0")
-        self._zoh = ZOHCoefficients.for_glvd(
+        zoh = ZOHCoefficients.for_glvd(
             np.broadcast_to(lag, follower_shape), np.broadcast_to(gain, follower_shape), self.config.dt
         )
-        self._zoh_args = tuple(self._zoh)
+        for target, values in zip(self._zoh[:-1], zoh[:-1]):
+            target[...] = values
 
     def reset(
         self,
