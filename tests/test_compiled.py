@@ -32,11 +32,13 @@ class Outer(NamedTuple):
 
 INNER = Stacked(Inner, (("p", "q"),))
 OUTER = Stacked(Outer, (("a", "b"),), nested={"inner": INNER})
-unstack_outer = OUTER.unstack  # a kernel calls it by a global name, as numba types no other object's attribute
+unstack_outer, prefetch_outer = OUTER.unstack, OUTER.prefetch  # a kernel calls them by global names (numba types no
+# other object's attributes)
 
 
 @numba.njit
 def _write_through(form):  # noqa: ANN001, ANN202
+    prefetch_outer(form, 1)  # a hint for env 1's rows, the nested layout's and past a scalar field: changes nothing
     a, flags, inner, b, count = unstack_outer(form)
     a[0, 1], b[1, 0], inner[1][0] = 1.5, 2.5, 3.5
     count[0] += 1

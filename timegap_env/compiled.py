@@ -15,7 +15,8 @@ while inlining these three added no measurable compile time. ``_nrt`` is a priva
 
 A kernel called from Python pays for each array it is handed, at every call (numba unpacks them one by one, about
 25 ns each): :class:`Stacked` hands the fused step a structure's arrays of one dtype and shape as the rows of one
-stack, which the structure's owner allocates as such.
+stack, which the structure's owner allocates as such. :func:`prefetch_env` and :func:`prefetch_rows` ask the CPU
+for an env's rows ahead of their use (each layout's ``prefetch`` for all of a structure's).
 """
 
 from __future__ import annotations
@@ -28,7 +29,10 @@ from typing import Any
 
 import numba
 import numpy as np
+from llvmlite import ir  # numba's code generator, a dependency of numba: what its extensions build code with
+from numba.core import cgutils, types
 from numba.core.dispatcher import Dispatcher
+from numba.extending import intrinsic
 
 NO_ALLOCATION: dict[str, Any] = {"_nrt": False}  # numba's reference counting off: an allocation fails to compile
 STAGE_KERNEL: dict[str, Any] = {"cache": True, "error_model": "numpy", **NO_ALLOCATION, "no_cpython_wrapper": True,
@@ -59,23 +63,32 @@ class Stacked:
                              f"distinct fields of {fields}")
         where = {name: (g, row) for g, group in enumerate(groups) for row, name in enumerate(group)}
         self._places: list[tuple[str, Any]] = []  # what each place of the form holds: a group, a nested or a field
-        rows = []  # each field's expression in unstack
+        rows, hints = [], []  # each field's expression in unstack, each place's hint in prefetch
         for name in fields:
             if name in where:
                 group, row = where[name]
                 if ("group", group) not in self._places:
                     self._places.append(("group", group))
+                    hints.append(f"prefetch_rows(form[{len(self._places) - 1}], e)")
                 rows.append(f"form[{self._places.index(('group', group))}][{row}]")
             elif name in self.nested:
                 self._places.append(("nested", name))
                 rows.append(f"unstack_{name}(form[{len(self._places) - 1}])")
+                hints.append(f"prefetch_{name}(form[{len(self._places) - 1}], e)")
             else:
                 self._places.append(("field", name))
                 rows.append(f"form[{len(self._places) - 1}]")
-        namespace = {f"unstack_{name}": inner.unstack for name, inner in self.nested.items()}
-        source = f"def unstack(form):\n    return ({', '.join(rows)},)\n"
+                hints.append(f"prefetch_env(form[{len(self._places) - 1}], e)")
+        namespace: dict[str, Any] = {"prefetch_rows": prefetch_rows, "prefetch_env": prefetch_env}
+        for name, inner in self.nested.items():
+            namespace[f"unstack_{name}"], namespace[f"prefetch_{name}"] = inner.unstack, inner.prefetch
+        source = (f"def unstack(form):\n    return ({', '.join(rows)},)\n\n\ndef prefetch(form, e):\n"
+                  + "".join(f"    {hint}\n" for hint in hints))
         exec(compile(source, f"<{cls.__name__}'s Stacked.unstack>", "exec"), namespace)  # noqa: S102
         self.unstack: Callable[[tuple], tuple] = numba.njit(inline="always")(namespace["unstack"])
+        # hints env e's first cache line of every array of the form in (the envs' axis: a stack's second, a field's
+        # first): the fused step asks for the next env's while it works on one
+        self.prefetch: Callable[[tuple, int], None] = numba.njit(inline="always")(namespace["prefetch"])
 
     def form(self, value: tuple) -> tuple:
         """``value`` (a ``cls``) as its kernel takes it; ``ValueError`` if a group's fields are not the rows of one
@@ -102,6 +115,44 @@ class Stacked:
             raise ValueError(f"{self.cls.__name__} fields {group}: must be the rows, in this order, of one C-contiguous "
                              "stack (allocate them as np.zeros((len(group), *shape)))")
         return stack
+
+
+@intrinsic
+def prefetch_env(typingctx, value, e):  # noqa: ANN001, ANN201
+    """Hint env ``e``'s first cache line of ``value`` in, to be read and written soon: ``value[e, 0, ...]`` of an
+    array whose first axis is the envs' (LLVM's prefetch, which never changes a result nor faults, whatever the
+    address); of anything else, nothing. Compiled code only."""
+    return types.none(value, e), _prefetch_codegen(axis=0)
+
+
+@intrinsic
+def prefetch_rows(typingctx, stack, e):  # noqa: ANN001, ANN201
+    """Hint env ``e``'s first cache line of every row of ``stack`` (rows, n_envs, ...) in (see :func:`prefetch_env`)."""
+    return types.none(stack, e), _prefetch_codegen(axis=1)
+
+
+def _prefetch_codegen(axis: int) -> Callable:
+    """The code of a hint at index ``e`` on ``axis`` (0, or 1 with every index of axis 0), the other indices 0."""
+
+    def codegen(context, builder, signature, args):  # noqa: ANN001, ANN202
+        array_type, index_type = signature.args
+        if not isinstance(array_type, types.Array) or array_type.ndim <= axis:
+            return context.get_dummy_value()
+        array = context.make_array(array_type)(context, builder, args[0])
+        shape, strides = cgutils.unpack_tuple(builder, array.shape), cgutils.unpack_tuple(builder, array.strides)
+        zero, env = context.get_constant(types.intp, 0), context.cast(builder, args[1], index_type, types.intp)
+        byte_pointer, flag = ir.IntType(8).as_pointer(), ir.IntType(32)
+        hint = cgutils.get_or_insert_function(
+            builder.module, ir.FunctionType(ir.VoidType(), [byte_pointer, flag, flag, flag]), "llvm.prefetch.p0i8")
+        rows = shape[0] if axis else context.get_constant(types.intp, 1)
+        with cgutils.for_range(builder, rows) as loop:
+            indices = ([loop.index, env] if axis else [env]) + [zero] * (array_type.ndim - axis - 1)
+            pointer = cgutils.get_item_pointer2(context, builder, array.data, shape, strides, array_type.layout,
+                                                indices, wraparound=False, boundscheck=False)
+            builder.call(hint, [builder.bitcast(pointer, byte_pointer), flag(1), flag(3), flag(1)])  # write, keep, data
+        return context.get_dummy_value()
+
+    return codegen
 
 
 STACKED: dict[type, Stacked] = {}  # each Stacked structure's layout, by its class
@@ -210,4 +261,5 @@ def _kernels(modules: tuple[str, ...]) -> Iterable[Dispatcher]:
                 yield value
 
 
-__all__ = ["INLINED_STAGE_KERNEL", "NO_ALLOCATION", "STACKED", "STAGE_KERNEL", "Stacked", "follow_sources", "restack"]
+__all__ = ["INLINED_STAGE_KERNEL", "NO_ALLOCATION", "STACKED", "STAGE_KERNEL", "Stacked", "follow_sources", "prefetch_env",
+           "prefetch_rows", "restack"]

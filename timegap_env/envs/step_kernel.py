@@ -12,8 +12,8 @@ path calls (``ladder_env``, ``advance_env``, ``measure_env``, ``update_env``, ``
 is the glue the staged path does in NumPy (which followers changed setting and how long their alarms are held off,
 the leader's and V2V's ticks), and the tests check the two paths against each other bit for bit.
 
-Working env by env keeps each env's state in cache while all its stages run, and re-centres only the
-followers whose setting changed. The kernel takes two structures, :class:`StepState` (every array it
+Working env by env keeps each env's state in cache while all its stages run (the step asks for the next env's
+rows ahead: :func:`_prefetch`), and re-centres only the followers whose setting changed. The kernel takes two structures, :class:`StepState` (every array it
 reads or writes, the objects' own) and :class:`StepRules` (the config's constants), as plain tuples
 (see :mod:`timegap_env.sim.platoon`). numba unpacks every array handed to it from Python at every call, so the
 state's structures come in their :class:`~timegap_env.compiled.Stacked` forms (a few stacks each, about 50 arrays
@@ -28,7 +28,7 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
-from timegap_env.compiled import NO_ALLOCATION, STAGE_KERNEL, follow_sources
+from timegap_env.compiled import NO_ALLOCATION, STAGE_KERNEL, follow_sources, prefetch_env
 from timegap_env.config import EnvConfig
 from timegap_env.envs.action import LadderRule, ladder_env
 from timegap_env.envs.observation import FollowerState, encode_env
@@ -165,6 +165,7 @@ def fused_step(state, rules, action):  # noqa: ANN001, ANN201
     faults_start, faults_end = faults[0], faults[1]
     last = n_ticks - 1
     for e in range(n_envs):
+        _prefetch(state, e + 1)  # the next env's rows come in while this env's stages run
         _change_settings(platoon_args, state.controller, memory, chart_args, rules, action, state.changed,
                          scratch.targets, e)
         ticks_before = platoon.ticks[e]
@@ -199,6 +200,43 @@ def fused_step(state, rules, action):  # noqa: ANN001, ANN201
     chart_tick[0] += n_ticks
 
 
+@numba.njit(inline="always")
+def _prefetch(state, e):  # noqa: ANN001, ANN202
+    """Hint env ``e``'s first cache line of every array of ``state`` (a :class:`StepState`) in
+    (:func:`~timegap_env.compiled.prefetch_env`; past the last env, a hint that does nothing). From a few thousand
+    envs on a step's arrays no longer stay in cache, and each env's rows lie in ~50 of them, more streams than the
+    CPU's own prefetcher follows: asked for one env ahead, they arrive while that env's stages run (measured in
+    turns against no hints: 8-12 % faster from 4,096 envs on, the same within noise at 16-1,024)."""
+    prefetch_platoon(state.platoon, e)
+    prefetch_zoh(state.zoh, e)
+    prefetch_faults(state.faults, e)
+    prefetch_env(state.v2v_down, e)
+    prefetch_env(state.episode_ticks, e)
+    prefetch_env(state.noise[0], e)
+    prefetch_env(state.noise[1], e)
+    prefetch_sensor_faults(state.sensor_faults, e)
+    window_form, slot, _, _, moment_form = state.monitor
+    prefetch_window(window_form, e)
+    prefetch_env(slot, e)
+    prefetch_moments(moment_form, e)
+    chart_form, center, statistic, _ = state.chart
+    prefetch_chart_memory(chart_form, e)
+    prefetch_env(center, e)
+    prefetch_env(statistic, e)
+    prefetch_readouts(state.readouts, e)
+    prefetch_env(state.previous_accel, e)
+    prefetch_env(state.envelope, e)
+    prefetch_totals(state.totals, e)
+    prefetch_env(state.changed, e)
+    prefetch_terms(state.terms, e)
+    prefetch_env(state.reward, e)
+    prefetch_terms(state.objectives, e)
+    prefetch_env(state.cost, e)
+    prefetch_env(state.terminated, e)
+    prefetch_env(state.truncated, e)
+    prefetch_env(state.observation, e)
+
+
 @numba.njit(**STAGE_KERNEL)
 def _change_settings(platoon, controller, memory, chart, rules, action, changed, targets, e):  # noqa: ANN001, ANN202, PLR0913
     """Env ``e``'s new settings from its action (:func:`~timegap_env.envs.action.ladder_env`, into ``targets``
@@ -226,6 +264,10 @@ unstack_platoon, unstack_zoh, unstack_faults = PLATOON_STACKS.unstack, ZOH_STACK
 unstack_sensor_faults, unstack_window = SENSOR_FAULT_STACKS.unstack, WINDOW_STACKS.unstack
 unstack_moments, unstack_chart_memory = MOMENT_STACKS.unstack, CHART_MEMORY_STACKS.unstack
 unstack_readouts, unstack_totals, unstack_terms = READOUT_STACKS.unstack, TOTAL_STACKS.unstack, TERM_STACKS.unstack
+prefetch_platoon, prefetch_zoh, prefetch_faults = PLATOON_STACKS.prefetch, ZOH_STACKS.prefetch, FAULT_STACKS.prefetch
+prefetch_sensor_faults, prefetch_window = SENSOR_FAULT_STACKS.prefetch, WINDOW_STACKS.prefetch
+prefetch_moments, prefetch_chart_memory = MOMENT_STACKS.prefetch, CHART_MEMORY_STACKS.prefetch
+prefetch_readouts, prefetch_totals, prefetch_terms = READOUT_STACKS.prefetch, TOTAL_STACKS.prefetch, TERM_STACKS.prefetch
 follow_sources(tuple(f"timegap_env.{module}" for module in (  # every kernel the step runs, and the step
     "compiled", "config", "envs.action", "sim.counter_noise", "sim.platoon", "monitoring.sensors", "monitoring.monitor",
     "monitoring.posterior", "monitoring.charts", "envs.reward", "envs.totals", "envs.observation",
