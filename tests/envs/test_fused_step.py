@@ -263,4 +263,6 @@ def test_actions_of_any_memory_layout_share_one_compiled_step() -> None:
     compiled = len(fused_step.signatures)
     env.step(np.asfortranarray(np.ones((4, 5), dtype=np.int32)))
     env.step(np.ones((8, 5), dtype=np.int64)[::2])
+    env.step(np.broadcast_to(np.int64(2), (4, 5)))  # read-only: the task calls one compiled entry for one type
     assert len(fused_step.signatures) == compiled
+    assert env.task.ladder.check(np.broadcast_to(np.int64(2), (4, 5))).flags.writeable

@@ -1,9 +1,11 @@
 """Where a single env's step goes: the fused kernel's call, the part of it numba spends unpacking its arguments,
 and its arithmetic per env-step at 256 envs, in microseconds, all measured in this process (``make bench``).
 
-The unpacking is timed with a kernel that takes the same arguments and only reads one value: what numba does to
-turn the state's arrays (about 50, its structures in their stacks: ``timegap_env.compiled.Stacked``) and the rules'
-constants into native values at every call, whatever the kernel then computes.
+Both kernels are called as the task calls the fused step, through their compiled entry for the arguments' types
+(``timegap_env.compiled.compiled_entry``, without numba's dispatcher). The unpacking is timed with a kernel that
+takes the same arguments and only reads one value: what numba does to turn the state's arrays (about 50, its
+structures in their stacks: ``timegap_env.compiled.Stacked``) and the rules' constants into native values at every
+call, whatever the kernel then computes.
 """
 
 from __future__ import annotations
@@ -15,7 +17,7 @@ from collections.abc import Callable
 import numba
 import numpy as np
 
-from timegap_env.compiled import NO_ALLOCATION
+from timegap_env.compiled import NO_ALLOCATION, compiled_entry
 from timegap_env.envs.step_kernel import StepState, fused_step
 from timegap_env.envs.vector_env import TimeGapMonitorVectorEnv
 
@@ -59,7 +61,9 @@ def measure(calls: int) -> SingleEnvSplit:
         env.reset(seed=0)
         task = env.task
         action = task.ladder.check(np.full(task.ladder.shape, 5))
-        times[n_envs] = microseconds(lambda: fused_step(task._state, task._rules, action), max(calls // n_envs, 2))
+        step = compiled_entry(fused_step, task._state, task._rules, action)
+        times[n_envs] = microseconds(lambda: step(task._state, task._rules, action), max(calls // n_envs, 2))
         if n_envs == 1:
-            unpacking = microseconds(lambda: _unpack_only(task._state, task._rules, action), calls)
+            unpack = compiled_entry(_unpack_only, task._state, task._rules, action)
+            unpacking = microseconds(lambda: unpack(task._state, task._rules, action), calls)
     return SingleEnvSplit(call=times[1], unpacking=unpacking, arithmetic=times[ARITHMETIC_ENVS] / ARITHMETIC_ENVS)

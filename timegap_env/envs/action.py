@@ -62,7 +62,8 @@ class SettingLadder:
             raise ValueError(f"action = {shown(action)}: expected integer actions of shape {self.shape}")
         if ((action < 0) | (action >= self.n_actions)).any():
             raise ValueError(f"action = {shown(action)}: every entry must be in [0, {self.n_actions - 1}]")
-        return np.ascontiguousarray(action, dtype=np.int64).reshape(self.shape[0], -1)  # one layout: one compile
+        checked = np.ascontiguousarray(action, dtype=np.int64).reshape(self.shape[0], -1)  # one layout: one compile
+        return checked if checked.flags.writeable and checked.flags.aligned else checked.copy()  # the fused step's type
 
     def settings(self, action: np.ndarray, current: np.ndarray) -> np.ndarray:
         """Settings [s] (n_envs, n_followers) for an action: ladder indices, (n_envs,) platoon or (n_envs, N) per

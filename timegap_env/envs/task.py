@@ -23,7 +23,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from timegap_env.compiled import restack
+from timegap_env.compiled import compiled_entry, restack
 from timegap_env.config import TIME_GAP_MIN_SPEED, EnvConfig
 from timegap_env.envs.action import SettingLadder
 from timegap_env.envs.episodes import Episodes, check_reset_options
@@ -148,11 +148,14 @@ class PlatoonTask:
         self._scratch = tuple(StepScratch.empty(self.ticks_per_decision, self.n_followers))
         self._state: tuple | None = None  # the fused step's StepState, built at the first reset (the objects' arrays
         #                                    are changed in place, never replaced)
+        self._fused_step: Any = None  # fused_step compiled for the types of _state, _rules and a checked action, at
+        #                                the first fused step
 
     def __getstate__(self) -> dict[str, Any]:
         """For copy and pickle: everything but the fused step's state, whose stacks of the task's arrays a copy
-        would detach from them; :meth:`__setstate__` builds it again from the copy's arrays."""
-        return {**self.__dict__, "_state": None, "_state_built": self._state is not None}
+        would detach from them, and its compiled entry; :meth:`__setstate__` builds them again from the copy's
+        arrays."""
+        return {**self.__dict__, "_state": None, "_fused_step": None, "_state_built": self._state is not None}
 
     def __setstate__(self, state: dict[str, Any]) -> None:
         built = state.pop("_state_built")
@@ -160,6 +163,7 @@ class PlatoonTask:
         restack(self)  # a copy holds each row of the objects' stacks apart (see timegap_env.compiled.Stacked)
         if built:
             self._state = self._step_state()
+
 
     @staticmethod
     def bytes_per_env(config: EnvConfig) -> int:
@@ -238,7 +242,9 @@ class PlatoonTask:
         if self._state is None:
             raise RuntimeError("PlatoonTask.step() before reset(): reset every env first")
         if self.fused and self.trace is None:
-            fused_step(self._state, self._rules, action)
+            if self._fused_step is None:  # compiled for these types (SettingLadder.check gives every action one type)
+                self._fused_step = compiled_entry(fused_step, self._state, self._rules, action)
+            self._fused_step(self._state, self._rules, action)
             self.loop.monitor.posterior_written()
         else:
             self._staged_step(action)
