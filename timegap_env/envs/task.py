@@ -150,12 +150,14 @@ class PlatoonTask:
         #                                    are changed in place, never replaced)
         self._fused_step: Any = None  # fused_step compiled for the types of _state, _rules and a checked action, at
         #                                the first fused step
+        self._monitor_view: Any = None  # monitor_view compiled for the types of the arrays monitor_info hands it
 
     def __getstate__(self) -> dict[str, Any]:
         """For copy and pickle: everything but the fused step's state, whose stacks of the task's arrays a copy
-        would detach from them, and its compiled entry; :meth:`__setstate__` builds them again from the copy's
-        arrays."""
-        return {**self.__dict__, "_state": None, "_fused_step": None, "_state_built": self._state is not None}
+        would detach from them, and the compiled entries; :meth:`__setstate__` builds the state again from the copy's
+        arrays, the next calls the entries."""
+        return {**self.__dict__, "_state": None, "_fused_step": None, "_monitor_view": None,
+                "_state_built": self._state is not None}
 
     def __setstate__(self, state: dict[str, Any]) -> None:
         built = state.pop("_state_built")
@@ -303,8 +305,11 @@ class PlatoonTask:
         follower sees (CACC when True); ``skipped_measurements`` since reset [-] (:func:`~timegap_env.envs.info.monitor_view`)."""
         monitor, chart, platoon = self.loop.monitor, self.loop.chart, self.loop.platoon
         moments, (floats, flags) = monitor.moments, self._view
-        monitor_view(moments.mean_tau, moments.var_tau, platoon.setting, chart.center, self._scales.half_width,
+        arguments = (moments.mean_tau, moments.var_tau, platoon.setting, chart.center, self._scales.half_width,
                      chart.side, platoon.v2v, floats, flags)
+        if self._monitor_view is None:  # the same arrays at every call
+            self._monitor_view = compiled_entry(monitor_view, *arguments)
+        self._monitor_view(*arguments)
         rows = slice(None) if env is None else env
         return {**dict(zip(VIEW_FLOATS, floats[:, rows].copy())), **dict(zip(VIEW_FLAGS, flags[:, rows].copy())),
                 "skipped_measurements": monitor.skipped[rows].copy()}
