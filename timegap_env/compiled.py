@@ -13,8 +13,8 @@ cost more than the work of a short block (compiled apart, ``make bench``'s batch
 while inlining these three added no measurable compile time. ``_nrt`` is a private numba option (as of numba
 0.60-0.68); the tests compile every kernel.
 
-A kernel called from Python pays for each array it is handed, at every call (numba unpacks them one by one, about
-25 ns each): :class:`Stacked` hands the fused step a structure's arrays of one dtype and shape as the rows of one
+A kernel called from Python pays for each array it is handed, at every call (numba unpacks them one by one):
+:class:`Stacked` hands the fused step a structure's arrays of one dtype and shape as the rows of one
 stack, which the structure's owner allocates as such. :func:`prefetch_env` and :func:`prefetch_rows` ask the CPU
 for an env's rows ahead of their use (each layout's ``prefetch`` for all of a structure's).
 """
@@ -112,8 +112,8 @@ class Stacked:
                 row.dtype == first.dtype and row.shape == first.shape and row.flags.writeable
                 and row.__array_interface__["data"][0] == first.__array_interface__["data"][0] + i * first.nbytes
                 for i, row in enumerate(rows))):
-            raise ValueError(f"{self.cls.__name__} fields {group}: must be the rows, in this order, of one C-contiguous "
-                             "stack (allocate them as np.zeros((len(group), *shape)))")
+            raise ValueError(f"{self.cls.__name__} fields {group}: must be the rows, in this order, of one "
+                             "C-contiguous stack (allocate them as np.zeros((len(group), *shape)))")
         return stack
 
 
@@ -158,7 +158,8 @@ def _prefetch_codegen(axis: int) -> Callable:
 def compiled_entry(kernel: Dispatcher, *args: Any) -> Callable:
     """``kernel``'s compiled function for the types of ``args`` (compiled, or loaded from numba's cache, if need be),
     for a caller whose arguments keep exactly those types from call to call: numba's dispatcher works out the type
-    of every argument again at each call (about 1.8 µs for the fused step's), the compiled function does not. It
+    of every argument again at each call (for the fused step's ~110, more than the unpacking), the compiled function
+    does not. It
     reads whatever it is given as those types, so arguments of other types are the caller's error to prevent."""
     return kernel.compile(tuple(numba.typeof(arg) for arg in args))
 
@@ -224,7 +225,8 @@ def _replace_rows(item: Any, rows: dict[int, np.ndarray], done: dict[int, Any]) 
     if isinstance(item, tuple):
         parts = [_replace_rows(part, rows, done) for part in item]
         if any(new is not old for new, old in zip(parts, item)):
-            done[id(item)] = type(item)._make(parts) if hasattr(item, "_fields") else tuple(parts)  # type: ignore[attr-defined]
+            rebuilt = type(item)._make(parts) if hasattr(item, "_fields") else tuple(parts)  # type: ignore[attr-defined]
+            done[id(item)] = rebuilt
     elif isinstance(item, list):
         item[:] = [_replace_rows(part, rows, done) for part in item]
     elif isinstance(item, dict):
@@ -269,5 +271,5 @@ def _kernels(modules: tuple[str, ...]) -> Iterable[Dispatcher]:
                 yield value
 
 
-__all__ = ["INLINED_STAGE_KERNEL", "NO_ALLOCATION", "STACKED", "STAGE_KERNEL", "Stacked", "compiled_entry", "follow_sources", "prefetch_env",
-           "prefetch_rows", "restack"]
+__all__ = ["INLINED_STAGE_KERNEL", "NO_ALLOCATION", "STACKED", "STAGE_KERNEL", "Stacked", "compiled_entry",
+           "follow_sources", "prefetch_env", "prefetch_rows", "restack"]

@@ -60,7 +60,7 @@ VIEW_FLAGS = ("alarm", "v2v")  # and its bool rows
 
 
 @numba.njit(cache=True, error_model="numpy")
-def monitor_view(mean_tau, var_tau, setting, center, half_width, side, v2v, floats, flags):  # noqa: ANN001, ANN201, PLR0913
+def monitor_view(mean_tau, var_tau, setting, center, half_width, side, v2v, floats, flags):  # noqa: ANN001, ANN201
     """The monitor's view of every follower into ``floats`` (len(VIEW_FLOATS), n_envs, n_followers) and ``flags``
     (len(VIEW_FLAGS), ...) bool, their rows in those names' order: the posterior mean ``mean_tau`` [s] and the
     square root of ``var_tau`` [s^2], the ``setting`` [s], the chart's limits, ``center`` [s] -/+ ``half_width``

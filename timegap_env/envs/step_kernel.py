@@ -13,11 +13,11 @@ is the glue the staged path does in NumPy (which followers changed setting and h
 the leader's and V2V's ticks), and the tests check the two paths against each other bit for bit.
 
 Working env by env keeps each env's state in cache while all its stages run (the step asks for the next env's
-rows ahead: :func:`_prefetch`), and re-centres only the followers whose setting changed. The kernel takes two structures, :class:`StepState` (every array it
-reads or writes, the objects' own) and :class:`StepRules` (the config's constants), as plain tuples
-(see :mod:`timegap_env.sim.platoon`). numba unpacks every array handed to it from Python at every call, so the
-state's structures come in their :class:`~timegap_env.compiled.Stacked` forms (a few stacks each, about 50 arrays
-in all rather than about 120) and are made again inside.
+rows ahead: :func:`_prefetch`), and re-centres only the followers whose setting changed. The kernel takes two
+structures, :class:`StepState` (every array it reads or writes, the objects' own) and :class:`StepRules` (the
+config's constants), as plain tuples (see :mod:`timegap_env.sim.platoon`). numba unpacks every array handed to it
+from Python at every call, so the state's structures come in their :class:`~timegap_env.compiled.Stacked` forms (a
+few stacks each, about 50 arrays in all rather than about 120) and are made again inside.
 """
 
 from __future__ import annotations
@@ -205,8 +205,8 @@ def _prefetch(state, e):  # noqa: ANN001, ANN202
     """Hint env ``e``'s first cache line of every array of ``state`` (a :class:`StepState`) in
     (:func:`~timegap_env.compiled.prefetch_env`; past the last env, a hint that does nothing). From a few thousand
     envs on a step's arrays no longer stay in cache, and each env's rows lie in ~50 of them, more streams than the
-    CPU's own prefetcher follows: asked for one env ahead, they arrive while that env's stages run (measured in
-    turns against no hints: 8-12 % faster from 4,096 envs on, the same within noise at 16-1,024)."""
+    CPU's own prefetcher follows: asked for one env ahead, they arrive while that env's stages run (``make bench``'s
+    vector env at large sizes; the commit that added the hints gives the A/B)."""
     prefetch_platoon(state.platoon, e)
     prefetch_zoh(state.zoh, e)
     prefetch_faults(state.faults, e)
@@ -267,7 +267,8 @@ unstack_readouts, unstack_totals, unstack_terms = READOUT_STACKS.unstack, TOTAL_
 prefetch_platoon, prefetch_zoh, prefetch_faults = PLATOON_STACKS.prefetch, ZOH_STACKS.prefetch, FAULT_STACKS.prefetch
 prefetch_sensor_faults, prefetch_window = SENSOR_FAULT_STACKS.prefetch, WINDOW_STACKS.prefetch
 prefetch_moments, prefetch_chart_memory = MOMENT_STACKS.prefetch, CHART_MEMORY_STACKS.prefetch
-prefetch_readouts, prefetch_totals, prefetch_terms = READOUT_STACKS.prefetch, TOTAL_STACKS.prefetch, TERM_STACKS.prefetch
+prefetch_readouts, prefetch_totals = READOUT_STACKS.prefetch, TOTAL_STACKS.prefetch
+prefetch_terms = TERM_STACKS.prefetch
 follow_sources(tuple(f"timegap_env.{module}" for module in (  # every kernel the step runs, and the step
     "compiled", "config", "envs.action", "sim.counter_noise", "sim.platoon", "monitoring.sensors", "monitoring.monitor",
     "monitoring.posterior", "monitoring.charts", "envs.reward", "envs.totals", "envs.observation",

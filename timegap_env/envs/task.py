@@ -166,7 +166,6 @@ class PlatoonTask:
         if built:
             self._state = self._step_state()
 
-
     @staticmethod
     def bytes_per_env(config: EnvConfig) -> int:
         """Bytes of NumPy state each env of a task with ``config`` holds (what one more env costs) [B]."""
@@ -211,7 +210,8 @@ class PlatoonTask:
         return self.loop.degradation.v2v_up(ticks) & self.config.platoon.v2v
 
     def _step_state(self) -> tuple:
-        """The fused step's :class:`~timegap_env.envs.step_kernel.StepState`: the objects' own arrays, in their kernel forms."""
+        """The fused step's :class:`~timegap_env.envs.step_kernel.StepState`: the objects' own arrays, in their kernel
+        forms."""
         loop, episodes, result = self.loop, self.episodes, self._result
         platoon_state, zoh, controller, faults = loop.platoon.kernel_form
         noise, sensor_faults = loop.sensors.kernel_form
@@ -219,7 +219,8 @@ class PlatoonTask:
             platoon=platoon_state, zoh=zoh, controller=controller, faults=faults, v2v_down=loop.degradation.v2v_down,
             leader_speed=episodes.leader_speed, leader_accel=episodes.leader_accel,
             episode_ticks=episodes.episode_ticks, noise=noise, sensor_faults=sensor_faults,
-            monitor=loop.monitor.kernel_form, chart=loop.chart.kernel_form, readouts=READOUT_STACKS.form(self._readouts),
+            monitor=loop.monitor.kernel_form, chart=loop.chart.kernel_form,
+            readouts=READOUT_STACKS.form(self._readouts),
             previous_accel=self._previous_accel, envelope=self._accel_envelope, totals=TOTAL_STACKS.form(self.totals),
             changed=self._changed, terms=TERM_STACKS.form(RewardTerms(*result.term_rows)), reward=result.reward,
             objectives=TERM_STACKS.form(RewardTerms(*result.objective_rows)), cost=result.cost,
@@ -300,9 +301,10 @@ class PlatoonTask:
 
     def monitor_info(self, env: int | None = None) -> dict[str, np.ndarray]:
         """The monitor's view now, what every info holds: arrays nothing else holds (rows of fresh copies), each
-        (n_envs, n_followers), or with ``env`` that env's alone (n_followers,). ``estimate``: the posterior mean of tau [s]; ``estimate_std`` [s];
-        ``setting``: tau* asked for [s]; ``lcl``, ``ucl``: the chart's limits [s]; ``alarm``; ``v2v``: the flag the
-        follower sees (CACC when True); ``skipped_measurements`` since reset [-] (:func:`~timegap_env.envs.info.monitor_view`)."""
+        (n_envs, n_followers), or with ``env`` that env's alone (n_followers,). ``estimate``: the posterior mean of
+        tau [s]; ``estimate_std`` [s]; ``setting``: tau* asked for [s]; ``lcl``, ``ucl``: the chart's limits [s];
+        ``alarm``; ``v2v``: the flag the follower sees (CACC when True); ``skipped_measurements`` since reset [-]
+        (:func:`~timegap_env.envs.info.monitor_view`)."""
         monitor, chart, platoon = self.loop.monitor, self.loop.chart, self.loop.platoon
         moments, (floats, flags) = monitor.moments, self._view
         arguments = (moments.mean_tau, moments.var_tau, platoon.setting, chart.center, self._scales.half_width,

@@ -203,8 +203,8 @@ class FollowerFaults(NamedTuple):
         dynamics[:] = np.stack(nominal[:-1])
         gains = np.zeros((5, *shape))  # k_s, k_v, accel_max, packet_loss, spacing_bias
         gains[0], gains[1], gains[2] = float(config.k_s), float(config.k_v), float(config.accel_max)
-        return cls(start=windows[0], end=windows[1], dynamics=ZOHCoefficients._make((*dynamics, nominal.dt)), k_s=gains[0],
-                   k_v=gains[1], accel_max=gains[2], extra_delay=windows[2], packet_loss=gains[3],
+        return cls(start=windows[0], end=windows[1], dynamics=ZOHCoefficients._make((*dynamics, nominal.dt)),
+                   k_s=gains[0], k_v=gains[1], accel_max=gains[2], extra_delay=windows[2], packet_loss=gains[3],
                    spacing_bias=gains[4], keys=np.zeros(n_envs, dtype=np.uint64))
 
     def as_kernel_tuple(self) -> tuple:
