@@ -1,5 +1,7 @@
 """Where a single env's step goes: the fused kernel's call, the part of it numba spends unpacking its arguments,
-and its arithmetic per env-step at 256 envs, in microseconds, all measured in this process (``make bench``).
+and its arithmetic per env-step at 256 envs, in microseconds, all measured in this process (``make bench``). The
+one env's call writes its info values as the default single env's step does; the 256 envs' write none, as the
+vector env's.
 
 Both kernels are called as the task calls the fused step, through their compiled entry for the arguments' types
 (``timegap_env.compiled.compiled_entry``, without numba's dispatcher). The unpacking is timed with a kernel that
@@ -35,7 +37,7 @@ ARITHMETIC_ENVS = 256
 
 
 @numba.njit(cache=True, **NO_ALLOCATION)
-def _unpack_only(state, rules, action):  # noqa: ANN001, ANN202
+def _unpack_only(state, rules, action, view):  # noqa: ANN001, ANN202
     """Reads one value of what fused_step takes, compiled as fused_step is; its cost is numba's unpacking of the
     arguments."""
     return StepState(*state).reward[0]
@@ -61,9 +63,10 @@ def measure(calls: int) -> SingleEnvSplit:
         env.reset(seed=0)
         task = env.task
         action = task.ladder.check(np.full(task.ladder.shape, 5))
-        step = compiled_entry(fused_step, task._state, task._rules, action)
-        times[n_envs] = microseconds(lambda: step(task._state, task._rules, action), max(calls // n_envs, 2))
+        view = task._view if n_envs == 1 else task._no_view  # the single env's info values, as its default info
+        step = compiled_entry(fused_step, task._state, task._rules, action, view)
+        times[n_envs] = microseconds(lambda: step(task._state, task._rules, action, view), max(calls // n_envs, 2))
         if n_envs == 1:
-            unpack = compiled_entry(_unpack_only, task._state, task._rules, action)
-            unpacking = microseconds(lambda: unpack(task._state, task._rules, action), calls)
+            unpack = compiled_entry(_unpack_only, task._state, task._rules, action, view)
+            unpacking = microseconds(lambda: unpack(task._state, task._rules, action, view), calls)
     return SingleEnvSplit(call=times[1], unpacking=unpacking, arithmetic=times[ARITHMETIC_ENVS] / ARITHMETIC_ENVS)

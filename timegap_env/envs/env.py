@@ -11,7 +11,7 @@ import numpy as np
 
 from timegap_env.config import EnvConfig, shown
 from timegap_env.envs.action import action_space
-from timegap_env.envs.info import EPISODE_PREFIX, info_flags, no_scores, of_env, prefixed, scores_of_env
+from timegap_env.envs.info import EPISODE_PREFIX, EnvInfoArrays, EnvInfoPool, info_flags, of_env, prefixed
 from timegap_env.envs.observation import observation_space
 from timegap_env.envs.rendering import DEFAULT_TIME_WINDOW
 from timegap_env.envs.task import PlatoonTask
@@ -83,7 +83,8 @@ class TimeGapMonitorEnv(gym.Env):
     ``truth_<name>``, which oracles read. ``timegap_env.envs.info.truth_of(info)`` and
     ``summary_of(info)`` read the groups back as dicts. ``env.unwrapped.scenario`` names the leader. v1
     (``info_keys="v1"``) adds ``vector_reward``, ``cost``, ``objectives`` (and with ``truth_info``
-    ``truth_regime``).
+    ``truth_regime``). The info's arrays are written into arrays the env reuses only once nothing references them
+    any more (:class:`timegap_env.envs.info.EnvInfoPool`): an info you keep, or a value or view of it, never changes.
 
     ## Starting State
 
@@ -151,6 +152,7 @@ class TimeGapMonitorEnv(gym.Env):
         self._needs_reset = True  # step() before reset() or after the episode ended raises gymnasium's ResetNeeded
         self.step_diagnostics, self.truth_info = info_flags(step_diagnostics, truth_info)
         self._action = np.zeros((1, 1), dtype=np.int64)  # a Discrete action, as the task takes it
+        self._infos = EnvInfoPool(self.config.platoon.n_followers, self.config.info_keys)
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict]:
         self._needs_reset = True  # stays so if the reset below raises (a bad seed too)
@@ -159,7 +161,11 @@ class TimeGapMonitorEnv(gym.Env):
         self._needs_reset = False
         if self.task.trace is not None:
             self.task.trace.clear()
-        info = {**self._info(), **of_env(no_scores(1, self.config.info_keys), 0)} if self.step_diagnostics else {}
+        info = {}
+        if self.step_diagnostics:
+            arrays = self._infos.take()
+            self.task.write_view(arrays.view, scored=False)
+            info = self._info(arrays)
         return self.task.observation()[0].ravel(), info
 
     def __getstate__(self) -> dict[str, Any]:
@@ -171,9 +177,9 @@ class TimeGapMonitorEnv(gym.Env):
         if self._needs_reset:
             raise ResetNeeded("TimeGapMonitorEnv.step() called before reset() or after the episode ended "
                               "(terminated or truncated): call reset() first")
-        result = self.task._run_step(self._checked(action))
-        info = {**self._info(), **scores_of_env(result.term_rows, self.task.objectives(), 0)} \
-            if self.step_diagnostics else {}
+        arrays = self._infos.take() if self.step_diagnostics else None
+        result = self.task._run_step(self._checked(action), None if arrays is None else arrays.view)
+        info = {} if arrays is None else self._info(arrays)
         terminated, truncated = bool(result.terminated[0]), bool(result.truncated[0])
         if terminated or truncated:
             info.update(of_env(prefixed(EPISODE_PREFIX, self.task.episode_summary()), 0))
@@ -198,13 +204,12 @@ class TimeGapMonitorEnv(gym.Env):
         """The name of the current episode's leader (a family of ``timegap_env.SCENARIOS``, NGSIM's, or "user")."""
         return str(self.task.scenario[0])
 
-    def _info(self) -> dict[str, np.ndarray]:
-        """The monitor's view now, and with ``truth_info`` the platoon's true state and the ground truth
-        (:mod:`timegap_env.envs.info`)."""
-        info = self.task.monitor_info(env=0)
-        if self.truth_info:
-            info.update(of_env(self.task.truth_info(), 0, copy=False))  # fresh arrays: views of them suffice
-        return info
+    def _info(self, arrays: EnvInfoArrays) -> dict[str, np.ndarray]:
+        """The per-step info, its values ``arrays``' (just written): the monitor's view and the scores, and with
+        ``truth_info`` the platoon's true state and the ground truth between them (:mod:`timegap_env.envs.info`)."""
+        if self.truth_info:  # fresh arrays: views of them suffice
+            return {**arrays.monitor, **of_env(self.task.truth_info(), 0, copy=False), **arrays.scored}
+        return arrays.info.copy()
 
     def render(self) -> np.ndarray | None:
         if self.render_mode is None:

@@ -30,6 +30,9 @@ With ``EnvConfig.info_keys = "v1"`` (``TimeGapMonitor-v1``'s default) it also ho
 - with ``truth_info=True``, ``truth_regime`` (): the leader's regime now, an index into
   :func:`~timegap_env.leaders.scenarios.regime_names` (:func:`truth_of` gives the name).
 
+A single env writes its per-step values into arrays it reuses (:class:`EnvInfoArrays`), but only arrays nothing
+outside the env references any more: an info's arrays never change while anything holds them, as if they were fresh.
+
 The native vector env's infos are what gymnasium's own vector envs make of these (arrays with a
 leading num_envs axis, a boolean ``_<key>`` mask beside each key, ``final_obs`` and ``final_info``
 at same-step autoresets). :func:`truth_of`, :func:`summary_of` and :func:`rewards_of` read the
@@ -39,11 +42,15 @@ groups back as dicts, with the kinds as names.
 from __future__ import annotations
 
 import math
+import sys
+from collections import deque
 from collections.abc import Mapping
+from typing import NamedTuple
 
 import numba
 import numpy as np
 
+from timegap_env.compiled import STAGE_KERNEL
 from timegap_env.envs.reward import OBJECTIVES, REWARD_TERMS
 from timegap_env.leaders.scenarios import regime_names
 from timegap_env.sim.degradation import KINDS
@@ -54,23 +61,126 @@ VECTOR_REWARD, COST, OBJECTIVES_KEY = "vector_reward", "cost", "objectives"  # i
 
 
 _REWARD_KEYS = tuple(REWARD_PREFIX + name for name in REWARD_TERMS)
-_TERM_INDEXES = tuple((i, Ellipsis) for i in range(len(REWARD_TERMS)))  # each term's 0-d view of an env's terms
-VIEW_FLOATS = ("estimate", "estimate_std", "setting", "lcl", "ucl")  # the monitor's view, float rows of monitor_view
-VIEW_FLAGS = ("alarm", "v2v")  # and its bool rows
+VIEW_FLOATS = ("estimate", "estimate_std", "setting", "lcl", "ucl")  # the monitor's view, InfoView.floats' rows
+VIEW_FLAGS = ("alarm", "v2v")  # and InfoView.flags' rows
+
+
+class InfoView(NamedTuple):
+    """The per-step values an info holds, as a step writes them (:func:`view_env`), arrays with an n_envs axis (of
+    length 0 when nothing is to be written): the monitor's view and the scores."""
+
+    floats: np.ndarray  # (len(VIEW_FLOATS), n_envs, n_followers) estimate, estimate_std, setting, lcl, ucl [s]
+    flags: np.ndarray  # (len(VIEW_FLAGS), n_envs, n_followers) bool alarm, v2v
+    skipped: np.ndarray  # (n_envs, n_followers) int64 skipped measurements since reset [-]
+    scores: np.ndarray  # (n_scores, n_envs) the reward terms; with info_keys "v1" then the terms again (vector_reward),
+    #                     the objectives and the cost
+
+    @classmethod
+    def empty(cls, n_envs: int, n_followers: int, info_keys: str) -> InfoView:
+        n_terms = len(REWARD_TERMS)
+        return cls(np.empty((len(VIEW_FLOATS), n_envs, n_followers)),
+                   np.empty((len(VIEW_FLAGS), n_envs, n_followers), dtype=bool),
+                   np.empty((n_envs, n_followers), dtype=np.int64),
+                   np.empty((n_terms if info_keys == "v0" else 3 * n_terms + 1, n_envs)))
+
+
+@numba.njit(**STAGE_KERNEL)
+def view_env(mean_tau, var_tau, setting, center, half_width, side, v2v, skipped, term_rows, objective_rows, cost,  # noqa: ANN001, ANN201, PLR0913
+             view, e):
+    """Env ``e``'s per-step info values into ``view`` (an :class:`InfoView`): the posterior mean ``mean_tau`` [s] and
+    the square root of ``var_tau`` [s^2], the ``setting`` [s], the chart's limits, ``center`` [s] -/+ ``half_width``
+    [s], whether the chart's ``side`` is not 0, the ``v2v`` flag, the ``skipped`` count, and the scores: the reward
+    terms (``term_rows`` (n_terms, n_envs)), then, if ``view.scores`` has more rows (``info_keys`` "v1"), the terms
+    again, the ``objective_rows`` and the ``cost``. The fused step calls it for every env, :func:`view_envs` for
+    the task's other paths."""
+    floats, flags, skipped_out, scores = view
+    for f in range(mean_tau.shape[1]):
+        floats[0, e, f], floats[1, e, f] = mean_tau[e, f], math.sqrt(var_tau[e, f])
+        floats[2, e, f] = setting[e, f]
+        floats[3, e, f], floats[4, e, f] = center[e, f] - half_width, center[e, f] + half_width
+        flags[0, e, f], flags[1, e, f] = side[e, f] != 0, v2v[e, f]
+        skipped_out[e, f] = skipped[e, f]
+    n_terms = term_rows.shape[0]
+    for i in range(n_terms):
+        scores[i, e] = term_rows[i, e]
+    if scores.shape[0] > n_terms:
+        for i in range(n_terms):
+            scores[n_terms + i, e], scores[2 * n_terms + i, e] = term_rows[i, e], objective_rows[i, e]
+        scores[3 * n_terms, e] = cost[e]
 
 
 @numba.njit(cache=True, error_model="numpy")
-def monitor_view(mean_tau, var_tau, setting, center, half_width, side, v2v, floats, flags):  # noqa: ANN001, ANN201
-    """The monitor's view of every follower into ``floats`` (len(VIEW_FLOATS), n_envs, n_followers) and ``flags``
-    (len(VIEW_FLAGS), ...) bool, their rows in those names' order: the posterior mean ``mean_tau`` [s] and the
-    square root of ``var_tau`` [s^2], the ``setting`` [s], the chart's limits, ``center`` [s] -/+ ``half_width``
-    [s]; whether the chart's ``side`` is not 0, the ``v2v`` flag. One compiled pass, so that an info is two copies."""
+def view_envs(mean_tau, var_tau, setting, center, half_width, side, v2v, skipped, term_rows, objective_rows, cost,  # noqa: ANN001, ANN201, PLR0913
+              view):
+    """:func:`view_env` for every env."""
     for e in range(mean_tau.shape[0]):
-        for f in range(mean_tau.shape[1]):
-            floats[0, e, f], floats[1, e, f] = mean_tau[e, f], math.sqrt(var_tau[e, f])
-            floats[2, e, f] = setting[e, f]
-            floats[3, e, f], floats[4, e, f] = center[e, f] - half_width, center[e, f] + half_width
-            flags[0, e, f], flags[1, e, f] = side[e, f] != 0, v2v[e, f]
+        view_env(mean_tau, var_tau, setting, center, half_width, side, v2v, skipped, term_rows, objective_rows, cost,
+                 view, e)
+
+
+class EnvInfoArrays:
+    """One :class:`InfoView` of a single env (n_envs 1) and the info's values as views of it: the monitor's view and
+    the scores (the reward terms, 0-d views, and with ``info_keys`` "v1" ``vector_reward``, ``objectives`` and
+    ``cost``)."""
+
+    def __init__(self, n_followers: int, info_keys: str) -> None:
+        n_terms = len(REWARD_TERMS)
+        self.view = InfoView.empty(1, n_followers, info_keys)
+        floats, flags, skipped, scores = self.view
+        self.monitor = {**dict(zip(VIEW_FLOATS, floats[:, 0])), **dict(zip(VIEW_FLAGS, flags[:, 0])),
+                        "skipped_measurements": skipped[0]}
+        self.scored = {key: scores[i, 0, ...] for i, key in enumerate(_REWARD_KEYS)}
+        if info_keys != "v0":
+            self.scored[VECTOR_REWARD] = scores[n_terms : 2 * n_terms, 0]
+            self.scored[OBJECTIVES_KEY] = scores[2 * n_terms : 3 * n_terms, 0]
+            self.scored[COST] = scores[3 * n_terms, 0, ...]
+        self.info = {**self.monitor, **self.scored}  # what an info holds, its keys in order
+        self._held = (*self.view, *self.info.values())
+        del floats, flags, skipped, scores  # so that the counts below see only this set's own references
+        self._counts = _reference_counts(self._held)  # with nothing outside holding any of them
+
+    def unheld(self) -> bool:
+        """Whether nothing but this set references its arrays and views: no info dict, none of its values, no view
+        of them (a view of a view references the array that owns the memory)."""
+        return _reference_counts(self._held) == self._counts
+
+
+def _reference_counts(objects: tuple[object, ...]) -> list[int]:
+    return list(map(sys.getrefcount, objects))
+
+
+class EnvInfoPool:
+    """The :class:`EnvInfoArrays` a single env writes its per-step infos into, reused once nothing outside holds them.
+
+    Fresh arrays for every info (a dozen and a half NumPy objects) cost about as much as the rest of a small step.
+    Instead the pool keeps ``INFO_SETS`` sets and hands out the one given out longest ago if CPython's reference
+    counts show that nothing else references it (a loop holds the last info while it takes the next step: hence two
+    sets); else it leaves that set to whoever holds it and makes a new one. So a kept info's arrays never change. A
+    copy or pickle of the pool is an empty pool (a copied view would no longer be a view of the copied set)."""
+
+    def __init__(self, n_followers: int, info_keys: str) -> None:
+        self.n_followers, self.info_keys = n_followers, info_keys
+        self._sets: deque[EnvInfoArrays] = deque()
+
+    def take(self) -> EnvInfoArrays:
+        """A set to write the next info into: one nothing else references."""
+        if len(self._sets) == INFO_SETS:
+            oldest = self._sets.popleft()
+            if oldest.unheld():
+                self._sets.append(oldest)
+                return oldest
+        fresh = EnvInfoArrays(self.n_followers, self.info_keys)
+        self._sets.append(fresh)
+        return fresh
+
+    def __getstate__(self) -> dict[str, object]:
+        return {"n_followers": self.n_followers, "info_keys": self.info_keys}
+
+    def __setstate__(self, state: dict[str, object]) -> None:
+        self.__init__(**state)  # type: ignore[misc]
+
+
+INFO_SETS = 2  # sets an EnvInfoPool reuses: the info being returned and the one the caller may still hold
 
 
 def info_flags(step_diagnostics: object, truth_info: object) -> tuple[bool, bool]:
@@ -99,18 +209,6 @@ def step_scores(term_rows: np.ndarray, objectives: tuple[np.ndarray, np.ndarray]
     scores = {REWARD_PREFIX + name: row for name, row in zip(REWARD_TERMS, term_rows)}
     if objectives is not None:
         scores[VECTOR_REWARD], scores[OBJECTIVES_KEY], scores[COST] = term_rows.T, objectives[0].T, objectives[1]
-    return scores
-
-
-def scores_of_env(term_rows: np.ndarray, objectives: tuple[np.ndarray, np.ndarray] | None, env: int
-                  ) -> dict[str, np.ndarray]:
-    """:func:`step_scores` of env ``env`` alone, as :func:`of_env` would give them, with fewer allocations: one copy of
-    the env's terms, each ``reward_<term>`` a 0-d view of it."""
-    terms = term_rows[:, env].copy()
-    scores = dict(zip(_REWARD_KEYS, map(terms.__getitem__, _TERM_INDEXES)))
-    if objectives is not None:
-        scores[VECTOR_REWARD], scores[OBJECTIVES_KEY] = terms.copy(), objectives[0][:, env].copy()
-        scores[COST] = np.array(objectives[1][env])
     return scores
 
 
@@ -173,5 +271,5 @@ def objectives_of(info: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
 
 
 __all__ = ["COST", "EPISODE_PREFIX", "KIND_NAMES", "OBJECTIVES_KEY", "REWARD_PREFIX", "TRUTH_PREFIX", "VECTOR_REWARD",
-           "info_flags", "no_scores", "scores_of_env", "objectives_of", "of_env", "prefixed", "rewards_of",
+           "EnvInfoArrays", "EnvInfoPool", "InfoView", "info_flags", "no_scores", "objectives_of", "of_env", "prefixed", "rewards_of",
            "step_scores", "summary_of", "truth_of", "with_masks"]

@@ -31,7 +31,8 @@ import numpy as np
 from timegap_env.compiled import NO_ALLOCATION, STAGE_KERNEL, follow_sources, prefetch_env
 from timegap_env.config import EnvConfig
 from timegap_env.envs.action import LadderRule, ladder_env
-from timegap_env.envs.observation import FollowerState, encode_env
+from timegap_env.envs.info import view_env
+from timegap_env.envs.observation import FollowerState, ObservationScales, encode_env
 from timegap_env.envs.reward import (
     READOUT_STACKS, TERM_STACKS, RewardConstants, RewardTerms, StepReadouts, StepTicks, env_objectives, env_readouts,
     env_reward_terms, env_weighted_sum,
@@ -41,7 +42,14 @@ from timegap_env.monitoring.charts import (
     CHART_MEMORY_STACKS, ChartMemory, ChartRule, ChartState, chart_sides_env, count_excursions_env, restart_env,
 )
 from timegap_env.monitoring.loop import SAME_SETTING
-from timegap_env.monitoring.monitor import UPDATE_WORK_ROWS, WINDOW_STACKS, MonitorTicks, recenter_env, update_env
+from timegap_env.monitoring.monitor import (
+    UPDATE_WORK_ROWS,
+    WINDOW_STACKS,
+    MonitorTicks,
+    WindowMemory,
+    recenter_env,
+    update_env,
+)
 from timegap_env.monitoring.posterior import MOMENT_STACKS, Moments
 from timegap_env.monitoring.sensors import SENSOR_FAULT_STACKS, UNIFORM_STREAMS, Readings, measure_env
 from timegap_env.sim.platoon import (
@@ -132,11 +140,12 @@ class StepRules(NamedTuple):
 
 
 @numba.njit(cache=True, error_model="numpy", **NO_ALLOCATION)  # allocates nothing (see timegap_env.compiled)
-def fused_step(state, rules, action):  # noqa: ANN001, ANN201
+def fused_step(state, rules, action, view):  # noqa: ANN001, ANN201
     """One decision step of every env: ``action`` (n_envs, 1) ladder indices or relative steps, or (n_envs,
     n_followers) indices per follower, int64, checked by :meth:`~timegap_env.envs.action.SettingLadder.check`
     (numba checks no bounds; a raise here would cost seconds of compilation); ``state`` (:class:`StepState`) is
-    updated in place under ``rules`` (:class:`StepRules`)."""
+    updated in place under ``rules`` (:class:`StepRules`); each env's per-step info values go into ``view`` (an
+    :class:`~timegap_env.envs.info.InfoView` of every env, or of none: n_envs 0)."""
     state, rules = StepState(*state), StepRules(*rules)
     platoon_args, zoh, faults = unstack_platoon(state.platoon), unstack_zoh(state.zoh), unstack_faults(state.faults)
     sensor_faults, readout_args = unstack_sensor_faults(state.sensor_faults), unstack_readouts(state.readouts)
@@ -163,7 +172,8 @@ def fused_step(state, rules, action):  # noqa: ANN001, ANN201
     readouts, totals = StepReadouts(*readout_args), unstack_totals(state.totals)
     constants = RewardConstants(*rules.reward)
     faults_start, faults_end = faults[0], faults[1]
-    last = n_ticks - 1
+    skipped, half_width = WindowMemory(*memory).skipped, ObservationScales(*rules.scales).half_width
+    last, viewed = n_ticks - 1, view[0].shape[1] > 0
     for e in range(n_envs):
         _prefetch(state, e + 1)  # the next env's rows come in while this env's stages run
         _change_settings(platoon_args, state.controller, memory, chart_args, rules, action, state.changed,
@@ -197,6 +207,9 @@ def fused_step(state, rules, action):  # noqa: ANN001, ANN201
         state.terminated[e] = collided
         state.truncated[e] = platoon.ticks[e] >= state.episode_ticks[e] and not collided
         encode_env(follower, rules.scales, state.observation, e)
+        if viewed:
+            view_env(moments.mean_tau, moments.var_tau, platoon.setting, center, half_width, chart.side, platoon.v2v,
+                     skipped, state.terms[0], state.objectives[0], state.cost, view, e)
     chart_tick[0] += n_ticks
 
 
@@ -271,7 +284,7 @@ prefetch_readouts, prefetch_totals = READOUT_STACKS.prefetch, TOTAL_STACKS.prefe
 prefetch_terms = TERM_STACKS.prefetch
 follow_sources(tuple(f"timegap_env.{module}" for module in (  # every kernel the step runs, and the step
     "compiled", "config", "envs.action", "sim.counter_noise", "sim.platoon", "monitoring.sensors", "monitoring.monitor",
-    "monitoring.posterior", "monitoring.charts", "envs.reward", "envs.totals", "envs.observation",
+    "monitoring.posterior", "monitoring.charts", "envs.reward", "envs.totals", "envs.observation", "envs.info",
     "envs.step_kernel")))
 
 __all__ = ["StepRules", "StepScratch", "StepState", "fused_step"]

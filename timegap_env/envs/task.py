@@ -27,7 +27,7 @@ from timegap_env.compiled import compiled_entry, restack
 from timegap_env.config import TIME_GAP_MIN_SPEED, EnvConfig
 from timegap_env.envs.action import SettingLadder
 from timegap_env.envs.episodes import Episodes, check_reset_options
-from timegap_env.envs.info import TRUTH_PREFIX, VIEW_FLAGS, VIEW_FLOATS, monitor_view, prefixed
+from timegap_env.envs.info import TRUTH_PREFIX, VIEW_FLAGS, VIEW_FLOATS, InfoView, prefixed, view_envs
 from timegap_env.envs.observation import FEATURES, FollowerState, ObservationScales, observe_into
 from timegap_env.envs.rendering import DEFAULT_TIME_WINDOW, RenderFrame
 from timegap_env.envs.reward import (
@@ -138,10 +138,13 @@ class PlatoonTask:
         self._result = StepResult(reward=np.zeros(n_envs), term_rows=np.zeros((len(REWARD_TERMS), n_envs)),
                                   objective_rows=np.zeros((len(REWARD_TERMS), n_envs)), cost=np.zeros(n_envs),
                                   terminated=np.zeros(n_envs, dtype=bool), truncated=np.zeros(n_envs, dtype=bool))
+        self._no_result = dataclasses.replace(self._result, term_rows=np.zeros_like(self._result.term_rows),
+                                              objective_rows=np.zeros_like(self._result.objective_rows),
+                                              cost=np.zeros_like(self._result.cost))  # a reset's scores: none
         self._changed = np.zeros((n_envs, self.n_followers), dtype=bool)
         self._observation = np.zeros((n_envs, self.n_followers, len(FEATURES)), dtype=np.float32)
-        self._view = (np.empty((len(VIEW_FLOATS), n_envs, self.n_followers)),  # what monitor_info copies
-                      np.empty((len(VIEW_FLAGS), n_envs, self.n_followers), dtype=bool))
+        self._view = InfoView.empty(n_envs, self.n_followers, config.info_keys)  # what monitor_info copies from
+        self._no_view = InfoView.empty(0, self.n_followers, config.info_keys)  # a step that writes no view
         self._rules = tuple(StepRules.from_config(config, self.ladder.rule, self.loop.chart.rule,
                                                   tuple(self._reward_constants), np.array(self._weights),
                                                   tuple(self._scales)))
@@ -150,13 +153,13 @@ class PlatoonTask:
         #                                    are changed in place, never replaced)
         self._fused_step: Any = None  # fused_step compiled for the types of _state, _rules and a checked action, at
         #                                the first fused step
-        self._monitor_view: Any = None  # monitor_view compiled for the types of the arrays monitor_info hands it
+        self._view_envs: Any = None  # view_envs compiled for the types of the arguments write_view hands it
 
     def __getstate__(self) -> dict[str, Any]:
         """For copy and pickle: everything but the fused step's state, whose stacks of the task's arrays a copy
         would detach from them, and the compiled entries; :meth:`__setstate__` builds the state again from the copy's
         arrays, the next calls the entries."""
-        return {**self.__dict__, "_state": None, "_fused_step": None, "_monitor_view": None,
+        return {**self.__dict__, "_state": None, "_fused_step": None, "_view_envs": None,
                 "_state_built": self._state is not None}
 
     def __setstate__(self, state: dict[str, Any]) -> None:
@@ -239,18 +242,22 @@ class PlatoonTask:
         """Apply the action (checked against the action space), run one decision interval of ticks, and score it."""
         return self._run_step(self.ladder.check(action))
 
-    def _run_step(self, action: np.ndarray) -> StepResult:
+    def _run_step(self, action: np.ndarray, view: InfoView | None = None) -> StepResult:
         """:meth:`step` for an action that :meth:`SettingLadder.check` returned (the single env checks its own; the
-        fused step checks nothing)."""
+        fused step checks nothing), writing each env's per-step info values into ``view`` (an
+        :class:`~timegap_env.envs.info.InfoView` of every env, or None)."""
         if self._state is None:
             raise RuntimeError("PlatoonTask.step() before reset(): reset every env first")
+        view = self._no_view if view is None else view
         if self.fused and self.trace is None:
             if self._fused_step is None:  # compiled for these types (SettingLadder.check gives every action one type)
-                self._fused_step = compiled_entry(fused_step, self._state, self._rules, action)
-            self._fused_step(self._state, self._rules, action)
+                self._fused_step = compiled_entry(fused_step, self._state, self._rules, action, view)
+            self._fused_step(self._state, self._rules, action, view)
             self.loop.monitor.posterior_written()
         else:
             self._staged_step(action)
+            if view.floats.shape[1]:
+                self.write_view(view, scored=True)
         return self._result
 
     def _staged_step(self, action: np.ndarray) -> None:
@@ -299,22 +306,28 @@ class PlatoonTask:
             speed=platoon.v[:, 1:], v2v=platoon.v2v,
         )
 
-    def monitor_info(self, env: int | None = None) -> dict[str, np.ndarray]:
+    def monitor_info(self) -> dict[str, np.ndarray]:
         """The monitor's view now, what every info holds: arrays nothing else holds (rows of fresh copies), each
-        (n_envs, n_followers), or with ``env`` that env's alone (n_followers,). ``estimate``: the posterior mean of
-        tau [s]; ``estimate_std`` [s]; ``setting``: tau* asked for [s]; ``lcl``, ``ucl``: the chart's limits [s];
-        ``alarm``; ``v2v``: the flag the follower sees (CACC when True); ``skipped_measurements`` since reset [-]
-        (:func:`~timegap_env.envs.info.monitor_view`)."""
+        (n_envs, n_followers). ``estimate``: the posterior mean of tau [s]; ``estimate_std`` [s]; ``setting``: tau*
+        asked for [s]; ``lcl``, ``ucl``: the chart's limits [s]; ``alarm``; ``v2v``: the flag the follower sees (CACC
+        when True); ``skipped_measurements`` since reset [-] (:func:`~timegap_env.envs.info.view_env`)."""
+        self.write_view(self._view, scored=False)
+        floats, flags, skipped, _ = self._view
+        return {**dict(zip(VIEW_FLOATS, floats.copy())), **dict(zip(VIEW_FLAGS, flags.copy())),
+                "skipped_measurements": skipped.copy()}
+
+    def write_view(self, view: InfoView, scored: bool) -> None:
+        """Every env's per-step info values now into ``view`` (n_envs of them), in one compiled pass
+        (:func:`~timegap_env.envs.info.view_envs`): the monitor's view and, if ``scored``, the last step's scores
+        (else zeros, a reset's)."""
         monitor, chart, platoon = self.loop.monitor, self.loop.chart, self.loop.platoon
-        moments, (floats, flags) = monitor.moments, self._view
-        arguments = (moments.mean_tau, moments.var_tau, platoon.setting, chart.center, self._scales.half_width,
-                     chart.side, platoon.v2v, floats, flags)
-        if self._monitor_view is None:  # the same arrays at every call
-            self._monitor_view = compiled_entry(monitor_view, *arguments)
-        self._monitor_view(*arguments)
-        rows = slice(None) if env is None else env
-        return {**dict(zip(VIEW_FLOATS, floats[:, rows].copy())), **dict(zip(VIEW_FLAGS, flags[:, rows].copy())),
-                "skipped_measurements": monitor.skipped[rows].copy()}
+        result = self._result if scored else self._no_result
+        arguments = (monitor.moments.mean_tau, monitor.moments.var_tau, platoon.setting, chart.center,
+                     self._scales.half_width, chart.side, platoon.v2v, monitor.skipped, result.term_rows,
+                     result.objective_rows, result.cost, view)
+        if self._view_envs is None:  # the same types at every call
+            self._view_envs = compiled_entry(view_envs, *arguments)
+        self._view_envs(*arguments)
 
     def truth_info(self) -> dict[str, np.ndarray]:
         """What only the simulator knows, fresh arrays, each (n_envs, n_followers) unless noted: the platoon's true
