@@ -142,6 +142,8 @@ def per_env_reset(episodes: Episodes, loop: MonitoredPlatoon, envs: np.ndarray, 
 def arrays(episodes: Episodes, loop: MonitoredPlatoon, rngs: list) -> list:
     """Everything a reset writes, in a fixed order: arrays, and reprs of what is not one."""
     table, faults = loop.degradation, loop.platoon.faults
+    table.truth(np.zeros(len(rngs), dtype=np.int64), np.ones(table.kind.shape, dtype=bool))  # works out the fixed
+    # parts of the ground truth, which a reset leaves until it is asked for
     return [
         *(episodes.fingerprint(env) for env in range(len(rngs))),
         episodes.leader_speed, episodes.leader_accel, episodes.episode_ticks, episodes.dropout_probability,

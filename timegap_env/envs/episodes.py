@@ -153,7 +153,7 @@ class Episodes:
                     loaded = first
                     try:
                         batches = list(make_leaders(family, seeds[first : first + LEADER_BATCH], cfg.leader,
-                                                    self._params.get(SCENARIOS[family].leader_family)))
+                                                    self._leader_params(family)))
                     except ValueError as error:  # e.g. a recorded family at another tick than platoon.dt
                         raise ValueError(f"scenario {family!r} with platoon.dt = {dt} s: {error}") from error
                     for batch in batches:
@@ -176,6 +176,15 @@ class Episodes:
                 self.initial_setting[env] = cfg.setting_levels[int(rng.integers(len(cfg.setting_levels)))]
         self.dropout_probability[envs] = dropouts
         self.noise_keys[envs] = np.array(keys, dtype=np.uint64)
+
+    def _leader_params(self, scenario: str) -> Any:
+        """The parameters scenario ``scenario``'s leader family is built with: ``leader_params``' for it, else its
+        defaults, made once (None for a family without parameters)."""
+        family = SCENARIOS[scenario].leader_family
+        if family not in self._params:
+            record = LEADER_FAMILIES[family]
+            self._params[family] = None if record.params is None else record.params()
+        return self._params[family]
 
     def _load_leaders(self, envs: np.ndarray, profiles: LeaderProfiles) -> None:
         """Put ``profiles`` (a row per env of ``envs``, or one row for all) in the envs' leader buffers, cut to the
@@ -213,7 +222,7 @@ class Episodes:
         if profiles.regime is not None:
             rows = ground_truth_codes(profiles.regime, family.regimes)
         else:
-            params = self._params.get(family.name) or (family.params() if family.params is not None else None)
+            params = self._leader_params(scenario)
             rows = np.stack([ground_truth_codes(*family.schedule(seed, params, self.config.leader)) for seed in seeds])
         n = min(rows.shape[1], int(self.episode_ticks[envs[0]]) + 1)
         self.regime[envs, :n] = rows[:, :n]

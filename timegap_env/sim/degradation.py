@@ -285,8 +285,9 @@ class DegradationTable:
         self.stable = {(degraded, up): np.zeros(shape) for degraded in (False, True) for up in (False, True)}
         # what truth() reports: fixed per episode, and the true parameters while it acts / otherwise
         self._reported = {name: np.zeros(shape) for name in ("size", "onset", "end")}
-        self._stale = np.ones(n_envs, dtype=bool)  # envs whose ``stable`` entries are not found yet
         self._while_active, self._otherwise = np.zeros((2, len(TRUE_PARAMETERS), *shape))
+        self._stale = np.ones(n_envs, dtype=bool)  # envs whose stable settings and ground truth's fixed parts (the
+        #                                            three above) are not worked out yet: truth() does it
         self.descriptions: list[tuple[Degradation, ...]] = [() for _ in range(n_envs)]
         self.set_many(np.arange(n_envs), [()] * n_envs)
 
@@ -312,8 +313,7 @@ class DegradationTable:
                 hits.add(env, degradation, self)
             self.descriptions[env] = tuple(items)
         hits.write(self)
-        self._stale[envs] = True  # their smallest stable settings are found when the ground truth is first asked for
-        self._prepare_truth(envs)
+        self._stale[envs] = True  # their ground truth's fixed parts are worked out when it is first asked for
 
     def _prepare_truth(self, envs: np.ndarray) -> None:
         """The parts of :meth:`truth` fixed for the episode of each env of ``envs``."""
@@ -398,7 +398,9 @@ class DegradationTable:
         TRUE_PARAMETERS.
         """
         if self._stale.any():
-            self._find_stable_settings(np.flatnonzero(self._stale))
+            stale = np.flatnonzero(self._stale)
+            self._prepare_truth(stale)
+            self._find_stable_settings(stale)
         active = self.active(ticks)
         parameters = np.where(active, self._while_active, self._otherwise)
         stable = np.where(active, np.where(v2v, self.stable[True, True], self.stable[True, False]),
