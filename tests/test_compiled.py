@@ -132,3 +132,22 @@ def test_the_fused_step_is_handed_about_fifty_arrays():
         return sum(arrays(part) for part in value) if isinstance(value, tuple) else 0
 
     assert arrays(StepState(*env.task._state)) <= 60  # about 120 before the structures came stacked
+
+
+def test_a_cache_index_naming_a_class_that_is_gone_is_compiled_anew(tmp_path):
+    """numba unpickles a cache's index before it checks the stamp; an index written before a NamedTuple of a cached
+    signature was renamed would raise at the kernel's first call. Under ``follow_sources`` it counts as stale."""
+    import subprocess
+    import sys
+
+    module = tmp_path / "renamed.py"
+    source = ("from typing import NamedTuple\nimport numba\nfrom timegap_env.compiled import follow_sources\n"
+              "class {name}(NamedTuple):\n    x: float\n"
+              "@numba.njit(cache=True)\ndef kernel(p):\n    return p.x + 1.0\n"
+              "follow_sources(('renamed',))\nprint(kernel({name}(1.0)))\n")
+    environment = {**__import__("os").environ, "NUMBA_CACHE_DIR": str(tmp_path / "cache"), "PYTHONPATH": str(tmp_path)}
+    for name in ("Before", "After"):
+        module.write_text(source.format(name=name))
+        out = subprocess.run([sys.executable, "-c", "import renamed"], capture_output=True, text=True, env=environment,
+                             cwd=tmp_path)
+        assert out.returncode == 0 and out.stdout.strip() == "2.0", out.stderr[-2000:]

@@ -22,6 +22,7 @@ for an env's rows ahead of their use (each layout's ``prefetch`` for all of a st
 from __future__ import annotations
 
 import hashlib
+import pickle
 import sys
 from collections.abc import Callable, Iterable, Mapping
 from pathlib import Path
@@ -249,6 +250,10 @@ def follow_sources(modules: tuple[str, ...]) -> None:
     kernels it calls in turn), so an edit there alone would leave it running the old code. Each cache's source
     stamp becomes its own file's and a hash of all ``modules``' contents. numba 0.68 keeps it in the dispatcher's
     ``_cache._cache_file._source_stamp``; should that move, the kernel's own file alone decides, as numba does.
+
+    An index numba cannot read back counts as stale too: numba unpickles a cache's index before it compares the
+    stamps, and an index written by an older version of these modules may name a class that is gone (a NamedTuple
+    of a cached signature, renamed), which would raise at the kernel's first call instead of compiling it again.
     """
     digest = hashlib.sha256()
     for module in modules:
@@ -259,6 +264,20 @@ def follow_sources(modules: tuple[str, ...]) -> None:
         cache_file = getattr(getattr(kernel, "_cache", None), "_cache_file", None)
         if cache_file is not None and hasattr(cache_file, "_source_stamp"):
             cache_file._source_stamp = (cache_file._source_stamp, digest.hexdigest())
+        if cache_file is not None and hasattr(cache_file, "_load_index"):
+            cache_file._load_index = _readable_or_stale(cache_file._load_index)
+
+
+def _readable_or_stale(load_index: Callable[[], dict]) -> Callable[[], dict]:
+    """numba's index loader, an index it cannot unpickle read as an empty one (stale: compiled and written anew)."""
+
+    def load() -> dict:
+        try:
+            return load_index()
+        except (AttributeError, ImportError, EOFError, pickle.UnpicklingError):
+            return {}
+
+    return load
 
 
 def _kernels(modules: tuple[str, ...]) -> Iterable[Dispatcher]:

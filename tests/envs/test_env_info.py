@@ -98,13 +98,13 @@ def test_a_kept_info_never_changes(version: int) -> None:
 
 def test_dropped_infos_are_written_into_the_same_two_sets(monkeypatch: pytest.MonkeyPatch) -> None:
     made = []
-    original = info_module.EnvInfoArrays.__init__
+    original = info_module.EnvInfoSet.__init__
 
-    def counted(self: info_module.EnvInfoArrays, *args: object) -> None:
+    def counted(self: info_module.EnvInfoSet, *args: object) -> None:
         made.append(1)
         original(self, *args)
 
-    monkeypatch.setattr(info_module.EnvInfoArrays, "__init__", counted)
+    monkeypatch.setattr(info_module.EnvInfoSet, "__init__", counted)
     env = make(1)
     _, info = env.reset(seed=2)
     for step in range(50):  # the usual loop: the last info is held while the next step runs
@@ -121,3 +121,11 @@ def test_without_step_diagnostics_no_sets_are_made() -> None:
     env = make(0, step_diagnostics=False)
     env.reset(seed=0)
     assert env.step(1)[4] == {} and len(env._infos._sets) == 0
+
+
+def test_a_step_refuses_an_info_block_of_another_number_of_envs() -> None:
+    env = make(0)
+    env.reset(seed=0)
+    action = env._checked(1)
+    with pytest.raises(ValueError, match="an InfoBlock of 2 envs: must be of n_envs = 1 or 0"):
+        env.task._run_step(action, info_module.InfoBlock.empty(2, env.task.n_followers, "v0"))

@@ -100,6 +100,24 @@ def test_a_vector_env_builds_a_registered_family_by_its_batch_or_seed_by_seed():
     assert np.array_equal(*speeds)
 
 
+def test_a_family_registered_again_is_built_with_its_own_defaults():
+    register_family(LeaderFamily("waves", waves, "Slow speed waves.", WavesConfig))
+    env = gym.make("TimeGapMonitor-v0", config={"episode_duration": 30})
+    env.reset(seed=2, options={"scenario": "waves"})
+
+    @dataclasses.dataclass(frozen=True)
+    class FasterWaves(WavesConfig):
+        mean_speed: float = 28.0  # [m/s]
+
+    register_family(LeaderFamily("waves", waves, "Faster waves.", FasterWaves), replace=True)
+    env.reset(seed=2, options={"scenario": "waves"})
+    leader = env.unwrapped.config.leader
+    assert np.array_equal(episode_speed(env), waves(leader_seed(2), FasterWaves(), leader).speed)
+    register_family(LeaderFamily("waves", constant, "20 m/s, without parameters."), replace=True)
+    env.reset(seed=2, options={"scenario": "waves"})
+    assert np.all(episode_speed(env) == 20.0)
+
+
 def test_a_family_without_parameters_takes_none():
     register_family(LeaderFamily("constant", constant, "20 m/s throughout."))
     assert make_leader("constant", 0).speed.max() == 20.0

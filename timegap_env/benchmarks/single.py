@@ -37,7 +37,7 @@ ARITHMETIC_ENVS = 256
 
 
 @numba.njit(cache=True, **NO_ALLOCATION)
-def _unpack_only(state, rules, action, view):  # noqa: ANN001, ANN202
+def _unpack_only(state, rules, action, info):  # noqa: ANN001, ANN202
     """Reads one value of what fused_step takes, compiled as fused_step is; its cost is numba's unpacking of the
     arguments."""
     return StepState(*state).reward[0]
@@ -63,10 +63,10 @@ def measure(calls: int) -> SingleEnvSplit:
         env.reset(seed=0)
         task = env.task
         action = task.ladder.check(np.full(task.ladder.shape, 5))
-        view = task._view if n_envs == 1 else task._no_view  # the single env's info values, as its default info
-        step = compiled_entry(fused_step, task._state, task._rules, action, view)
-        times[n_envs] = microseconds(lambda: step(task._state, task._rules, action, view), max(calls // n_envs, 2))
+        info = task._info_block if n_envs == 1 else task._no_info  # the single env writes its info values
+        step = compiled_entry(fused_step, task._state, task._rules, action, info)
+        times[n_envs] = microseconds(lambda: step(task._state, task._rules, action, info), max(calls // n_envs, 2))
         if n_envs == 1:
-            unpack = compiled_entry(_unpack_only, task._state, task._rules, action, view)
-            unpacking = microseconds(lambda: unpack(task._state, task._rules, action, view), calls)
+            unpack = compiled_entry(_unpack_only, task._state, task._rules, action, info)
+            unpacking = microseconds(lambda: unpack(task._state, task._rules, action, info), calls)
     return SingleEnvSplit(call=times[1], unpacking=unpacking, arithmetic=times[ARITHMETIC_ENVS] / ARITHMETIC_ENVS)

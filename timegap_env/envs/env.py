@@ -11,7 +11,7 @@ import numpy as np
 
 from timegap_env.config import EnvConfig, shown
 from timegap_env.envs.action import action_space
-from timegap_env.envs.info import EPISODE_PREFIX, EnvInfoArrays, EnvInfoPool, info_flags, of_env, prefixed
+from timegap_env.envs.info import EPISODE_PREFIX, EnvInfoSet, EnvInfoPool, info_flags, of_env, prefixed
 from timegap_env.envs.observation import observation_space
 from timegap_env.envs.rendering import DEFAULT_TIME_WINDOW
 from timegap_env.envs.task import PlatoonTask
@@ -83,8 +83,9 @@ class TimeGapMonitorEnv(gym.Env):
     ``truth_<name>``, which oracles read. ``timegap_env.envs.info.truth_of(info)`` and
     ``summary_of(info)`` read the groups back as dicts. ``env.unwrapped.scenario`` names the leader. v1
     (``info_keys="v1"``) adds ``vector_reward``, ``cost``, ``objectives`` (and with ``truth_info``
-    ``truth_regime``). The info's arrays are written into arrays the env reuses only once nothing references them
-    any more (:class:`timegap_env.envs.info.EnvInfoPool`): an info you keep, or a value or view of it, never changes.
+    ``truth_regime``). The step writes the info's values into arrays the env reuses, but only once nothing
+    references them any more (:class:`timegap_env.envs.info.EnvInfoPool`): an info you keep, or a value or view of
+    it, never changes.
 
     ## Starting State
 
@@ -163,9 +164,9 @@ class TimeGapMonitorEnv(gym.Env):
             self.task.trace.clear()
         info = {}
         if self.step_diagnostics:
-            arrays = self._infos.take()
-            self.task.write_view(arrays.view, scored=False)
-            info = self._info(arrays)
+            info_set = self._infos.take()
+            self.task.write_info(info_set.block, scored=False)
+            info = self._info(info_set)
         return self.task.observation()[0].ravel(), info
 
     def __getstate__(self) -> dict[str, Any]:
@@ -177,9 +178,9 @@ class TimeGapMonitorEnv(gym.Env):
         if self._needs_reset:
             raise ResetNeeded("TimeGapMonitorEnv.step() called before reset() or after the episode ended "
                               "(terminated or truncated): call reset() first")
-        arrays = self._infos.take() if self.step_diagnostics else None
-        result = self.task._run_step(self._checked(action), None if arrays is None else arrays.view)
-        info = {} if arrays is None else self._info(arrays)
+        info_set = self._infos.take() if self.step_diagnostics else None
+        result = self.task._run_step(self._checked(action), None if info_set is None else info_set.block)
+        info = {} if info_set is None else self._info(info_set)
         terminated, truncated = bool(result.terminated[0]), bool(result.truncated[0])
         if terminated or truncated:
             info.update(of_env(prefixed(EPISODE_PREFIX, self.task.episode_summary()), 0))
@@ -204,12 +205,12 @@ class TimeGapMonitorEnv(gym.Env):
         """The name of the current episode's leader (a family of ``timegap_env.SCENARIOS``, NGSIM's, or "user")."""
         return str(self.task.scenario[0])
 
-    def _info(self, arrays: EnvInfoArrays) -> dict[str, np.ndarray]:
-        """The per-step info, its values ``arrays``' (just written): the monitor's view and the scores, and with
+    def _info(self, info_set: EnvInfoSet) -> dict[str, np.ndarray]:
+        """The per-step info, its values ``info_set``'s (just written): the monitor's view and the scores, and with
         ``truth_info`` the platoon's true state and the ground truth between them (:mod:`timegap_env.envs.info`)."""
-        if self.truth_info:  # fresh arrays: views of them suffice
-            return {**arrays.monitor, **of_env(self.task.truth_info(), 0, copy=False), **arrays.scored}
-        return arrays.info.copy()
+        if self.truth_info:  # truth_info's arrays are fresh: views of their rows suffice
+            return {**info_set.monitor, **of_env(self.task.truth_info(), 0, copy=False), **info_set.scored}
+        return info_set.info.copy()
 
     def render(self) -> np.ndarray | None:
         if self.render_mode is None:

@@ -21,7 +21,15 @@ import numpy as np
 
 from timegap_env.config import EnvConfig, shown
 from timegap_env.leaders.profile import LeaderProfile, LeaderProfiles
-from timegap_env.leaders.scenarios import LEADER_FAMILIES, SCENARIOS, USER, family_params, make_leaders, regime_names
+from timegap_env.leaders.scenarios import (
+    LEADER_FAMILIES,
+    SCENARIOS,
+    USER,
+    LeaderFamily,
+    family_params,
+    make_leaders,
+    regime_names,
+)
 from timegap_env.sim.degradation import Categorical, Degradation, DegradationDraw, parse_degradations
 
 RESET_OPTIONS = ("leader_speed", "scenario", "degradation")  # the keys reset(options=...) takes
@@ -103,7 +111,8 @@ class Episodes:
         self.noise_keys = np.zeros(n_envs, dtype=np.uint64)
         self.scenario = np.full(n_envs, "", dtype=object)
         self.regime = np.zeros((n_envs, max_ticks + 1), dtype=np.int16) if config.info_keys != "v0" else None
-        self._params = family_params(config.leader_params)  # leader family -> its parameter dataclass
+        self._params = family_params(config.leader_params)  # leader family -> its parameter dataclass, as configured
+        self._defaults: dict[str, tuple[LeaderFamily, Any]] = {}  # leader family -> (its record, its default parameters)
         self._families = list(config.scenario_weights)
         self._family_draw = Categorical([config.scenario_weights[f] for f in self._families])
         self._degradation_draw = DegradationDraw(config.degradation, config.platoon.n_followers, config.platoon.dt)
@@ -179,12 +188,16 @@ class Episodes:
 
     def _leader_params(self, scenario: str) -> Any:
         """The parameters scenario ``scenario``'s leader family is built with: ``leader_params``' for it, else its
-        defaults, made once (None for a family without parameters)."""
+        defaults (None for a family without parameters), made once per registered family record (a family
+        registered again with ``replace=True`` gets its own)."""
         family = SCENARIOS[scenario].leader_family
-        if family not in self._params:
-            record = LEADER_FAMILIES[family]
-            self._params[family] = None if record.params is None else record.params()
-        return self._params[family]
+        if family in self._params:
+            return self._params[family]
+        record = LEADER_FAMILIES[family]
+        made = self._defaults.get(family)
+        if made is None or made[0] is not record:
+            made = self._defaults[family] = (record, None if record.params is None else record.params())
+        return made[1]
 
     def _load_leaders(self, envs: np.ndarray, profiles: LeaderProfiles) -> None:
         """Put ``profiles`` (a row per env of ``envs``, or one row for all) in the envs' leader buffers, cut to the

@@ -30,7 +30,7 @@ With ``EnvConfig.info_keys = "v1"`` (``TimeGapMonitor-v1``'s default) it also ho
 - with ``truth_info=True``, ``truth_regime`` (): the leader's regime now, an index into
   :func:`~timegap_env.leaders.scenarios.regime_names` (:func:`truth_of` gives the name).
 
-A single env writes its per-step values into arrays it reuses (:class:`EnvInfoArrays`), but only arrays nothing
+A single env writes its per-step values into arrays it reuses (:class:`EnvInfoSet`), but only arrays nothing
 outside the env references any more: an info's arrays never change while anything holds them, as if they were fresh.
 
 The native vector env's infos are what gymnasium's own vector envs make of these (arrays with a
@@ -61,13 +61,14 @@ VECTOR_REWARD, COST, OBJECTIVES_KEY = "vector_reward", "cost", "objectives"  # i
 
 
 _REWARD_KEYS = tuple(REWARD_PREFIX + name for name in REWARD_TERMS)
-VIEW_FLOATS = ("estimate", "estimate_std", "setting", "lcl", "ucl")  # the monitor's view, InfoView.floats' rows
-VIEW_FLAGS = ("alarm", "v2v")  # and InfoView.flags' rows
+VIEW_FLOATS = ("estimate", "estimate_std", "setting", "lcl", "ucl")  # the monitor's view, InfoBlock.floats' rows
+VIEW_FLAGS = ("alarm", "v2v")  # and InfoBlock.flags' rows
 
 
-class InfoView(NamedTuple):
-    """The per-step values an info holds, as a step writes them (:func:`view_env`), arrays with an n_envs axis (of
-    length 0 when nothing is to be written): the monitor's view and the scores."""
+class InfoBlock(NamedTuple):
+    """The per-step values an info holds, as a step writes them (:func:`write_info_env`), arrays with an n_envs axis (of
+    length 0 when nothing is to be written): the monitor's view and the scores. Kernels take it as a plain tuple
+    (``tuple(block)``), as every structure (see :mod:`timegap_env.sim.platoon`)."""
 
     floats: np.ndarray  # (len(VIEW_FLOATS), n_envs, n_followers) estimate, estimate_std, setting, lcl, ucl [s]
     flags: np.ndarray  # (len(VIEW_FLAGS), n_envs, n_followers) bool alarm, v2v
@@ -76,7 +77,7 @@ class InfoView(NamedTuple):
     #                     the objectives and the cost
 
     @classmethod
-    def empty(cls, n_envs: int, n_followers: int, info_keys: str) -> InfoView:
+    def empty(cls, n_envs: int, n_followers: int, info_keys: str) -> InfoBlock:
         n_terms = len(REWARD_TERMS)
         return cls(np.empty((len(VIEW_FLOATS), n_envs, n_followers)),
                    np.empty((len(VIEW_FLAGS), n_envs, n_followers), dtype=bool),
@@ -85,15 +86,15 @@ class InfoView(NamedTuple):
 
 
 @numba.njit(**STAGE_KERNEL)
-def view_env(mean_tau, var_tau, setting, center, half_width, side, v2v, skipped, term_rows, objective_rows, cost,  # noqa: ANN001, ANN201, PLR0913
-             view, e):
-    """Env ``e``'s per-step info values into ``view`` (an :class:`InfoView`): the posterior mean ``mean_tau`` [s] and
+def write_info_env(mean_tau, var_tau, setting, center, half_width, side, v2v, skipped,  # noqa: ANN001, ANN201
+                   term_rows, objective_rows, cost, block, e):
+    """Env ``e``'s per-step info values into ``block`` (an :class:`InfoBlock`): the posterior mean ``mean_tau`` [s] and
     the square root of ``var_tau`` [s^2], the ``setting`` [s], the chart's limits, ``center`` [s] -/+ ``half_width``
     [s], whether the chart's ``side`` is not 0, the ``v2v`` flag, the ``skipped`` count, and the scores: the reward
-    terms (``term_rows`` (n_terms, n_envs)), then, if ``view.scores`` has more rows (``info_keys`` "v1"), the terms
-    again, the ``objective_rows`` and the ``cost``. The fused step calls it for every env, :func:`view_envs` for
+    terms (``term_rows`` (n_terms, n_envs)), then, if ``block.scores`` has more rows (``info_keys`` "v1"), the terms
+    again, the ``objective_rows`` and the ``cost``. The fused step calls it for every env, :func:`write_info_envs` for
     the task's other paths."""
-    floats, flags, skipped_out, scores = view
+    floats, flags, skipped_out, scores = block
     for f in range(mean_tau.shape[1]):
         floats[0, e, f], floats[1, e, f] = mean_tau[e, f], math.sqrt(var_tau[e, f])
         floats[2, e, f] = setting[e, f]
@@ -110,23 +111,23 @@ def view_env(mean_tau, var_tau, setting, center, half_width, side, v2v, skipped,
 
 
 @numba.njit(cache=True, error_model="numpy")
-def view_envs(mean_tau, var_tau, setting, center, half_width, side, v2v, skipped, term_rows, objective_rows, cost,  # noqa: ANN001, ANN201, PLR0913
-              view):
-    """:func:`view_env` for every env."""
+def write_info_envs(mean_tau, var_tau, setting, center, half_width, side, v2v, skipped,  # noqa: ANN001, ANN201
+                    term_rows, objective_rows, cost, block):
+    """:func:`write_info_env` for every env."""
     for e in range(mean_tau.shape[0]):
-        view_env(mean_tau, var_tau, setting, center, half_width, side, v2v, skipped, term_rows, objective_rows, cost,
-                 view, e)
+        write_info_env(mean_tau, var_tau, setting, center, half_width, side, v2v, skipped, term_rows, objective_rows,
+                       cost, block, e)
 
 
-class EnvInfoArrays:
-    """One :class:`InfoView` of a single env (n_envs 1) and the info's values as views of it: the monitor's view and
-    the scores (the reward terms, 0-d views, and with ``info_keys`` "v1" ``vector_reward``, ``objectives`` and
-    ``cost``)."""
+class EnvInfoSet:
+    """One :class:`InfoBlock` of a single env (n_envs 1, a plain tuple) and the info's values as views of it: the
+    monitor's view and the scores (the reward terms, 0-d views, and with ``info_keys`` "v1" ``vector_reward``,
+    ``objectives`` and ``cost``)."""
 
     def __init__(self, n_followers: int, info_keys: str) -> None:
         n_terms = len(REWARD_TERMS)
-        self.view = InfoView.empty(1, n_followers, info_keys)
-        floats, flags, skipped, scores = self.view
+        self.block = tuple(InfoBlock.empty(1, n_followers, info_keys))  # as the step takes it
+        floats, flags, skipped, scores = self.block
         self.monitor = {**dict(zip(VIEW_FLOATS, floats[:, 0])), **dict(zip(VIEW_FLAGS, flags[:, 0])),
                         "skipped_measurements": skipped[0]}
         self.scored = {key: scores[i, 0, ...] for i, key in enumerate(_REWARD_KEYS)}
@@ -135,7 +136,7 @@ class EnvInfoArrays:
             self.scored[OBJECTIVES_KEY] = scores[2 * n_terms : 3 * n_terms, 0]
             self.scored[COST] = scores[3 * n_terms, 0, ...]
         self.info = {**self.monitor, **self.scored}  # what an info holds, its keys in order
-        self._held = (*self.view, *self.info.values())
+        self._held = (*self.block, *self.info.values())
         del floats, flags, skipped, scores  # so that the counts below see only this set's own references
         self._counts = _reference_counts(self._held)  # with nothing outside holding any of them
 
@@ -150,26 +151,27 @@ def _reference_counts(objects: tuple[object, ...]) -> list[int]:
 
 
 class EnvInfoPool:
-    """The :class:`EnvInfoArrays` a single env writes its per-step infos into, reused once nothing outside holds them.
+    """The :class:`EnvInfoSet` a single env writes its per-step infos into, reused once nothing outside holds them.
 
     Fresh arrays for every info (a dozen and a half NumPy objects) cost about as much as the rest of a small step.
     Instead the pool keeps ``INFO_SETS`` sets and hands out the one given out longest ago if CPython's reference
     counts show that nothing else references it (a loop holds the last info while it takes the next step: hence two
-    sets); else it leaves that set to whoever holds it and makes a new one. So a kept info's arrays never change. A
+    sets); else it leaves that set to whoever holds it and makes a new one. So a kept info's arrays never change.
+    Only references count: a weak reference to a value, or a raw address of its memory, may see later steps. A
     copy or pickle of the pool is an empty pool (a copied view would no longer be a view of the copied set)."""
 
     def __init__(self, n_followers: int, info_keys: str) -> None:
         self.n_followers, self.info_keys = n_followers, info_keys
-        self._sets: deque[EnvInfoArrays] = deque()
+        self._sets: deque[EnvInfoSet] = deque()
 
-    def take(self) -> EnvInfoArrays:
+    def take(self) -> EnvInfoSet:
         """A set to write the next info into: one nothing else references."""
         if len(self._sets) == INFO_SETS:
             oldest = self._sets.popleft()
             if oldest.unheld():
                 self._sets.append(oldest)
                 return oldest
-        fresh = EnvInfoArrays(self.n_followers, self.info_keys)
+        fresh = EnvInfoSet(self.n_followers, self.info_keys)
         self._sets.append(fresh)
         return fresh
 
@@ -271,5 +273,5 @@ def objectives_of(info: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
 
 
 __all__ = ["COST", "EPISODE_PREFIX", "KIND_NAMES", "OBJECTIVES_KEY", "REWARD_PREFIX", "TRUTH_PREFIX", "VECTOR_REWARD",
-           "EnvInfoArrays", "EnvInfoPool", "InfoView", "info_flags", "no_scores", "objectives_of", "of_env", "prefixed", "rewards_of",
-           "step_scores", "summary_of", "truth_of", "with_masks"]
+           "EnvInfoPool", "EnvInfoSet", "InfoBlock", "info_flags", "no_scores", "objectives_of", "of_env", "prefixed",
+           "rewards_of", "step_scores", "summary_of", "truth_of", "with_masks"]

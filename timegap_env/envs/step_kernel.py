@@ -15,9 +15,11 @@ the leader's and V2V's ticks), and the tests check the two paths against each ot
 Working env by env keeps each env's state in cache while all its stages run (the step asks for the next env's
 rows ahead: :func:`_prefetch`), and re-centres only the followers whose setting changed. The kernel takes two
 structures, :class:`StepState` (every array it reads or writes, the objects' own) and :class:`StepRules` (the
-config's constants), as plain tuples (see :mod:`timegap_env.sim.platoon`). numba unpacks every array handed to it
-from Python at every call, so the state's structures come in their :class:`~timegap_env.compiled.Stacked` forms (a
-few stacks each, about 50 arrays in all rather than about 120) and are made again inside.
+config's constants), as plain tuples (see :mod:`timegap_env.sim.platoon`), besides the action and the
+:class:`~timegap_env.envs.info.InfoBlock` it writes the infos' values into (a single env's info). numba unpacks
+every array handed to it from Python at every call, so the state's structures come in their
+:class:`~timegap_env.compiled.Stacked` forms (a few stacks each, about 50 arrays in all rather than about 120) and
+are made again inside.
 """
 
 from __future__ import annotations
@@ -31,7 +33,7 @@ import numpy as np
 from timegap_env.compiled import NO_ALLOCATION, STAGE_KERNEL, follow_sources, prefetch_env
 from timegap_env.config import EnvConfig
 from timegap_env.envs.action import LadderRule, ladder_env
-from timegap_env.envs.info import view_env
+from timegap_env.envs.info import InfoBlock, write_info_env
 from timegap_env.envs.observation import FollowerState, ObservationScales, encode_env
 from timegap_env.envs.reward import (
     READOUT_STACKS, TERM_STACKS, RewardConstants, RewardTerms, StepReadouts, StepTicks, env_objectives, env_readouts,
@@ -140,12 +142,12 @@ class StepRules(NamedTuple):
 
 
 @numba.njit(cache=True, error_model="numpy", **NO_ALLOCATION)  # allocates nothing (see timegap_env.compiled)
-def fused_step(state, rules, action, view):  # noqa: ANN001, ANN201
+def fused_step(state, rules, action, info):  # noqa: ANN001, ANN201
     """One decision step of every env: ``action`` (n_envs, 1) ladder indices or relative steps, or (n_envs,
     n_followers) indices per follower, int64, checked by :meth:`~timegap_env.envs.action.SettingLadder.check`
     (numba checks no bounds; a raise here would cost seconds of compilation); ``state`` (:class:`StepState`) is
-    updated in place under ``rules`` (:class:`StepRules`); each env's per-step info values go into ``view`` (an
-    :class:`~timegap_env.envs.info.InfoView` of every env, or of none: n_envs 0)."""
+    updated in place under ``rules`` (:class:`StepRules`); each env's per-step info values go into ``info`` (an
+    :class:`~timegap_env.envs.info.InfoBlock` of every env, or of none: n_envs 0)."""
     state, rules = StepState(*state), StepRules(*rules)
     platoon_args, zoh, faults = unstack_platoon(state.platoon), unstack_zoh(state.zoh), unstack_faults(state.faults)
     sensor_faults, readout_args = unstack_sensor_faults(state.sensor_faults), unstack_readouts(state.readouts)
@@ -173,7 +175,7 @@ def fused_step(state, rules, action, view):  # noqa: ANN001, ANN201
     constants = RewardConstants(*rules.reward)
     faults_start, faults_end = faults[0], faults[1]
     skipped, half_width = WindowMemory(*memory).skipped, ObservationScales(*rules.scales).half_width
-    last, viewed = n_ticks - 1, view[0].shape[1] > 0
+    last, writes_info = n_ticks - 1, InfoBlock(*info).floats.shape[1] > 0
     for e in range(n_envs):
         _prefetch(state, e + 1)  # the next env's rows come in while this env's stages run
         _change_settings(platoon_args, state.controller, memory, chart_args, rules, action, state.changed,
@@ -207,9 +209,9 @@ def fused_step(state, rules, action, view):  # noqa: ANN001, ANN201
         state.terminated[e] = collided
         state.truncated[e] = platoon.ticks[e] >= state.episode_ticks[e] and not collided
         encode_env(follower, rules.scales, state.observation, e)
-        if viewed:
-            view_env(moments.mean_tau, moments.var_tau, platoon.setting, center, half_width, chart.side, platoon.v2v,
-                     skipped, state.terms[0], state.objectives[0], state.cost, view, e)
+        if writes_info:
+            write_info_env(moments.mean_tau, moments.var_tau, platoon.setting, center, half_width, chart.side,
+                           platoon.v2v, skipped, state.terms[0], state.objectives[0], state.cost, info, e)
     chart_tick[0] += n_ticks
 
 

@@ -27,7 +27,7 @@ from timegap_env.compiled import compiled_entry, restack
 from timegap_env.config import TIME_GAP_MIN_SPEED, EnvConfig
 from timegap_env.envs.action import SettingLadder
 from timegap_env.envs.episodes import Episodes, check_reset_options
-from timegap_env.envs.info import TRUTH_PREFIX, VIEW_FLAGS, VIEW_FLOATS, InfoView, prefixed, view_envs
+from timegap_env.envs.info import TRUTH_PREFIX, VIEW_FLAGS, VIEW_FLOATS, InfoBlock, prefixed, write_info_envs
 from timegap_env.envs.observation import FEATURES, FollowerState, ObservationScales, observe_into
 from timegap_env.envs.rendering import DEFAULT_TIME_WINDOW, RenderFrame
 from timegap_env.envs.reward import (
@@ -138,13 +138,12 @@ class PlatoonTask:
         self._result = StepResult(reward=np.zeros(n_envs), term_rows=np.zeros((len(REWARD_TERMS), n_envs)),
                                   objective_rows=np.zeros((len(REWARD_TERMS), n_envs)), cost=np.zeros(n_envs),
                                   terminated=np.zeros(n_envs, dtype=bool), truncated=np.zeros(n_envs, dtype=bool))
-        self._no_result = dataclasses.replace(self._result, term_rows=np.zeros_like(self._result.term_rows),
-                                              objective_rows=np.zeros_like(self._result.objective_rows),
-                                              cost=np.zeros_like(self._result.cost))  # a reset's scores: none
+        self._no_scores = (np.zeros_like(self._result.term_rows), np.zeros_like(self._result.objective_rows),
+                           np.zeros_like(self._result.cost))  # a reset's info: no step's terms, objectives, cost
         self._changed = np.zeros((n_envs, self.n_followers), dtype=bool)
         self._observation = np.zeros((n_envs, self.n_followers, len(FEATURES)), dtype=np.float32)
-        self._view = InfoView.empty(n_envs, self.n_followers, config.info_keys)  # what monitor_info copies from
-        self._no_view = InfoView.empty(0, self.n_followers, config.info_keys)  # a step that writes no view
+        self._info_block = tuple(InfoBlock.empty(n_envs, self.n_followers, config.info_keys))  # monitor_info's
+        self._no_info = tuple(InfoBlock.empty(0, self.n_followers, config.info_keys))  # a step writing no info
         self._rules = tuple(StepRules.from_config(config, self.ladder.rule, self.loop.chart.rule,
                                                   tuple(self._reward_constants), np.array(self._weights),
                                                   tuple(self._scales)))
@@ -153,13 +152,13 @@ class PlatoonTask:
         #                                    are changed in place, never replaced)
         self._fused_step: Any = None  # fused_step compiled for the types of _state, _rules and a checked action, at
         #                                the first fused step
-        self._view_envs: Any = None  # view_envs compiled for the types of the arguments write_view hands it
+        self._write_info_envs: Any = None  # write_info_envs compiled for the types of the arguments write_info hands it
 
     def __getstate__(self) -> dict[str, Any]:
         """For copy and pickle: everything but the fused step's state, whose stacks of the task's arrays a copy
         would detach from them, and the compiled entries; :meth:`__setstate__` builds the state again from the copy's
         arrays, the next calls the entries."""
-        return {**self.__dict__, "_state": None, "_fused_step": None, "_view_envs": None,
+        return {**self.__dict__, "_state": None, "_fused_step": None, "_write_info_envs": None,
                 "_state_built": self._state is not None}
 
     def __setstate__(self, state: dict[str, Any]) -> None:
@@ -242,22 +241,25 @@ class PlatoonTask:
         """Apply the action (checked against the action space), run one decision interval of ticks, and score it."""
         return self._run_step(self.ladder.check(action))
 
-    def _run_step(self, action: np.ndarray, view: InfoView | None = None) -> StepResult:
+    def _run_step(self, action: np.ndarray, block: tuple | None = None) -> StepResult:
         """:meth:`step` for an action that :meth:`SettingLadder.check` returned (the single env checks its own; the
-        fused step checks nothing), writing each env's per-step info values into ``view`` (an
-        :class:`~timegap_env.envs.info.InfoView` of every env, or None)."""
+        fused step checks nothing), writing each env's per-step info values into ``block`` (an
+        :class:`~timegap_env.envs.info.InfoBlock` of every env as a plain tuple, or None: none written)."""
         if self._state is None:
             raise RuntimeError("PlatoonTask.step() before reset(): reset every env first")
-        view = self._no_view if view is None else view
+        block = self._no_info if block is None else block
+        n_written = block[0].shape[1]  # InfoBlock.floats' n_envs
+        if n_written not in (0, self.n_envs):  # the compiled step checks no bounds
+            raise ValueError(f"an InfoBlock of {n_written} envs: must be of n_envs = {self.n_envs} or 0")
         if self.fused and self.trace is None:
             if self._fused_step is None:  # compiled for these types (SettingLadder.check gives every action one type)
-                self._fused_step = compiled_entry(fused_step, self._state, self._rules, action, view)
-            self._fused_step(self._state, self._rules, action, view)
+                self._fused_step = compiled_entry(fused_step, self._state, self._rules, action, block)
+            self._fused_step(self._state, self._rules, action, block)
             self.loop.monitor.posterior_written()
         else:
             self._staged_step(action)
-            if view.floats.shape[1]:
-                self.write_view(view, scored=True)
+            if n_written:
+                self.write_info(block, scored=True)
         return self._result
 
     def _staged_step(self, action: np.ndarray) -> None:
@@ -310,24 +312,24 @@ class PlatoonTask:
         """The monitor's view now, what every info holds: arrays nothing else holds (rows of fresh copies), each
         (n_envs, n_followers). ``estimate``: the posterior mean of tau [s]; ``estimate_std`` [s]; ``setting``: tau*
         asked for [s]; ``lcl``, ``ucl``: the chart's limits [s]; ``alarm``; ``v2v``: the flag the follower sees (CACC
-        when True); ``skipped_measurements`` since reset [-] (:func:`~timegap_env.envs.info.view_env`)."""
-        self.write_view(self._view, scored=False)
-        floats, flags, skipped, _ = self._view
+        when True); ``skipped_measurements`` since reset [-] (:func:`~timegap_env.envs.info.write_info_env`)."""
+        self.write_info(self._info_block, scored=False)
+        floats, flags, skipped, _ = self._info_block
         return {**dict(zip(VIEW_FLOATS, floats.copy())), **dict(zip(VIEW_FLAGS, flags.copy())),
                 "skipped_measurements": skipped.copy()}
 
-    def write_view(self, view: InfoView, scored: bool) -> None:
-        """Every env's per-step info values now into ``view`` (n_envs of them), in one compiled pass
-        (:func:`~timegap_env.envs.info.view_envs`): the monitor's view and, if ``scored``, the last step's scores
-        (else zeros, a reset's)."""
+    def write_info(self, block: tuple, scored: bool) -> None:
+        """Every env's per-step info values now into ``block`` (an InfoBlock of n_envs, a plain tuple), in one
+        compiled pass (:func:`~timegap_env.envs.info.write_info_envs`): the monitor's view and, if ``scored``, the last
+        step's scores (else zeros, a reset's)."""
         monitor, chart, platoon = self.loop.monitor, self.loop.chart, self.loop.platoon
-        result = self._result if scored else self._no_result
+        result = self._result
+        scores = (result.term_rows, result.objective_rows, result.cost) if scored else self._no_scores
         arguments = (monitor.moments.mean_tau, monitor.moments.var_tau, platoon.setting, chart.center,
-                     self._scales.half_width, chart.side, platoon.v2v, monitor.skipped, result.term_rows,
-                     result.objective_rows, result.cost, view)
-        if self._view_envs is None:  # the same types at every call
-            self._view_envs = compiled_entry(view_envs, *arguments)
-        self._view_envs(*arguments)
+                     self._scales.half_width, chart.side, platoon.v2v, monitor.skipped, *scores, block)
+        if self._write_info_envs is None:  # the same types at every call
+            self._write_info_envs = compiled_entry(write_info_envs, *arguments)
+        self._write_info_envs(*arguments)
 
     def truth_info(self) -> dict[str, np.ndarray]:
         """What only the simulator knows, fresh arrays, each (n_envs, n_followers) unless noted: the platoon's true
