@@ -11,7 +11,7 @@ import numpy as np
 
 from timegap_env.config import EnvConfig, shown
 from timegap_env.envs.action import action_space
-from timegap_env.envs.info import EPISODE_PREFIX, EnvInfoSet, EnvInfoPool, info_flags, of_env, prefixed
+from timegap_env.envs.info import EPISODE_PREFIX, EnvInfoPool, EnvInfoSet, info_flags, of_env, prefixed
 from timegap_env.envs.observation import observation_space
 from timegap_env.envs.rendering import DEFAULT_TIME_WINDOW
 from timegap_env.envs.task import PlatoonTask

@@ -30,7 +30,7 @@ With ``EnvConfig.info_keys = "v1"`` (``TimeGapMonitor-v1``'s default) it also ho
 - with ``truth_info=True``, ``truth_regime`` (): the leader's regime now, an index into
   :func:`~timegap_env.leaders.scenarios.regime_names` (:func:`truth_of` gives the name).
 
-A single env writes its per-step values into arrays it reuses (:class:`EnvInfoSet`), but only arrays nothing
+A single env writes its per-step values into arrays it reuses (:class:`EnvInfoPool`), but only arrays nothing
 outside the env references any more: an info's arrays never change while anything holds them, as if they were fresh.
 
 The native vector env's infos are what gymnasium's own vector envs make of these (arrays with a
@@ -119,6 +119,9 @@ def write_info_envs(mean_tau, var_tau, setting, center, half_width, side, v2v, s
                        cost, block, e)
 
 
+INFO_SETS = 2  # sets an EnvInfoPool reuses: the info being returned and the one the caller may still hold
+
+
 class EnvInfoSet:
     """One :class:`InfoBlock` of a single env (n_envs 1, a plain tuple) and the info's values as views of it: the
     monitor's view and the scores (the reward terms, 0-d views, and with ``info_keys`` "v1" ``vector_reward``,
@@ -153,7 +156,7 @@ def _reference_counts(objects: tuple[object, ...]) -> list[int]:
 class EnvInfoPool:
     """The :class:`EnvInfoSet` a single env writes its per-step infos into, reused once nothing outside holds them.
 
-    Fresh arrays for every info (a dozen and a half NumPy objects) cost about as much as the rest of a small step.
+    Fresh arrays for every info (a dozen and a half NumPy objects) cost about a third of a single env's step.
     Instead the pool keeps ``INFO_SETS`` sets and hands out the one given out longest ago if CPython's reference
     counts show that nothing else references it (a loop holds the last info while it takes the next step: hence two
     sets); else it leaves that set to whoever holds it and makes a new one. So a kept info's arrays never change.
@@ -181,8 +184,6 @@ class EnvInfoPool:
     def __setstate__(self, state: dict[str, object]) -> None:
         self.__init__(**state)  # type: ignore[misc]
 
-
-INFO_SETS = 2  # sets an EnvInfoPool reuses: the info being returned and the one the caller may still hold
 
 
 def info_flags(step_diagnostics: object, truth_info: object) -> tuple[bool, bool]:
