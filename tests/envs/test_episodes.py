@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from timegap_env.config import EnvConfig, LeaderConfig
-from timegap_env.envs.episodes import Episodes, check_reset_options, collection_paused
+from timegap_env.compiled import collection_paused
+from timegap_env.envs.episodes import Episodes, check_reset_options
 from timegap_env.leaders.profile import LeaderProfile
 from timegap_env.leaders.regimes import RegimesConfig, regime_schedule
 from timegap_env.leaders.scenarios import LEADER_FAMILIES, LeaderFamily, register_family, regime_names

@@ -10,15 +10,14 @@ other draws as they were.
 
 from __future__ import annotations
 
-import contextlib
-import gc
 import hashlib
 import math
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
 
+from timegap_env.compiled import collection_paused
 from timegap_env.config import EnvConfig, shown
 from timegap_env.leaders.profile import LeaderProfile, LeaderProfiles
 from timegap_env.leaders.scenarios import (
@@ -66,20 +65,6 @@ def check_reset_options(options: Mapping[str, Any] | None) -> dict[str, Any]:
             raise ValueError(f"reset option leader_speed = {shown(speed)}: must be a series of numbers [m/s], "
                              f"not of {np.asarray(speed).dtype}")
     return options
-
-
-@contextlib.contextmanager
-def collection_paused() -> Iterator[None]:
-    """Python's garbage collector paused in the block, then as it was: a batched draw makes objects that live on,
-    several per env (its degradations), and collecting as they come walks all the envs' objects again and again
-    (0.2 s of a reset of 65,536 envs; afterwards one collection of the young objects takes 0.06 s)."""
-    enabled = gc.isenabled()
-    gc.disable()
-    try:
-        yield
-    finally:
-        if enabled:
-            gc.enable()
 
 
 class Episodes:
