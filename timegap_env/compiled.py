@@ -164,7 +164,7 @@ def compiled_entry(kernel: Dispatcher, *args: Any) -> Callable:
     of every argument again at each call (for the fused step's ~110, more than the unpacking), the compiled function
     does not. It reads whatever it is given as those types, so arguments of other types are the caller's error to
     prevent. Python's garbage collector is paused while it compiles: numba makes objects by the hundred thousand,
-    and collecting as they come walked them again and again (about a tenth of a cold first step's CPU time)."""
+    and collecting as they come walked them again and again."""
     with collection_paused():
         return kernel.compile(tuple(numba.typeof(arg) for arg in args))
 

@@ -133,7 +133,7 @@ def interleaved_steps_per_second(envs: dict[str, tuple[gym.Env, int]], rounds: i
     """Steps/s of each env {name: (env, steps per round)} over all its rounds, the envs taking turns round
     by round, so that a slow spell of a shared machine hits all of them rather than one. The order rotates by one
     env each round, so that no env always runs right after the same one: an env runs its first steps with what the
-    one before left in the caches (after highway-env's, about a tenth slower; ``rounds`` a multiple of the number of
+    one before left in the caches (after highway-env's, slower; ``rounds`` a multiple of the number of
     envs gives each the same turns)."""
     for env, _ in envs.values():
         env.reset(seed=0)
@@ -351,7 +351,7 @@ def table(rows: list[Row], quick: bool) -> str:
         "",
         "- Single envs take turns over several rounds, their order rotating each round (an env runs its first steps "
         "with what the one before left in the caches), random actions, resets included; highway-fast-v0 is timed "
-        "apart after them (whichever env ran right after it was about a tenth slower).",
+        "apart after them (whichever env ran right after it ran slower).",
         ("- The native vector env runs in this one process on one core (numba's kernels are single-threaded), "
         "random actions, the sizes taking turns over several rounds (all of them held at once); its stepping is "
         "timed within episodes (all sub-envs start together, so their episodes "
