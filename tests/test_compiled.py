@@ -151,3 +151,55 @@ def test_a_cache_index_naming_a_class_that_is_gone_is_compiled_anew(tmp_path):
         out = subprocess.run([sys.executable, "-c", "import renamed"], capture_output=True, text=True, env=environment,
                              cwd=tmp_path)
         assert out.returncode == 0 and out.stdout.strip() == "2.0", out.stderr[-2000:]
+
+
+def test_a_cache_is_fresh_by_content_not_by_modification_time(tmp_path):
+    """A cached kernel is loaded from a copy of its module with a new modification time (what installing a wheel
+    does to its files), compiled again when a followed module's content changes, and
+    ``precompile.compiled_not_loaded`` tells the two apart."""
+    import os
+    import subprocess
+    import sys
+
+    source = ("import numba\nfrom timegap_env.compiled import follow_sources\nimport helper\n"
+              "@numba.njit(cache=True)\ndef kernel(x):\n    return x + helper.OFFSET\n"
+              "follow_sources(('stamped',), reached=('helper',))\nprint(kernel(1.0))\n"
+              "from timegap_env.precompile import compiled_not_loaded\nprint(compiled_not_loaded())\n")
+
+    def run(folder, offset):
+        folder.mkdir(exist_ok=True)
+        (folder / "stamped.py").write_text(source)
+        (folder / "helper.py").write_text(f"OFFSET = {offset}\n")
+        environment = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "cache"), "PYTHONPATH": str(folder)}
+        out = subprocess.run([sys.executable, "-c", "import stamped"], capture_output=True, text=True, env=environment,
+                             cwd=folder)
+        assert out.returncode == 0, out.stderr[-2000:]
+        return out.stdout.split()
+
+    assert run(tmp_path / "a", 1.0) == ["2.0", "[]"]  # kernels outside the package are not counted
+    first = next((tmp_path / "cache").rglob("stamped.kernel-*.nbi"))
+    written = first.stat().st_mtime_ns
+    os.utime(tmp_path / "a" / "stamped.py", ns=(0, 0))  # a new modification time, the same content: loaded
+    assert run(tmp_path / "a", 1.0) == ["2.0", "[]"] and first.stat().st_mtime_ns == written
+    assert run(tmp_path / "a", 2.0) == ["3.0", "[]"] and first.stat().st_mtime_ns != written  # helper changed
+
+
+def test_precompile_names_the_package_kernels_a_process_compiled(tmp_path):
+    import os
+    import subprocess
+    import sys
+
+    code = ("import numpy as np\nimport timegap_env\nfrom timegap_env.monitoring.batch import _all_finite\n"
+            "_all_finite(np.ones(2))\nfrom timegap_env.precompile import compiled_not_loaded\n"
+            "print(compiled_not_loaded())\n")
+    environment = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path)}
+    runs = [subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=environment)
+            for _ in range(2)]
+    assert [run.stdout.strip() for run in runs] == ["['timegap_env.monitoring.batch._all_finite']", "[]"], runs
+
+
+def test_a_kernel_is_stamped_by_one_call_only():
+    from timegap_env.compiled import follow_sources
+
+    with pytest.raises(ValueError, match="stamped by two calls"):
+        follow_sources(("timegap_env.sim.platoon",))  # the step's call stamps its kernels with the step's modules

@@ -260,31 +260,42 @@ def _replace_rows(item: Any, rows: dict[int, np.ndarray], done: dict[int, Any]) 
     return done[id(item)]
 
 
-def follow_sources(modules: tuple[str, ...]) -> None:
-    """Make the numba cache of every kernel in ``modules`` (imported, by name) go stale when any of those modules'
-    files changes, as when its own file does.
+def follow_sources(modules: tuple[str, ...], reached: tuple[str, ...] = ()) -> None:
+    """Make the numba cache of every kernel defined in ``modules`` (imported, by name) fresh exactly while the
+    contents of ``modules``' and ``reached``'s files are unchanged; ``reached``: modules whose kernels or constants
+    those kernels compile in but which this call does not stamp (each kernel is stamped by one call only).
 
-    numba reloads a cached kernel while the kernel's own file is unchanged; a kernel carries the compiled code of
-    the kernels it calls, inlined or not, also those of other files (the fused step every stage's, a stage the
-    kernels it calls in turn), so an edit there alone would leave it running the old code. Each cache's source
-    stamp becomes its own file's and a hash of all ``modules``' contents. numba 0.68 keeps it in the dispatcher's
-    ``_cache._cache_file._source_stamp``; should that move, the kernel's own file alone decides, as numba does.
+    numba stamps a cache with its kernel's own file's modification time and size, and reloads it while they are
+    unchanged. Two things break that. A kernel carries the compiled code of the kernels it calls, inlined or not,
+    also those of other files (the fused step every stage's, a stage the kernels it calls in turn), so an edit there
+    alone would leave it running the old code. And installing a file gives it a new modification time, so the cache
+    a wheel ships (:mod:`timegap_env.precompile`) would always look stale. Each cache's source stamp becomes a hash
+    of the contents instead. numba 0.68 keeps the stamp in the dispatcher's ``_cache._cache_file._source_stamp``;
+    should that move, numba's own stamp decides.
 
     An index numba cannot read back counts as stale too: numba unpickles a cache's index before it compares the
     stamps, and an index written by an older version of these modules may name a class that is gone (a NamedTuple
     of a cached signature, renamed), which would raise at the kernel's first call instead of compiling it again.
     """
     digest = hashlib.sha256()
-    for module in modules:
+    for module in modules + reached:
         source = sys.modules[module].__file__
         assert source is not None  # the package's modules are files
         digest.update(Path(source).read_bytes())
+    stamp = f"sha256 of {', '.join(modules + reached)}: {digest.hexdigest()}"
     for kernel in _kernels(modules):
         cache_file = getattr(getattr(kernel, "_cache", None), "_cache_file", None)
-        if cache_file is not None and hasattr(cache_file, "_source_stamp"):
-            cache_file._source_stamp = (cache_file._source_stamp, digest.hexdigest())
-        if cache_file is not None and hasattr(cache_file, "_load_index"):
-            cache_file._load_index = _readable_or_stale(cache_file._load_index)
+        if cache_file is None:
+            continue
+        if getattr(cache_file, "_followed", stamp) != stamp:
+            raise ValueError(f"follow_sources: kernel {kernel.py_func.__qualname__} of {kernel.py_func.__module__} "
+                             "is stamped by two calls; list its module in one call's modules, in others' reached")
+        cache_file._followed = stamp
+        if hasattr(cache_file, "_source_stamp"):
+            cache_file._source_stamp = stamp
+        if hasattr(cache_file, "_load_index") and not hasattr(cache_file, "_load_numba_index"):
+            cache_file._load_numba_index = cache_file._load_index
+            cache_file._load_index = _readable_or_stale(cache_file._load_numba_index)
 
 
 def _readable_or_stale(load_index: Callable[[], dict]) -> Callable[[], dict]:

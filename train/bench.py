@@ -14,8 +14,9 @@ rates. The targets are issue 16's, raised by issue 27 (the default env against C
    against the 256-env figure and CartPole-v1's steps/s, peak memory per env (tracemalloc), 256 envs with
    the per-step diagnostics on, and 64 envs against a ``SyncVectorEnv`` of single envs;
 3. batched reset, ``envs.reset(seed=0)`` at 4,096 and 65,536 envs, against creating as many NumPy generators;
-4. cold start: a child process's CPU and wall seconds to its first ``env.step``, with an empty numba cache
-   and a warm one, against a child stepping CartPole-v1;
+4. cold start: a child process's CPU and wall seconds to its first ``env.step``: right after ``pip install`` of
+   the package's wheel (whose build compiled the kernels into it), with an empty numba cache and with a warm
+   one, against a child stepping CartPole-v1;
 5. the share of PPO's time (``make train``'s setting) spent in the env, and the most a free env could gain;
 6. the batched simulator (vehicle-ticks/s) and the batched monitor (against a NumPy add of the same arrays).
 
@@ -56,7 +57,7 @@ TARGET_VECTOR_BASE = 256  # envs
 TARGET_VECTOR_SPREAD = 0.2  # every size's env-steps/s within this fraction of the base size's [-]
 TARGET_RESET_SECONDS = 2.0  # envs.reset(seed=0) at TARGET_RESET_ENVS envs [s]
 TARGET_RESET_ENVS = 65_536
-TARGET_COLD_CPU = 5.0  # first step with an empty numba cache [CPU s]
+TARGET_COLD_CPU = 5.0  # first step after a fresh install of the wheel [CPU s]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -300,14 +301,18 @@ def cold_start_rows(sizes: Sizes) -> list[Row]:
     start = bench_cold.measure(timegap_env.ENV_ID, sizes.cold_repeats)
     ref = start.reference
     rows = []
-    for label, run in (("empty numba cache", start.cold), ("warm numba cache", start.warm)):
-        target = verdict(f"< {TARGET_COLD_CPU:.0f} CPU s", run.cpu_seconds < TARGET_COLD_CPU) if run is start.cold else ""
+    for label, run in (("after pip install of the wheel", start.installed), ("empty numba cache", start.cold),
+                       ("warm numba cache", start.warm)):
+        target = (verdict(f"< {TARGET_COLD_CPU:.0f} CPU s", run.cpu_seconds < TARGET_COLD_CPU)
+                  if run is start.installed else "")
         rows += [
             Row(f"first step from python -c, {label} [CPU s]", f"{run.cpu_seconds:.2f}",
                 f"CartPole-v1 child: {ref.cpu_seconds:.2f}", f"{run.cpu_seconds / ref.cpu_seconds:.1f}x", target),
             Row(f"first step from python -c, {label} [wall s]", f"{run.wall_seconds:.2f}",
                 f"CartPole-v1 child: {ref.wall_seconds:.2f}", f"{run.wall_seconds / ref.wall_seconds:.1f}x"),
         ]
+    rows.append(Row("building the wheel, its kernels compiled into it (pip wheel) [wall s]",
+                    f"{start.wheel_build_seconds:.1f}"))
     rows.append(Row("numba functions compiled by the empty-cache run [.nbi files]", f"{start.compiled}"))
     return rows
 
@@ -361,8 +366,12 @@ def table(rows: list[Row], quick: bool) -> str:
         f"traced set-up would take over {bench_vector.TRACE_BUDGET:.0f} s (tracing slows a per-env Python reset "
         "loop several times over)."),
         ("- Cold start: CPU seconds (the child's `time.process_time()`) and wall seconds from `python -c` to the "
-        "first `env.step` returning (imports, `gym.make`, reset, one step), `NUMBA_CACHE_DIR` a fresh directory, "
-        "then the same directory again (warm, median of the runs); the reference child steps CartPole-v1 once."),
+        "first `env.step` returning (imports, `gym.make`, reset, one step). After pip install: the wheel built "
+        "from a copy of this tree (`pip wheel`, whose build compiles the kernels into the wheel: "
+        "`timegap_env.precompile`), installed into an empty folder, imported from there with `NUMBA_CACHE_DIR` "
+        "unset. Empty cache: `NUMBA_CACHE_DIR` a fresh directory (what an editable install's first run, or a "
+        "wheel built without its cache, compiles); warm: the same directory again (median of the runs). The "
+        "reference child steps CartPole-v1 once."),
         ("- PPO: `hyperparams/ppo.yml` as `make train` runs it (TimeGapVecEnv, VecNormalize, MlpPolicy, CPU, one "
         "torch thread), after one untimed rollout; the env's share is the time in its `step_wait` and `reset`."),
         "",

@@ -19,7 +19,7 @@ from collections.abc import Callable
 import numba
 import numpy as np
 
-from timegap_env.compiled import NO_ALLOCATION, compiled_entry
+from timegap_env.compiled import NO_ALLOCATION, compiled_entry, follow_sources
 from timegap_env.envs.step_kernel import StepState, fused_step
 from timegap_env.envs.vector_env import TimeGapMonitorVectorEnv
 
@@ -70,3 +70,7 @@ def measure(calls: int) -> SingleEnvSplit:
             unpack = compiled_entry(_unpack_only, task._state, task._rules, action, info)
             unpacking = microseconds(lambda: unpack(task._state, task._rules, action, info), calls)
     return SingleEnvSplit(call=times[1], unpacking=unpacking, arithmetic=times[ARITHMETIC_ENVS] / ARITHMETIC_ENVS)
+
+
+# Its kernel: numba's cache by content
+follow_sources(("timegap_env.benchmarks.single",), reached=("timegap_env.compiled",))

@@ -29,6 +29,7 @@ from typing import NamedTuple, TypeVar
 import numba
 import numpy as np
 
+from timegap_env.compiled import follow_sources
 from timegap_env.config import (
     MAX_ACCEL,
     MAX_DURATION,
@@ -464,3 +465,7 @@ def _pursue_targets(normal, uniform, motion):  # noqa: ANN001, ANN202
             now, accel[row, k] = _step_in_band(now, motion.speed_gain * (target - now) + noise, motion.dt, motion.low,
                                                motion.high)
     return speed, accel
+
+
+# The leaders' kernels (profile's too: the package's leaders import this module): numba's cache by content
+follow_sources(("timegap_env.leaders.profile", "timegap_env.leaders.synthetic"), reached=("timegap_env.config",))

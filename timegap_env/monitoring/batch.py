@@ -9,6 +9,8 @@ import numba
 import numpy as np
 from numpy.typing import ArrayLike
 
+from timegap_env.compiled import follow_sources
+
 
 def batch_shape(n_envs: int, n_vehicles: int) -> tuple[int, int]:
     """(n_envs, n_vehicles), both checked to be integers >= 1."""
@@ -86,3 +88,7 @@ def _all_finite(values):  # noqa: ANN001, ANN202
         if not np.isfinite(value):
             return False
     return True
+
+
+# Its kernel: numba's cache by content
+follow_sources(("timegap_env.monitoring.batch",))

@@ -21,6 +21,7 @@ import numba
 import numpy as np
 from numpy.typing import ArrayLike
 
+from timegap_env.compiled import follow_sources
 from timegap_env.config import PlatoonConfig
 from timegap_env.monitoring.batch import batch_array, batch_shape, env_mask, setting_array
 from timegap_env.sim.platoon import actual_time_gap
@@ -182,3 +183,7 @@ def _rls_kernel(speed, spacing, memory, forgetting, tau_out):  # noqa: ANN001, A
                     memory.p_s0_tau[e, i] /= forgetting
                     memory.p_tau[e, i] /= forgetting
                 tau_out[k, e, i] = memory.tau[e, i]
+
+
+# Its kernel: numba's cache by content
+follow_sources(("timegap_env.monitoring.detectors",), reached=("timegap_env.config",))

@@ -36,6 +36,7 @@ import numba
 import numpy as np
 from scipy.optimize import OptimizeResult, least_squares
 
+from timegap_env.compiled import follow_sources
 from timegap_env.config import PlatoonConfig
 from timegap_env.leaders.openacc import valid_stretches
 from timegap_env.sim.platoon import Controller, ZOHCoefficients, cth_command, follower_tick
@@ -251,3 +252,7 @@ def _best_fit(
     results = [least_squares(residuals, np.clip(start, lower, upper), bounds=(lower, upper), x_scale="jac",
                              max_nfev=MAX_EVALUATIONS) for start in starts]
     return min(results, key=lambda result: result.cost)
+
+
+# Its kernel, which runs the platoon's: numba's cache by content
+follow_sources(("timegap_env.sim.calibration",), reached=("timegap_env.config", "timegap_env.sim.platoon"))
