@@ -154,8 +154,8 @@ def test_a_cache_index_naming_a_class_that_is_gone_is_compiled_anew(tmp_path):
 
 
 def test_a_cache_is_fresh_by_content_not_by_modification_time(tmp_path):
-    """A cached kernel is loaded from a copy of its module with a new modification time (what installing a wheel
-    does to its files), compiled again when a followed module's content changes, and
+    """A cached kernel is loaded from its module with a new modification time (what installing a wheel does to its
+    files; numba before 0.68 read that as stale), compiled again when a module it reaches changes, and
     ``precompile.compiled_not_loaded`` tells the two apart."""
     import os
     import subprocess

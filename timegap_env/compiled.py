@@ -265,12 +265,13 @@ def follow_sources(modules: tuple[str, ...], reached: tuple[str, ...] = ()) -> N
     contents of ``modules``' and ``reached``'s files are unchanged; ``reached``: modules whose kernels or constants
     those kernels compile in but which this call does not stamp (each kernel is stamped by one call only).
 
-    numba stamps a cache with its kernel's own file's modification time and size, and reloads it while they are
-    unchanged. Two things break that. A kernel carries the compiled code of the kernels it calls, inlined or not,
-    also those of other files (the fused step every stage's, a stage the kernels it calls in turn), so an edit there
-    alone would leave it running the old code. And installing a file gives it a new modification time, so the cache
-    a wheel ships (:mod:`timegap_env.precompile`) would always look stale. Each cache's source stamp becomes a hash
-    of the contents instead. numba 0.68 keeps the stamp in the dispatcher's ``_cache._cache_file._source_stamp``;
+    numba stamps a cache with its kernel's own file only (0.68: a hash of its contents; before: its modification
+    time and size) and reloads it while that is unchanged. Two things break that. A kernel carries the compiled
+    code of the kernels it calls, inlined or not, also those of other files (the fused step every stage's, a stage
+    the kernels it calls in turn), so an edit there alone would leave it running the old code. And, before numba
+    0.68, installing a file gave it a new modification time, so the cache a wheel ships
+    (:mod:`timegap_env.precompile`) would always look stale. Each cache's source stamp becomes a hash of all these
+    contents instead. numba 0.68 keeps the stamp in the dispatcher's ``_cache._cache_file._source_stamp``;
     should that move, numba's own stamp decides.
 
     An index numba cannot read back counts as stale too: numba unpickles a cache's index before it compares the
