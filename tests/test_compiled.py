@@ -203,3 +203,26 @@ def test_a_kernel_is_stamped_by_one_call_only():
 
     with pytest.raises(ValueError, match="stamped by two calls"):
         follow_sources(("timegap_env.sim.platoon",))  # the step's call stamps its kernels with the step's modules
+
+
+def test_prefetch_item_hints_any_element_and_changes_nothing():
+    from numba.core.errors import TypingError
+
+    from timegap_env.compiled import prefetch_item
+
+    @numba.njit
+    def hinted(values, ring):  # noqa: ANN001, ANN202
+        prefetch_item(values, (1, 3))  # a row's middle
+        prefetch_item(ring, (0, 1))  # the remaining index 0
+        prefetch_item(ring, (5, 100, 7))  # far past the end: a hint never faults
+        return values.sum() + ring.sum()
+
+    values, ring = np.arange(12.0).reshape(2, 6), np.arange(24, dtype=np.int64).reshape(2, 3, 4)
+    assert hinted(values, ring) == values.sum() + ring.sum()
+
+    @numba.njit
+    def too_many(values):  # noqa: ANN001, ANN202
+        prefetch_item(values, (0, 0, 0))
+
+    with pytest.raises(TypingError):
+        too_many(values)

@@ -16,7 +16,8 @@ while inlining these three added no measurable compile time. ``_nrt`` is a priva
 A kernel called from Python pays for each array it is handed, at every call (numba unpacks them one by one):
 :class:`Stacked` hands the fused step a structure's arrays of one dtype and shape as the rows of one
 stack, which the structure's owner allocates as such. :func:`prefetch_env` and :func:`prefetch_rows` ask the CPU
-for an env's rows ahead of their use (each layout's ``prefetch`` for all of a structure's).
+for an env's rows ahead of their use (each layout's ``prefetch`` for all of a structure's), :func:`prefetch_item`
+for one element where an env reads a row in the middle.
 """
 
 from __future__ import annotations
@@ -134,6 +135,27 @@ def prefetch_rows(typingctx, stack, e):  # noqa: ANN001, ANN201
     return types.none(stack, e), _prefetch_codegen(axis=1)
 
 
+@intrinsic
+def prefetch_item(typingctx, array, index):  # noqa: ANN001, ANN201
+    """Hint the cache line of ``array[index]`` in, to be read and written soon, ``index`` a tuple of integers, the
+    array's remaining indices 0: for rows an env reads at a place that moves from step to step (the leader's
+    samples, a ring's slots), which :func:`prefetch_env` (the row's start) misses. Never changes a result nor
+    faults (see :func:`prefetch_env`). Compiled code only."""
+    if not (isinstance(array, types.Array) and isinstance(index, types.UniTuple)
+            and isinstance(index.dtype, types.Integer) and index.count <= array.ndim):
+        return None  # a typing error: an array and a tuple of at most ndim integers
+
+    def codegen(context, builder, signature, args):  # noqa: ANN001, ANN202
+        array_type, index_type = signature.args
+        indices = [context.cast(builder, value, index_type.dtype, types.intp)
+                   for value in cgutils.unpack_tuple(builder, args[1], index_type.count)]
+        zero = context.get_constant(types.intp, 0)
+        _hint(context, builder, array_type, args[0], indices + [zero] * (array_type.ndim - index_type.count))
+        return context.get_dummy_value()
+
+    return types.none(array, index), codegen
+
+
 def _prefetch_codegen(axis: int) -> Callable:
     """The code of a hint at index ``e`` on ``axis`` (0, or 1 with every index of axis 0), the other indices 0."""
 
@@ -142,20 +164,27 @@ def _prefetch_codegen(axis: int) -> Callable:
         if not isinstance(array_type, types.Array) or array_type.ndim <= axis:
             return context.get_dummy_value()
         array = context.make_array(array_type)(context, builder, args[0])
-        shape, strides = cgutils.unpack_tuple(builder, array.shape), cgutils.unpack_tuple(builder, array.strides)
         zero, env = context.get_constant(types.intp, 0), context.cast(builder, args[1], index_type, types.intp)
-        byte_pointer, flag = ir.IntType(8).as_pointer(), ir.IntType(32)
-        hint = cgutils.get_or_insert_function(
-            builder.module, ir.FunctionType(ir.VoidType(), [byte_pointer, flag, flag, flag]), "llvm.prefetch.p0i8")
-        rows = shape[0] if axis else context.get_constant(types.intp, 1)
+        rows = cgutils.unpack_tuple(builder, array.shape)[0] if axis else context.get_constant(types.intp, 1)
         with cgutils.for_range(builder, rows) as loop:
             indices = ([loop.index, env] if axis else [env]) + [zero] * (array_type.ndim - axis - 1)
-            pointer = cgutils.get_item_pointer2(context, builder, array.data, shape, strides, array_type.layout,
-                                                indices, wraparound=False, boundscheck=False)
-            builder.call(hint, [builder.bitcast(pointer, byte_pointer), flag(1), flag(3), flag(1)])  # write, keep, data
+            _hint(context, builder, array_type, args[0], indices)
         return context.get_dummy_value()
 
     return codegen
+
+
+def _hint(context: Any, builder: ir.IRBuilder, array_type: types.Array, value: Any, indices: list) -> None:
+    """LLVM's prefetch (to be written soon, kept in every cache level) of the element at ``indices`` of the array
+    ``value``, no bounds checked."""
+    array = context.make_array(array_type)(context, builder, value)
+    shape, strides = cgutils.unpack_tuple(builder, array.shape), cgutils.unpack_tuple(builder, array.strides)
+    pointer = cgutils.get_item_pointer2(context, builder, array.data, shape, strides, array_type.layout, indices,
+                                        wraparound=False, boundscheck=False)
+    byte_pointer, flag = ir.IntType(8).as_pointer(), ir.IntType(32)
+    hint = cgutils.get_or_insert_function(
+        builder.module, ir.FunctionType(ir.VoidType(), [byte_pointer, flag, flag, flag]), "llvm.prefetch.p0i8")
+    builder.call(hint, [builder.bitcast(pointer, byte_pointer), flag(1), flag(3), flag(1)])  # write, keep, data
 
 
 def compiled_entry(kernel: Dispatcher, *args: Any) -> Callable:
@@ -322,4 +351,4 @@ def _kernels(modules: tuple[str, ...]) -> Iterable[Dispatcher]:
 
 
 __all__ = ["INLINED_STAGE_KERNEL", "NO_ALLOCATION", "STACKED", "STAGE_KERNEL", "Stacked", "collection_paused",
-           "compiled_entry", "follow_sources", "prefetch_env", "prefetch_rows", "restack"]
+           "compiled_entry", "follow_sources", "prefetch_env", "prefetch_item", "prefetch_rows", "restack"]
