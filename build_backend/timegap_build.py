@@ -39,13 +39,14 @@ class BuildPy(build_py):
     (not for an editable install, nor with ``TIMEGAP_ENV_PRECOMPILE=0``)."""
 
     def run(self) -> None:
+        built = Path(self.build_lib)
+        if not getattr(self, "editable_mode", False):  # what an earlier build left (its cache, modules since
+            shutil.rmtree(built / PACKAGE, ignore_errors=True)  # deleted) is not this source's
         super().run()
         if getattr(self, "editable_mode", False) or os.environ.get(SWITCH) == "0":
             return
-        built = Path(self.build_lib)
-        for cache in (built / PACKAGE).rglob("__pycache__"):  # a cache an earlier build left: not this source's
-            shutil.rmtree(cache)
-        environment = {name: value for name, value in os.environ.items() if name != "NUMBA_CACHE_DIR"}
+        # numba's settings (NUMBA_CACHE_DIR, NUMBA_OPT, NUMBA_DISABLE_JIT, ...) are the user's, not the wheel's
+        environment = {name: value for name, value in os.environ.items() if not name.startswith("NUMBA_")}
         environment["PYTHONPATH"] = os.pathsep.join([str(built.resolve()), *filter(None, [os.environ.get("PYTHONPATH")])])
         done = subprocess.run([sys.executable, "-m", f"{PACKAGE}.precompile"], cwd=built, env=environment,
                               capture_output=True, text=True, check=False)

@@ -198,9 +198,21 @@ def test_precompile_names_the_package_kernels_a_process_compiled(tmp_path):
     assert [run.stdout.strip() for run in runs] == ["['timegap_env.monitoring.batch._all_finite']", "[]"], runs
 
 
-def test_a_kernel_is_stamped_by_one_call_only():
+def test_a_kernel_is_stamped_by_one_call_only(tmp_path, monkeypatch):
+    """Two different calls may not stamp one kernel; the same call again (a module reloaded after an edit) may."""
+    import importlib
+
     from timegap_env.compiled import follow_sources
 
+    (tmp_path / "stamped_twice.py").write_text("import numba\n@numba.njit(cache=True)\ndef kernel(x):\n"
+                                               "    return x\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path / "cache"))
+    importlib.import_module("stamped_twice")
+    follow_sources(("stamped_twice",))
+    follow_sources(("stamped_twice",))
+    with pytest.raises(ValueError, match="stamped by two calls"):
+        follow_sources(("stamped_twice",), reached=("timegap_env.config",))
     with pytest.raises(ValueError, match="stamped by two calls"):
         follow_sources(("timegap_env.sim.platoon",))  # the step's call stamps its kernels with the step's modules
 

@@ -43,7 +43,8 @@ def _say_when_compiling() -> None:
         from numba.misc.appdirs import AppDirs
 
         user_wide = Path(AppDirs(appname="numba", appauthor=False).user_cache_dir)
-        cached = [*Path(__file__).parent.glob(f"envs/__pycache__/{kernel}"), *user_wide.glob(f"envs_*/{kernel}")]
+        in_tree = Path(__file__).parent / "envs" / "__pycache__"  # numba uses it only where it may write there
+        cached = [*(in_tree.glob(kernel) if os.access(in_tree, os.W_OK) else []), *user_wide.glob(f"envs_*/{kernel}")]
     if not cached:
         _log.warning("timegap_env: the first run compiles the simulator's kernels (about 10 CPU-seconds, "
                      "cached for every later run)")

@@ -312,15 +312,15 @@ def follow_sources(modules: tuple[str, ...], reached: tuple[str, ...] = ()) -> N
         source = sys.modules[module].__file__
         assert source is not None  # the package's modules are files
         digest.update(Path(source).read_bytes())
-    stamp = f"sha256 of {', '.join(modules + reached)}: {digest.hexdigest()}"
+    stamp, call = f"sha256 of {', '.join(modules + reached)}: {digest.hexdigest()}", (modules, reached)
     for kernel in _kernels(modules):
         cache_file = getattr(getattr(kernel, "_cache", None), "_cache_file", None)
         if cache_file is None:
             continue
-        if getattr(cache_file, "_followed", stamp) != stamp:
+        if getattr(cache_file, "_followed", call) != call:  # the same call again (a module reloaded) may restamp
             raise ValueError(f"follow_sources: kernel {kernel.py_func.__qualname__} of {kernel.py_func.__module__} "
                              "is stamped by two calls; list its module in one call's modules, in others' reached")
-        cache_file._followed = stamp
+        cache_file._followed = call
         if hasattr(cache_file, "_source_stamp"):
             cache_file._source_stamp = stamp
         if hasattr(cache_file, "_load_index") and not hasattr(cache_file, "_load_numba_index"):

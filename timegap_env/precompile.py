@@ -4,8 +4,10 @@ Building the wheel runs it (``pip install .``, ``pip wheel``, ``python -m build`
 ``build_backend/timegap_build.py``), on the built copy of the package, so that the wheel carries the cache in its
 ``__pycache__`` folders and the first ``env.step`` after installing it loads the kernels instead of compiling them
 (about 1 CPU-second instead of about 12: ``make bench``'s cold start). numba uses that cache where the installed
-package's folders are writable, ``NUMBA_CACHE_DIR`` is unset, and its version and the CPU are those of the build
-(numba keys each kernel by CPU name and features); anywhere else the first step compiles, as it would without it.
+package's folders are writable, ``NUMBA_CACHE_DIR`` is unset, and the Python minor version, the numba release and
+the CPU are the build's (numba keys each kernel by CPU name and features and drops an index another release
+wrote; pip's isolated build takes the newest numba, ``pip install --no-build-isolation .`` the venv's own);
+anywhere else the first step compiles, as it would without it.
 
 It makes, resets and steps ``TimeGapMonitor-v0`` and ``-v1``, one env and a native vector env of each (what
 ``gym.make`` and ``gym.make_vec`` give), behind every leader family that draws its episodes in a batch (the

@@ -310,6 +310,6 @@ prefetch_terms = TERM_STACKS.prefetch
 follow_sources(tuple(f"timegap_env.{module}" for module in (  # every kernel the step runs, and the step
     "compiled", "config", "envs.action", "sim.counter_noise", "sim.platoon", "monitoring.sensors", "monitoring.monitor",
     "monitoring.posterior", "monitoring.charts", "envs.reward", "envs.totals", "envs.observation", "envs.info",
-    "envs.step_kernel")))
+    "envs.step_kernel")), reached=("timegap_env.monitoring.loop",))  # loop: SAME_SETTING
 
 __all__ = ["StepRules", "StepScratch", "StepState", "fused_step"]
