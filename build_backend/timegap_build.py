@@ -47,7 +47,8 @@ class BuildPy(build_py):
             return
         # numba's settings (NUMBA_CACHE_DIR, NUMBA_OPT, NUMBA_DISABLE_JIT, ...) are the user's, not the wheel's
         environment = {name: value for name, value in os.environ.items() if not name.startswith("NUMBA_")}
-        environment["PYTHONPATH"] = os.pathsep.join([str(built.resolve()), *filter(None, [os.environ.get("PYTHONPATH")])])
+        inherited = [os.environ["PYTHONPATH"]] if os.environ.get("PYTHONPATH") else []  # pip's isolated build's
+        environment["PYTHONPATH"] = os.pathsep.join([str(built.resolve()), *inherited])
         done = subprocess.run([sys.executable, "-m", f"{PACKAGE}.precompile"], cwd=built, env=environment,
                               capture_output=True, text=True, check=False)
         if done.returncode != 0:

@@ -103,7 +103,8 @@ def install_wheel(work: Path) -> tuple[Path, float]:
                             str(tree)], capture_output=True, text=True, check=False)
     seconds = time.perf_counter() - start
     if built.returncode != 0:
-        raise RuntimeError(f"building the wheel failed ({built.returncode}): {built.stdout[-2000:]}{built.stderr[-2000:]}")
+        raise RuntimeError(f"building the wheel failed ({built.returncode}): "
+                           f"{built.stdout[-2000:]}{built.stderr[-2000:]}")
     wheel = next((work / "dist").glob("*.whl"))
     installed = subprocess.run([*pip, "install", "--no-deps", "--target", str(work / "site"), str(wheel)],
                                capture_output=True, text=True, check=False)
