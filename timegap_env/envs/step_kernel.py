@@ -263,7 +263,8 @@ def _prefetch_moving(leader_speed, leader_accel, ticks, starts, first_slot, last
     :func:`_prefetch`'s hints (each row's start) miss: the leader's samples of the step's ticks (``ticks`` its
     ticks so far) and, for each vehicle, the chart ring's slots ``first_slot`` to ``last_slot`` (``starts``, what
     they held a window ago). Each was last read a step ago or a window ago, long out of the caches from a few
-    hundred envs on (a ``perf`` profile of 256 envs put about a tenth of the step's compiled time on these reads)."""
+    hundred envs on (a ``perf`` profile of 256 envs showed them; ``make bench``'s arithmetic per env-step is the
+    measure)."""
     first = min(ticks[e] + 1, leader_speed.shape[1] - 1)
     end = min(first + n_ticks - 1, leader_speed.shape[1] - 1)
     prefetch_item(leader_speed, (e, first))
