@@ -202,8 +202,7 @@ def compiled_entry(kernel: Dispatcher, *args: Any) -> Callable:
 def collection_paused() -> Iterator[None]:
     """Python's garbage collector paused in the block, then as it was: for work that makes many objects that live on
     (numba's compilation; a batched draw of episodes, several objects per env), which collecting as they come would
-    walk again and again (0.2 s of a reset of 65,536 envs; afterwards one collection of the young objects takes
-    0.06 s)."""
+    walk again and again."""
     enabled = gc.isenabled()
     gc.disable()
     try:

@@ -67,7 +67,7 @@ class Sizes:
     rounds: int  # single-env measurements alternate between the envs this many times (a multiple of their 6)
     split_calls: int  # fused-step calls timed for the single env's split (per timing)
     env_steps: int  # steps of TimeGapMonitor-v0 and CartPole-v1 per round
-    highway_steps: int  # steps of highway-fast-v0 per round (it is about 100x slower)
+    highway_steps: int  # steps of highway-fast-v0 per round (far slower: the bench's row says how much)
     ticks: dict[int, int]  # simulator ticks timed per batch size, in blocks of TICKS_PER_BLOCK
     vector_sizes: tuple[int, ...]  # native vector env sizes; the first is the reference size
     vector_seconds: float  # at least this much stepping timed per size [s]
@@ -195,8 +195,8 @@ def single_env_rows(sizes: Sizes) -> tuple[list[Row], float]:
         "cartpole": (gym.make("CartPole-v1"), sizes.env_steps),
     }
     rates = interleaved_steps_per_second(envs, sizes.rounds)
-    highway_fast = {"highway": (gym.make("highway-fast-v0"), sizes.highway_steps)}  # a hundred times slower and
-    highway = interleaved_steps_per_second(highway_fast, sizes.rounds)["highway"]  # heavy on the caches: apart
+    highway_fast = {"highway": (gym.make("highway-fast-v0"), sizes.highway_steps)}  # far slower (its row says how
+    highway = interleaved_steps_per_second(highway_fast, sizes.rounds)["highway"]  # much), heavy on the caches: apart
     envs.update(highway_fast)  # closed with the others below
     ours, cartpole = rates["ours"], rates["cartpole"]
     against_cartpole = f"CartPole-v1, one env: {cartpole:,.0f}"

@@ -156,7 +156,7 @@ def _reference_counts(objects: tuple[object, ...]) -> list[int]:
 class EnvInfoPool:
     """The :class:`EnvInfoSet` a single env writes its per-step infos into, reused once nothing outside holds them.
 
-    Fresh arrays for every info (a dozen and a half NumPy objects) cost about a third of a single env's step.
+    Fresh arrays for every info (a dozen and a half NumPy objects) cost much of a single env's step.
     Instead the pool keeps ``INFO_SETS`` sets and hands out the one given out longest ago if CPython's reference
     counts show that nothing else references it (a loop holds the last info while it takes the next step: hence two
     sets); else it leaves that set to whoever holds it and makes a new one. So a kept info's arrays never change.
@@ -183,7 +183,6 @@ class EnvInfoPool:
 
     def __setstate__(self, state: dict[str, object]) -> None:
         self.__init__(**state)  # type: ignore[misc]
-
 
 
 def info_flags(step_diagnostics: object, truth_info: object) -> tuple[bool, bool]:

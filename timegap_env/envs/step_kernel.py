@@ -174,16 +174,15 @@ def fused_step(state, rules, action, info):  # noqa: ANN001, ANN201
     readouts, totals = StepReadouts(*readout_args), unstack_totals(state.totals)
     constants = RewardConstants(*rules.reward)
     faults_start, faults_end = faults[0], faults[1]
-    skipped, half_width = WindowMemory(*memory).skipped, ObservationScales(*rules.scales).half_width
+    window, half_width = WindowMemory(*memory), ObservationScales(*rules.scales).half_width
     last, writes_info = n_ticks - 1, InfoBlock(*info).floats.shape[1] > 0
     ring_length = chart.starts.shape[2]  # the chart ring's slots this step writes, the same in every env
     first_slot, last_slot = chart_tick[0] % ring_length, (chart_tick[0] + last) % ring_length
     for e in range(n_envs):
         _prefetch(state, e + 1)  # the next env's rows come in while this env's stages run
         if e + 1 < n_envs:
-            _prefetch_moving(state.leader_speed, state.leader_accel, platoon.ticks, chart.starts, first_slot,
-                             last_slot, n_ticks, e + 1)
-            _prefetch_rings(platoon.predecessor_accel, WindowMemory(*memory).slots, slot, n_ticks, e + 1)
+            _prefetch_inside(state.leader_speed, state.leader_accel, platoon, chart.starts, first_slot, last_slot,
+                             window.slots, slot, n_ticks, e + 1)
         _change_settings(platoon_args, state.controller, memory, chart_args, rules, action, state.changed,
                          scratch.targets, e)
         ticks_before = platoon.ticks[e]
@@ -217,7 +216,7 @@ def fused_step(state, rules, action, info):  # noqa: ANN001, ANN201
         encode_env(follower, rules.scales, state.observation, e)
         if writes_info:
             write_info_env(moments.mean_tau, moments.var_tau, platoon.setting, center, half_width, chart.side,
-                           platoon.v2v, skipped, state.terms[0], state.objectives[0], state.cost, info, e)
+                           platoon.v2v, window.skipped, state.terms[0], state.objectives[0], state.cost, info, e)
     chart_tick[0] += n_ticks
 
 
@@ -259,14 +258,15 @@ def _prefetch(state, e):  # noqa: ANN001, ANN202
 
 
 @numba.njit(inline="always")
-def _prefetch_moving(leader_speed, leader_accel, ticks, starts, first_slot, last_slot, n_ticks, e):  # noqa: ANN001, ANN202, PLR0913
-    """Hint in env ``e``'s cache lines that its step reads where they move from step to step, which
-    :func:`_prefetch`'s hints (each row's start) miss: the leader's samples of the step's ticks (``ticks`` its
-    ticks so far) and, for each vehicle, the chart ring's slots ``first_slot`` to ``last_slot`` (``starts``, what
-    they held a window ago). Each was last read a step ago or a window ago, long out of the caches from a few
-    hundred envs on (a ``perf`` profile of 256 envs showed them; ``make bench``'s arithmetic per env-step is the
-    measure)."""
-    first = min(ticks[e] + 1, leader_speed.shape[1] - 1)
+def _prefetch_inside(leader_speed, leader_accel, platoon, starts, first_slot, last_slot, slots, slot, n_ticks, e):  # noqa: ANN001, ANN202, PLR0913
+    """Hint in env ``e``'s cache lines inside its rows that its step reads or writes, which :func:`_prefetch`'s
+    hints (each row's first line) miss: the leader's samples of the step's ticks, for each vehicle the chart ring's
+    slots ``first_slot`` to ``last_slot`` (``starts``, what they held a window ago), the V2V ring (all of it: a step
+    writes nearly every slot; ``platoon`` a :class:`PlatoonState`) and the monitor window's slots from ``slot[e]``
+    on (-1: no window). The leader's and the chart's were last read a step or a window ago, out of the caches from a
+    few hundred envs on; the rings, a few hundred bytes per env, from a few thousand (a ``perf`` profile showed
+    them; ``make bench``'s arithmetic per env-step and its vector env are the measure)."""
+    first = min(platoon.ticks[e] + 1, leader_speed.shape[1] - 1)
     end = min(first + n_ticks - 1, leader_speed.shape[1] - 1)
     prefetch_item(leader_speed, (e, first))
     prefetch_item(leader_speed, (e, end))
@@ -275,15 +275,8 @@ def _prefetch_moving(leader_speed, leader_accel, ticks, starts, first_slot, last
     for i in range(starts.shape[1]):
         prefetch_item(starts, (e, i, first_slot))
         prefetch_item(starts, (e, i, last_slot))
-
-
-@numba.njit(inline="always")
-def _prefetch_rings(predecessor_accel, slots, slot, n_ticks, e):  # noqa: ANN001, ANN202
-    """Hint in env ``e``'s V2V ring (all of it: a step writes nearly every slot) and, for each vehicle, the monitor
-    window's slots its step writes from ``slot[e]`` on (``slot[e]`` -1: no window): rows of a few hundred bytes
-    each, whose first line alone :func:`_prefetch` hints, out of the caches from a few thousand envs on."""
-    for row in range(predecessor_accel.shape[1]):
-        prefetch_item(predecessor_accel, (e, row))
+    for row in range(platoon.predecessor_accel.shape[1]):
+        prefetch_item(platoon.predecessor_accel, (e, row))
     if slot[e] < 0:
         return
     last_row = slots.shape[2] - 1
