@@ -293,6 +293,11 @@ def vector_rows(sizes: Sizes, cartpole: float) -> list[Row]:
                         f"{run.n_envs} x np.random.default_rng(seed + i): {reference:,.3f} s "
                         f"({reference / run.n_envs * 1e6:,.2f} µs per env)",
                         f"{run.reset_seconds / reference:,.1f}x", target))
+        if run.n_envs == TARGET_RESET_ENVS:
+            leaders = bench_vector.leaders_seconds(run.n_envs)
+            rows.append(Row(f"of that reset: building {run.n_envs} leaders of the default mix alone, each family its "
+                            "share (make_leaders) [s]", f"{leaders:,.3f} s",
+                            f"the reset: {run.reset_seconds:,.3f} s", f"{leaders / run.reset_seconds:.2f}x"))
     return rows
 
 

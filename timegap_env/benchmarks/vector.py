@@ -19,9 +19,13 @@ import sys
 import time
 import tracemalloc
 from pathlib import Path
+
 import numpy as np
 
+from timegap_env.config import EnvConfig
+from timegap_env.envs.episodes import LEADER_BATCH
 from timegap_env.envs.vector_env import TimeGapMonitorVectorEnv
+from timegap_env.leaders.scenarios import make_leaders
 
 TRACED_STEPS = 3  # steps taken under tracemalloc after the reset, so that the peak covers stepping too
 ACTION_POOL = 16  # distinct random action batches cycled while timing (sampled beforehand, not timed)
@@ -170,3 +174,18 @@ def generators_seconds(n: int, seed: int = 0) -> float:
     seconds = time.perf_counter() - start
     del generators
     return seconds
+
+
+def leaders_seconds(n: int, seed: int = 0) -> float:
+    """Seconds to build the leaders of n envs of the default mix (``EnvConfig.scenario_weights``), each family its
+    share of them, in batches of LEADER_BATCH as a reset builds them (every sample of every profile drawn and
+    integrated): the part of a batched reset that is arithmetic on the profiles rather than per-env bookkeeping [s]."""
+    config = EnvConfig()
+    weights = config.scenario_weights
+    total = sum(weights.values())
+    start = time.perf_counter()
+    for family, weight in weights.items():
+        count = round(n * weight / total)
+        for first in range(seed, seed + count, LEADER_BATCH):
+            make_leaders(family, list(range(first, min(first + LEADER_BATCH, seed + count))), config.leader)
+    return time.perf_counter() - start

@@ -26,6 +26,7 @@ from timegap_env.envs.info import (
 from timegap_env.envs.episodes import RESET_OPTIONS
 from timegap_env.envs.observation import observation_space
 from timegap_env.envs.task import PlatoonTask
+from timegap_env.generators import generators, unseeded_generators
 
 
 def available_memory() -> int | None:
@@ -118,7 +119,7 @@ class TimeGapMonitorVectorEnv(VectorEnv):
         self.single_action_space = action_space(self.config)
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
         self.action_space = batch_space(self.single_action_space, self.num_envs)
-        self._rngs = [seeding.np_random()[0] for _ in range(self.num_envs)]
+        self._rngs = unseeded_generators(self.num_envs)
         self._steps = np.zeros(self.num_envs, dtype=np.int64)
         self.step_diagnostics, self.truth_info = info_flags(step_diagnostics, truth_info)
         self._was_reset = False  # step() before the first reset() raises gymnasium's ResetNeeded
@@ -145,9 +146,14 @@ class TimeGapMonitorVectorEnv(VectorEnv):
             options = dict(options or {})
             mask = self._reset_mask(options.pop("reset_mask", None))
             seeds = self._seeds(seed)
-            for env in np.flatnonzero(mask):  # unseeded, a sub-env's generator carries on, as a single env's would
-                if seeds[env] is not None:
-                    self._rngs[env] = seeding.np_random(seeds[env])[0]
+            seeded = [env for env in np.flatnonzero(mask).tolist() if seeds[env] is not None]  # unseeded, a sub-env's
+            # generator carries on, as a single env's would
+            for env in seeded:
+                seed_of_env = seeds[env]
+                if not (isinstance(seed_of_env, int) and seed_of_env >= 0):
+                    seeding.np_random(seed_of_env)  # raises gymnasium's error for this seed
+            for env, rng in zip(seeded, generators([seeds[env] for env in seeded])):  # np_random(seed)'s generators
+                self._rngs[env] = rng
             self._reset_task(mask, options or None)
         except BaseException:
             self._half_reset |= mask & self._was_reset

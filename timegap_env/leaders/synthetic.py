@@ -42,6 +42,7 @@ from timegap_env.config import (
     SinusoidConfig,
     StochasticHumanConfig,
 )
+from timegap_env.generators import generators
 from timegap_env.leaders.profile import LeaderProfile, LeaderProfiles, _step_in_band
 
 DRAWS_PER_PHASE = 3  # uniform numbers an aggressive cycle's phase draws: duration, magnitude, cruise or not
@@ -79,8 +80,7 @@ def aggressive_cycles_batch(
                                      leader.dt, 2.0)))
     accel = np.zeros((len(seeds), leader.n_samples))
     n_draws = DRAWS_PER_PHASE * (math.ceil(leader.n_samples * leader.dt / params.phase_duration_range[0]) + 16)
-    for row, seed in enumerate(seeds):
-        rng = np.random.default_rng(seed)
+    for row, rng in enumerate(generators(seeds)):
         sign = (-1.0, 1.0)[int(rng.integers(2))]  # what rng.choice([-1.0, 1.0]) draws, without building an array
         draws = rng.random(n_draws)
         while _cycle_phases(accel[row], sign, draws, tuple(constants)) < 0:  # ran out: draw as many again
@@ -102,8 +102,8 @@ def sinusoid_batch(
     amplitude [m/s], the period [s] and the phase [rad]."""
     low, high = leader.speed_band
     drawn = np.empty((len(seeds), 3))
-    for row, seed in enumerate(seeds):
-        np.random.default_rng(seed).random(out=drawn[row])
+    for row, rng in enumerate(generators(seeds)):
+        rng.random(out=drawn[row])
     amplitude = np.minimum(_uniform(params.amplitude_range, drawn[:, 0]), 0.5 * (high - low))
     period = _uniform(params.period_range, drawn[:, 1])
     phase = _uniform((0.0, 2.0 * np.pi), drawn[:, 2])
@@ -137,8 +137,7 @@ def hard_braking_batch(
     """:func:`hard_braking` of each seed, a row each."""
     accel = np.zeros((len(seeds), leader.n_samples))
     slot = leader.n_samples // params.n_events  # one event per slot, so events never overlap
-    for row, seed in enumerate(seeds):
-        rng = np.random.default_rng(seed)
+    for row, rng in enumerate(generators(seeds)):
         for event in range(params.n_events):
             decel_draw, drop_draw = rng.random(2).tolist()
             decel = _uniform(params.decel_range, decel_draw)
@@ -233,7 +232,7 @@ def stop_and_go_batch(
     seeds: Sequence[int | None], params: StopAndGoConfig = StopAndGoConfig(), leader: LeaderConfig = LeaderConfig()
 ) -> LeaderProfiles:
     """:func:`stop_and_go` of each seed, a row each."""
-    accel = np.stack([_stop_and_go_accel(np.random.default_rng(seed), params, leader) for seed in seeds])
+    accel = np.stack([_stop_and_go_accel(rng, params, leader) for rng in generators(seeds)])
     return LeaderProfiles.from_acceleration(accel, _down_to_standstill(leader), name="stop_and_go")
 
 
@@ -275,7 +274,7 @@ def emergency_braking_batch(
     leader: LeaderConfig = LeaderConfig(),
 ) -> LeaderProfiles:
     """:func:`emergency_braking` of each seed, a row each."""
-    accel = np.stack([_emergency_braking_accel(np.random.default_rng(seed), params, leader) for seed in seeds])
+    accel = np.stack([_emergency_braking_accel(rng, params, leader) for rng in generators(seeds)])
     return LeaderProfiles.from_acceleration(accel, _down_to_standstill(leader), name="emergency_braking")
 
 
@@ -369,8 +368,7 @@ def stochastic_human_batch(
     n, dt = leader.n_samples, leader.dt
     decay = np.exp(-dt / params.accel_correlation_time)
     normal, uniform = np.empty((len(seeds), n)), np.empty((len(seeds), 2 * n))
-    for row, seed in enumerate(seeds):
-        rng = np.random.default_rng(seed)
+    for row, rng in enumerate(generators(seeds)):
         rng.standard_normal(out=normal[row])
         rng.random(out=uniform[row])
     motion = _HumanMotion(*(float(value) for value in (
