@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import copy
+import pickle
+
 import gymnasium
 import numpy as np
 import pytest
@@ -31,6 +34,14 @@ def test_each_generator_draws_what_default_rng_draws():
     seeds = [*EDGES, 5, np.int64(12), np.uint32(4_000_000_000), True, False, [1, 2], np.random.SeedSequence(3)]
     for seed, rng in zip(seeds, generators(seeds), strict=True):
         assert draws(rng) == draws(np.random.default_rng(seed)), seed
+
+
+def test_a_generator_pickles_copies_and_spawns_as_default_rngs_do():
+    ours, numpys = generators([11])[0], np.random.default_rng(11)
+    ours.random(), numpys.random()
+    assert draws(pickle.loads(pickle.dumps(ours))) == draws(copy.deepcopy(ours)) == draws(copy.deepcopy(numpys))
+    for _ in range(2):  # the second spawn's children follow on from the first's
+        assert [draws(child) for child in ours.spawn(2)] == [draws(child) for child in numpys.spawn(2)]
 
 
 def test_a_bad_seed_raises_what_default_rng_raises():

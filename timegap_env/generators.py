@@ -16,7 +16,7 @@ from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
-from numpy.random.bit_generator import ISeedSequence
+from numpy.random.bit_generator import ISpawnableSeedSequence
 
 from timegap_env.compiled import collection_paused
 
@@ -29,22 +29,34 @@ MIX_MULT_L, MIX_MULT_R, XSHIFT = 0xCA01F9DD, 0x4973F715, np.uint32(16)
 WORD = 0xFFFFFFFF
 
 
-class SeedWords(ISeedSequence):
+class SeedWords(ISpawnableSeedSequence):
     """The four 64-bit words that ``SeedSequence(entropy).generate_state(4, np.uint64)`` gives, worked out
-    beforehand: what a PCG64 asks its seed sequence for. Any other request is passed to a real SeedSequence of
-    ``entropy``."""
+    beforehand: what a PCG64 asks its seed sequence for. Anything else (other words, ``spawn``) is asked of a
+    SeedSequence of ``entropy``, made the first time and kept (so that spawned children follow on as its would)."""
 
-    __slots__ = ("entropy", "words")
+    __slots__ = ("entropy", "words", "_sequence")
 
     def __init__(self, entropy: int, words: np.ndarray) -> None:
         self.entropy = entropy  # the seed, as SeedSequence.entropy
         self.words = words  # (STATE_WORDS,) uint64
+        self._sequence: np.random.SeedSequence | None = None
 
     def generate_state(self, n_words: int, dtype: Any = np.uint32) -> np.ndarray:
         """``SeedSequence(entropy).generate_state(n_words, dtype)``."""
         if n_words == STATE_WORDS and np.dtype(dtype) == np.uint64:
             return self.words.copy()
-        return np.random.SeedSequence(self.entropy).generate_state(n_words, dtype)
+        return self.sequence().generate_state(n_words, dtype)
+
+    def spawn(self, n_children: int) -> list[np.random.SeedSequence]:  # type: ignore[override]
+        """``SeedSequence(entropy).spawn(n_children)``, the children numbered on from the ones spawned before
+        (SeedSequences, where numpy's stubs would have them of this class)."""
+        return self.sequence().spawn(n_children)
+
+    def sequence(self) -> np.random.SeedSequence:
+        """The SeedSequence these words are of."""
+        if self._sequence is None:
+            self._sequence = np.random.SeedSequence(self.entropy)
+        return self._sequence
 
 
 @collection_paused()
