@@ -5,8 +5,8 @@
 64-bit words the sequence generates; most of its cost is that sequence's set-up, paid per generator in Python. A
 batched reset makes two generators an env (its own and its leader's), so here the hashing (NumPy's published
 SeedSequence algorithm, on 32-bit words) runs on all the seeds at once, column by column, and each PCG64 takes its
-four words from :class:`SeedWords`. Seeds that are not non-negative ints (None, arrays, a SeedSequence) go to
-``default_rng`` itself.
+four words from :class:`SeedWords`. Seeds that are not non-negative ints (None, bools, arrays, a SeedSequence) go
+to ``default_rng`` itself.
 """
 
 from __future__ import annotations
