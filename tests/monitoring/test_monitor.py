@@ -212,6 +212,36 @@ def test_recenter_moves_the_prior_and_clears_the_window():
     np.testing.assert_allclose(monitor.cov[0, 0], cov[0, 0], rtol=1e-8)
 
 
+@settings(max_examples=40, deadline=None)
+@given(window_ticks=st.integers(2, 12), forgetting=st.sampled_from([1.0, 0.97]), seed=st.integers(0, 2**32 - 1),
+       blocks=st.lists(st.tuples(st.integers(1, 30), st.booleans()), min_size=1, max_size=12))
+def test_a_marked_clearing_gives_the_bits_of_a_written_one(window_ticks, forgetting, seed, blocks):
+    """A change of setting marks the ring as cleared (``cleared_below``) instead of writing zeros into it: every
+    tick's estimate is the one a monitor whose ring is zeroed at each change gives, bit for bit, whatever slot of the
+    block the change comes at, changes in the same block, and resets."""
+    config = MonitorConfig(window=window_ticks * 0.1, forgetting=forgetting)
+    marked, written = (TimeGapMonitor(2, 3, setting=1.6, config=config) for _ in range(2))
+    rng = np.random.default_rng(seed)
+    for n_ticks, reset in blocks:
+        speeds, spacings = corrupt(rng, *synthetic(rng, (n_ticks, 2, 3), tau=rng.uniform(0.8, 2.0)))
+        for monitor in (marked, written):
+            ticks = monitor.update_block(speeds, spacings)
+            if monitor is marked:
+                expected = ticks
+        np.testing.assert_array_equal(ticks.tau_mean, expected.tau_mean)
+        np.testing.assert_array_equal(ticks.tau_var, expected.tau_var)
+        switched, setting = rng.random((2, 3)) < 0.5, rng.uniform(0.8, 2.0, (2, 3))
+        for monitor in (marked, written):
+            if reset:
+                monitor.reset(switched[:, 0], setting)
+            else:
+                monitor.recenter(setting, switched)
+        cleared = np.broadcast_to(switched[:, :1], (2, 3)) if reset else switched
+        written._memory.slots[cleared] = 0.0  # what a clearing wrote before the mark
+        np.testing.assert_array_equal(marked.mean, written.mean)
+        np.testing.assert_array_equal(marked.cov, written.cov)
+
+
 def test_reset_restarts_envs_and_their_skip_counters():
     monitor = TimeGapMonitor(2, 2, setting=1.6)
     rng = np.random.default_rng(7)

@@ -183,7 +183,7 @@ def fused_step(state, rules, action, info):  # noqa: ANN001, ANN201
         if e + 1 < n_envs:
             _prefetch_inside(state.leader_speed, state.leader_accel, platoon, chart.starts, first_slot, last_slot,
                              window.slots, slot, n_ticks, e + 1)
-        _change_settings(platoon_args, state.controller, memory, chart_args, rules, action, state.changed,
+        _change_settings(platoon_args, state.controller, memory, slot, chart_args, rules, action, state.changed,
                          scratch.targets, e)
         ticks_before = platoon.ticks[e]
         for k in range(n_ticks):  # the leader at the end of each tick (held after its episode), V2V during it
@@ -286,12 +286,12 @@ def _prefetch_inside(leader_speed, leader_accel, platoon, starts, first_slot, la
 
 
 @numba.njit(**STAGE_KERNEL)
-def _change_settings(platoon, controller, memory, chart, rules, action, changed, targets, e):  # noqa: ANN001, ANN202, PLR0913
+def _change_settings(platoon, controller, memory, slot, chart, rules, action, changed, targets, e):  # noqa: ANN001, ANN202, PLR0913
     """Env ``e``'s new settings from its action (:func:`~timegap_env.envs.action.ladder_env`, into ``targets``
     (n_followers,)); a follower whose setting changes (``changed``) ramps to it, its prior and chart are re-centred
     (the window's data and the chart's history cleared) and its alarms held off while it ramps and settles (see
     :meth:`~timegap_env.monitoring.loop.MonitoredPlatoon.change_setting`). ``platoon``, ``controller``, ``memory``
-    (:class:`WindowMemory`) and ``chart`` are :class:`StepState`'s."""
+    (:class:`WindowMemory`), ``slot`` (the window's next slots) and ``chart`` are :class:`StepState`'s."""
     platoon, controller = PlatoonState(*platoon), Controller(*controller)
     chart_memory, center, statistic, chart_tick = chart
     ladder_env(rules.ladder, action, platoon.setting, e, targets)
@@ -301,7 +301,7 @@ def _change_settings(platoon, controller, memory, chart, rules, action, changed,
         if not changed[e, f]:
             continue
         platoon.setting[e, f] = setting
-        recenter_env(memory, setting, e, f)
+        recenter_env(memory, slot, setting, e, f)
         applied = platoon.applied_setting[e, f]
         restart_env(rules.chart, chart_memory, center, statistic, chart_tick[0], applied, e, f)
         ramp_ticks = math.ceil(abs(setting - applied) / controller.max_setting_change)

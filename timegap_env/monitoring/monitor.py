@@ -45,6 +45,9 @@ class WindowMemory(NamedTuple):
     window_sums: np.ndarray  # (n_envs, n_vehicles, N_SUMS) forgetting-weighted sum of the window
     skipped: np.ndarray  # (n_envs, n_vehicles) int64 measurements skipped since reset [-]
     prior_tau: np.ndarray  # (n_envs, n_vehicles) prior mean of tau, the setting tau* [s]
+    cleared_below: np.ndarray  # (n_envs, n_vehicles) int64: the window was cleared by a change of setting (or a
+    # reset) when the block had reached this slot: this block's slots below it, and the previous block's suffix
+    # sums, read as zeros until the block is full; -1: nothing cleared since
 
 
 WINDOW_STACKS = Stacked(WindowMemory, (("block_sum", "window_sums"),))
@@ -105,7 +108,9 @@ class TimeGapMonitor:
     additions of at most 2W terms, so the error is bounded and does not grow with time. When
     a block is full it is turned into suffix sums in place: O(W) work every W ticks,
     amortised O(1) per tick. A block of ticks makes the same additions in the same order as
-    tick by tick.
+    tick by tick. A change of setting clears a vehicle's window by a mark, not by writing its
+    ring (``cleared_below``): until its block is full, the block's slots before the mark and the
+    previous block's suffix sums read as zeros, the numbers a written clearing would give.
     """
 
     def __init__(
@@ -122,6 +127,7 @@ class TimeGapMonitor:
             window_sums=sums[1],
             skipped=np.zeros(self.shape, dtype=np.int64),
             prior_tau=np.empty(self.shape),
+            cleared_below=np.full(self.shape, -1, dtype=np.int64),
         )
         self._rule = WindowRule(
             max_speed=float(config.max_speed),
@@ -212,7 +218,8 @@ class TimeGapMonitor:
         """
         setting, vehicles = setting_array(setting, self.shape), vehicle_mask(mask, self.shape)
         memory = self._memory
-        _recenter(self._kernel_args[0], np.ascontiguousarray(setting, dtype=float), np.ascontiguousarray(vehicles))
+        _recenter(self._kernel_args[0], self._slot, np.ascontiguousarray(setting, dtype=float),
+                  np.ascontiguousarray(vehicles))
         if self._rule.raw_gap and self._moments is not None:  # the others keep their last tick's raw gap
             fresh = Moments(*np.zeros((len(Moments._fields),) + self.shape))
             _posterior_of_window(memory.window_sums, memory.prior_tau, tuple(self._prior), tuple(fresh))
@@ -296,25 +303,26 @@ class TimeGapMonitor:
 
 
 @numba.njit(cache=True, error_model="numpy")
-def _recenter(memory, settings, vehicles):  # noqa: ANN001, ANN202
-    """:func:`recenter_env` for every vehicle of ``vehicles`` (n_envs, n_vehicles) bool, on ``settings`` [s]."""
+def _recenter(memory, slot, settings, vehicles):  # noqa: ANN001, ANN202
+    """:func:`recenter_env` for every vehicle of ``vehicles`` (n_envs, n_vehicles) bool, on ``settings`` [s]; ``slot``
+    (n_envs,) each env's next ring slot."""
     for e in range(vehicles.shape[0]):
         for f in range(vehicles.shape[1]):
             if vehicles[e, f]:
-                recenter_env(memory, settings[e, f], e, f)
+                recenter_env(memory, slot, settings[e, f], e, f)
 
 
 @numba.njit(**STAGE_KERNEL)
-def recenter_env(memory, setting, e, f):  # noqa: ANN001, ANN201
+def recenter_env(memory, slot, setting, e, f):  # noqa: ANN001, ANN201
     """Vehicle ``f`` of env ``e`` under a new setting [s]: its prior mean of tau moves there and its window's data
-    are cleared (see :meth:`TimeGapMonitor.recenter`); ``memory`` is :class:`WindowMemory` (a plain tuple)."""
+    are cleared (see :meth:`TimeGapMonitor.recenter`); ``memory`` is :class:`WindowMemory` (a plain tuple), ``slot``
+    (n_envs,) each env's next ring slot. The sums are zeroed; the ring's slots are not written but marked
+    (``cleared_below``): :func:`update_env` reads them as the zeros they would hold."""
     memory = WindowMemory(*memory)
     memory.prior_tau[e, f] = setting
-    window = memory.slots[e, f]  # (W + 1, N_SUMS)
-    for n in range(window.shape[1]):
+    memory.cleared_below[e, f] = slot[e]
+    for n in range(memory.block_sum.shape[2]):
         memory.block_sum[e, f, n] = memory.window_sums[e, f, n] = 0.0
-        for m in range(window.shape[0]):
-            window[m, n] = 0.0
 
 
 @numba.njit(cache=True, error_model="numpy")
@@ -356,7 +364,7 @@ def update_env(  # noqa: ANN201, PLR0913
     sums, prior_taus, mean_tau, var_tau = work[:N_SUMS], work[N_SUMS], work[N_SUMS + 1], work[N_SUMS + 2]
     decay = rule.forgetting
     for i in range(n_vehicles):  # the sums in scalars: b the block's, w the window's
-        p, prior_tau = first_slot, memory.prior_tau[e, i]
+        p, prior_tau, cleared = first_slot, memory.prior_tau[e, i], memory.cleared_below[e, i]
         b0, b1, b2, b3, b4 = block_sum[i, 0], block_sum[i, 1], block_sum[i, 2], block_sum[i, 3], block_sum[i, 4]
         for k in range(n_ticks):
             v, s = speed[k, c, i], spacing[k, c, i]
@@ -375,9 +383,13 @@ def update_env(  # noqa: ANN201, PLR0913
                 w0, w1, w2, w3, w4 = b0, b1, b2, b3, b4
             else:
                 slots[i, p, 0], slots[i, p, 1], slots[i, p, 2], slots[i, p, 3], slots[i, p, 4] = x0, x1, x2, x3, x4
-                suffix, weight = slots[i, p + 1], rule.suffix_weight[p]
-                w0, w1, w2 = suffix[0] * weight + b0, suffix[1] * weight + b1, suffix[2] * weight + b2
-                w3, w4 = suffix[3] * weight + b3, suffix[4] * weight + b4
+                s0 = s1 = s2 = s3 = s4 = 0.0  # the previous block's suffix, cleared
+                if cleared < 0:
+                    suffix = slots[i, p + 1]
+                    s0, s1, s2, s3, s4 = suffix[0], suffix[1], suffix[2], suffix[3], suffix[4]
+                weight = rule.suffix_weight[p]
+                w0, w1, w2 = s0 * weight + b0, s1 * weight + b1, s2 * weight + b2
+                w3, w4 = s3 * weight + b3, s4 * weight + b4
             j = k * n_vehicles + i
             sums[0, j], sums[1, j], sums[2, j], sums[3, j], sums[4, j], prior_taus[j] = w0, w1, w2, w3, w4, prior_tau
             if rule.raw_gap:
@@ -391,13 +403,15 @@ def update_env(  # noqa: ANN201, PLR0913
                 continue
             if p < window_ticks - 1:
                 p += 1
-            else:  # the block is full: turn it into suffix sums
+            else:  # the block is full: turn it into suffix sums (its slots before a clearing count as zeros)
                 for m in range(window_ticks - 2, -1, -1):
                     for n in range(N_SUMS):
-                        slots[i, m, n] = slots[i, m, n] * rule.age_weight[m] + slots[i, m + 1, n]
+                        kept = slots[i, m, n] if m >= cleared else 0.0
+                        slots[i, m, n] = kept * rule.age_weight[m] + slots[i, m + 1, n]
                 b0 = b1 = b2 = b3 = b4 = 0.0
-                p = 0
+                p, cleared = 0, -1
         block_sum[i, 0], block_sum[i, 1], block_sum[i, 2], block_sum[i, 3], block_sum[i, 4] = b0, b1, b2, b3, b4
+        memory.cleared_below[e, i] = cleared
         window_sums[i, 0], window_sums[i, 1], window_sums[i, 2] = w0, w1, w2
         window_sums[i, 3], window_sums[i, 4] = w3, w4
         slot[e] = p
