@@ -12,7 +12,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from timegap_env.envs.vector_env import TimeGapMonitorVectorEnv
-from timegap_env.generators import SeedWords, generators, seed_words, unseeded_generators
+import timegap_env.generators
+from timegap_env.generators import HASHED_FROM, SeedWords, generators, seed_words, unseeded_generators
 
 EDGES = [0, 1, 2**31 - 1, 2**32 - 1, 2**32, 2**63, 2**64 - 1, 2**64, 2**127, 2**128 - 1, 2**128, 2**130 + 7, 10**60]
 
@@ -23,6 +24,15 @@ def draws(rng: np.random.Generator) -> list:
             *rng.standard_normal(3), int(rng.integers(7))]
 
 
+@pytest.fixture(params=[True, False], ids=["hashed", "below HASHED_FROM"])
+def hashed(request, monkeypatch):
+    """Both ways generators() makes a few generators: hashed in arrays (HASHED_FROM lowered to 1) or, below
+    HASHED_FROM, by default_rng one by one."""
+    if request.param:
+        monkeypatch.setattr(timegap_env.generators, "HASHED_FROM", 1)
+    return request.param
+
+
 @settings(max_examples=300, deadline=None)
 @given(st.lists(st.integers(0, 2**300), min_size=1, max_size=20))
 def test_the_words_are_seed_sequences(seeds):
@@ -30,13 +40,13 @@ def test_the_words_are_seed_sequences(seeds):
     np.testing.assert_array_equal(seed_words(seeds), expected)
 
 
-def test_each_generator_draws_what_default_rng_draws():
+def test_each_generator_draws_what_default_rng_draws(hashed):
     seeds = [*EDGES, 5, np.int64(12), np.uint32(4_000_000_000), True, False, [1, 2], np.random.SeedSequence(3)]
     for seed, rng in zip(seeds, generators(seeds), strict=True):
         assert draws(rng) == draws(np.random.default_rng(seed)), seed
 
 
-def test_a_generator_pickles_copies_and_spawns_as_default_rngs_do():
+def test_a_generator_pickles_copies_and_spawns_as_default_rngs_do(hashed):
     ours, numpys = generators([11])[0], np.random.default_rng(11)
     ours.random(), numpys.random()
     assert draws(pickle.loads(pickle.dumps(ours))) == draws(copy.deepcopy(ours)) == draws(copy.deepcopy(numpys))
@@ -44,7 +54,7 @@ def test_a_generator_pickles_copies_and_spawns_as_default_rngs_do():
         assert [draws(child) for child in ours.spawn(2)] == [draws(child) for child in numpys.spawn(2)]
 
 
-def test_a_bad_seed_raises_what_default_rng_raises():
+def test_a_bad_seed_raises_what_default_rng_raises(hashed):
     with pytest.raises(ValueError, match="negative") as ours:
         generators([3, -1])
     with pytest.raises(ValueError) as numpys:
@@ -66,15 +76,16 @@ def test_unseeded_generators_differ():
 
 
 def test_a_sub_env_draws_the_episode_a_single_env_of_its_seed_draws():
-    envs = TimeGapMonitorVectorEnv(3)
+    n_envs = HASHED_FROM + 1  # hashed in arrays
+    envs = TimeGapMonitorVectorEnv(n_envs)
     try:
-        envs.reset(seed=[7, None, 2**70])
-        for sub_env, seed in ((0, 7), (2, 2**70)):
+        envs.reset(seed=[7, None, 2**70, *range(n_envs - 3)])
+        for sub_env, seed in ((0, 7), (2, 2**70), (n_envs - 1, n_envs - 4)):
             single = gymnasium.make("TimeGapMonitor-v0").unwrapped
             single.reset(seed=seed)
             assert envs.task.episodes.fingerprint(sub_env) == single.task.episodes.fingerprint(0)
         for seed in (-1, 1.5, np.int64(3)):
             with pytest.raises(gymnasium.error.Error, match="Seed must"):
-                envs.reset(seed=[0, seed, 1])
+                envs.reset(seed=[0, seed, *range(1, n_envs - 1)])
     finally:
         envs.close()

@@ -23,6 +23,8 @@ from timegap_env.compiled import collection_paused
 POOL_SIZE = 4  # SeedSequence's pool of 32-bit words (its default)
 STATE_WORDS = 4  # 64-bit words a PCG64 is seeded with
 ENTROPY_BITS = 128  # what SeedSequence() draws from the OS for an unseeded generator
+HASHED_FROM = 32  # fewer int seeds than this go to default_rng one by one: hashing in arrays costs a hundred-odd
+# NumPy calls whatever the number of seeds (make bench times both ways at this many seeds)
 # SeedSequence's hash constants
 INIT_A, MULT_A, INIT_B, MULT_B = 0x43B0D7E5, 0x931E8875, 0x8B51F9DD, 0x58F38DED
 MIX_MULT_L, MIX_MULT_R, XSHIFT = 0xCA01F9DD, 0x4973F715, np.uint32(16)
@@ -61,8 +63,10 @@ class SeedWords(ISpawnableSeedSequence):
 
 @collection_paused()
 def generators(seeds: Sequence[Any]) -> list[np.random.Generator]:
-    """``[np.random.default_rng(seed) for seed in seeds]``, the same draws, made faster for int seeds."""
+    """``[np.random.default_rng(seed) for seed in seeds]``, the same draws, made faster for many int seeds."""
     hashed = [i for i, seed in enumerate(seeds) if _is_entropy(seed)]
+    if len(hashed) < HASHED_FROM:
+        hashed = []
     entropy = [int(seeds[i]) for i in hashed]
     made: list[np.random.Generator | None] = [None] * len(seeds)
     for i, seed, row in zip(hashed, entropy, seed_words(entropy)):

@@ -46,6 +46,7 @@ from timegap_env.benchmarks import single as bench_single
 from timegap_env.benchmarks import vector as bench_vector
 from timegap_env.benchmarks.monitor import bench as bench_monitor
 from timegap_env.config import MonitorConfig, PlatoonConfig
+from timegap_env.generators import HASHED_FROM
 from timegap_env.sim import Platoon
 
 TARGET_VS_HIGHWAY = 100.0  # single env steps/s over highway-fast-v0's [-]
@@ -294,6 +295,10 @@ def vector_rows(sizes: Sizes, cartpole: float) -> list[Row]:
                         f"({reference / run.n_envs * 1e6:,.2f} µs per env)",
                         f"{run.reset_seconds / reference:,.1f}x", target))
         if run.n_envs == TARGET_RESET_ENVS:
+            for n in (HASHED_FROM, run.n_envs):
+                ours, numpys = bench_vector.seeding_seconds(n)
+                rows.append(Row(f"its generators: timegap_env.generators of {n} seeds [s]", f"{ours:,.4f} s",
+                                f"{n} x np.random.default_rng: {numpys:,.4f} s", f"{ours / numpys:.2f}x"))
             leaders = bench_vector.leaders_seconds(run.n_envs)
             rows.append(Row(f"of that reset: building {run.n_envs} leaders of the default mix alone, each family its "
                             "share (make_leaders) [s]", f"{leaders:,.3f} s",

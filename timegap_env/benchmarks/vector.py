@@ -18,6 +18,7 @@ import gc
 import sys
 import time
 import tracemalloc
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -25,11 +26,13 @@ import numpy as np
 from timegap_env.config import EnvConfig
 from timegap_env.envs.episodes import LEADER_BATCH
 from timegap_env.envs.vector_env import TimeGapMonitorVectorEnv
+from timegap_env.generators import generators
 from timegap_env.leaders.scenarios import make_leaders
 
 TRACED_STEPS = 3  # steps taken under tracemalloc after the reset, so that the peak covers stepping too
 ACTION_POOL = 16  # distinct random action batches cycled while timing (sampled beforehand, not timed)
 TRACE_BUDGET = 60.0  # longest traced set-up (build, reset, TRACED_STEPS steps) allowed, extrapolated [s]
+SEEDING_RUNS = 5  # runs of each way of making generators, the best kept
 STATUS, CLEAR_REFS = Path("/proc/self/status"), Path("/proc/self/clear_refs")
 
 
@@ -170,10 +173,25 @@ def generators_seconds(n: int, seed: int = 0) -> float:
     """Seconds to create (and hold) n NumPy generators ``np.random.default_rng(seed + i)``: the floor of seeding
     n envs one generator each, a reference for the batched reset [s]."""
     start = time.perf_counter()
-    generators = [np.random.default_rng(seed + i) for i in range(n)]
+    made = [np.random.default_rng(seed + i) for i in range(n)]
     seconds = time.perf_counter() - start
-    del generators
+    del made
     return seconds
+
+
+def seeding_seconds(n: int, seed: int = 0) -> tuple[float, float]:
+    """Seconds to make n generators seeded ``seed + i`` with :func:`timegap_env.generators.generators` and with
+    ``np.random.default_rng`` one by one, each the best of SEEDING_RUNS runs [s]."""
+    seeds = list(range(seed, seed + n))
+
+    def seconds(make: Callable[[], list[np.random.Generator]]) -> float:
+        start = time.perf_counter()
+        make()
+        return time.perf_counter() - start
+
+    ours, numpys = (min(seconds(make) for _ in range(SEEDING_RUNS))
+                    for make in (lambda: generators(seeds), lambda: [np.random.default_rng(s) for s in seeds]))
+    return ours, numpys
 
 
 def leaders_seconds(n: int, seed: int = 0) -> float:
