@@ -366,9 +366,10 @@ def count_excursions_env(memory, first_tick, block, e, column):  # noqa: ANN001,
     starts = memory.starts[e]  # (n_vehicles, window ticks)
     ring_length = starts.shape[1]
     c = column
+    slot = first_tick % ring_length - 1  # the ring slot before the block's first tick's, then counted on
     for k in range(n_ticks):
         tick = first_tick + k
-        slot = tick % ring_length
+        slot = slot + 1 if slot + 1 < ring_length else 0  # tick % ring_length
         for i in range(n_vehicles):
             now = block.side[k, c, i] if hold_off[e, i] == 0 else 0
             hold_off[e, i] = max(hold_off[e, i] - 1, 0)

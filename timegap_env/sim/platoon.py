@@ -491,9 +491,10 @@ def advance_env(state, leader, zoh, controller, faults, out, e, column):  # noqa
     buffer_length = ring.shape[0]
     nominal_delay = controller.v2v_delay_ticks
     c = column
-    for k in range(n_ticks):
+    slot = state.ticks[e] % buffer_length - 1  # the ring slot before the block's first tick's, then counted on (a
+    for k in range(n_ticks):  # division per tick was a measurable share of the step)
         tick = state.ticks[e] + k
-        slot = tick % buffer_length
+        slot = slot + 1 if slot + 1 < buffer_length else 0  # tick % buffer_length
         nominal_slot = _ring_back(slot, nominal_delay, buffer_length)  # (tick - nominal_delay) % buffer_length
         for i in range(n_followers, 0, -1):  # vehicle i is follower f = i - 1
             f = i - 1
