@@ -167,7 +167,7 @@ class TimeGapMonitorEnv(gym.Env):
             info_set = self._infos.take()
             self.task.write_info(info_set.block, scored=False)
             info = self._info(info_set)
-        return self.task.observation()[0].ravel(), info
+        return self.task.observation().ravel(), info
 
     def __getstate__(self) -> dict[str, Any]:
         """For copy and pickle: everything but the renderer (pygame surfaces and fonts do not pickle), which the next
@@ -187,7 +187,7 @@ class TimeGapMonitorEnv(gym.Env):
             self._needs_reset = True
         if self.render_mode == "human":
             self.render()
-        return self.task.observation()[0].ravel(), float(result.reward[0]), terminated, truncated, info
+        return self.task.observation().ravel(), float(result.reward[0]), terminated, truncated, info  # its one env's
 
     def _checked(self, action: Any) -> np.ndarray:
         """``action`` as the task takes it, int64 (1, 1) or (1, N); ``ValueError`` unless the action space's ``contains``

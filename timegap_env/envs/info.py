@@ -141,16 +141,18 @@ class EnvInfoSet:
         self.info = {**self.monitor, **self.scored}  # what an info holds, its keys in order
         self._held = (*self.block, *self.info.values())
         del floats, flags, skipped, scores  # so that the counts below see only this set's own references
-        self._counts = _reference_counts(self._held)  # with nothing outside holding any of them
+        self._count = _reference_count(self._held)  # with nothing outside holding any of them
 
     def unheld(self) -> bool:
         """Whether nothing but this set references its arrays and views: no info dict, none of its values, no view
-        of them (a view of a view references the array that owns the memory)."""
-        return _reference_counts(self._held) == self._counts
+        of them (a view of a view references the array that owns the memory). While the set holds them no count
+        falls below its own, so the sum is its own only when every count is."""
+        return _reference_count(self._held) == self._count
 
 
-def _reference_counts(objects: tuple[object, ...]) -> list[int]:
-    return list(map(sys.getrefcount, objects))
+def _reference_count(objects: tuple[object, ...]) -> int:
+    """The sum of ``objects``' reference counts."""
+    return sum(map(sys.getrefcount, objects))
 
 
 class EnvInfoPool:
