@@ -34,7 +34,9 @@ WORD = 0xFFFFFFFF
 class SeedWords(ISpawnableSeedSequence):
     """The four 64-bit words that ``SeedSequence(entropy).generate_state(4, np.uint64)`` gives, worked out
     beforehand: what a PCG64 asks its seed sequence for. Anything else (other words, ``spawn``) is asked of a
-    SeedSequence of ``entropy``, made the first time and kept (so that spawned children follow on as its would)."""
+    SeedSequence of ``entropy``, made the first time and kept (so that spawned children follow on as its would).
+    It is not a SeedSequence itself: ``rng.bit_generator.seed_seq`` has ``entropy`` but not ``pool``, ``spawn_key``
+    or ``n_children_spawned`` (:meth:`sequence` has them)."""
 
     __slots__ = ("entropy", "words", "_sequence")
 
@@ -42,6 +44,12 @@ class SeedWords(ISpawnableSeedSequence):
         self.entropy = entropy  # the seed, as SeedSequence.entropy
         self.words = words  # (STATE_WORDS,) uint64
         self._sequence: np.random.SeedSequence | None = None
+
+    def __getstate__(self) -> tuple[int, np.ndarray, np.random.SeedSequence | None]:
+        return self.entropy, self.words, self._sequence  # for pickle's protocols 0 and 1 too (a class with slots)
+
+    def __setstate__(self, state: tuple[int, np.ndarray, np.random.SeedSequence | None]) -> None:
+        self.entropy, self.words, self._sequence = state
 
     def generate_state(self, n_words: int, dtype: Any = np.uint32) -> np.ndarray:
         """``SeedSequence(entropy).generate_state(n_words, dtype)``."""

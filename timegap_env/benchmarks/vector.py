@@ -23,6 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
+from timegap_env.compiled import collection_paused
 from timegap_env.config import EnvConfig
 from timegap_env.envs.episodes import LEADER_BATCH
 from timegap_env.envs.vector_env import TimeGapMonitorVectorEnv
@@ -180,14 +181,18 @@ def generators_seconds(n: int, seed: int = 0) -> float:
 
 
 def seeding_seconds(n: int, seed: int = 0) -> tuple[float, float]:
-    """Seconds to make n generators seeded ``seed + i`` with :func:`timegap_env.generators.generators` and with
-    ``np.random.default_rng`` one by one, each the best of SEEDING_RUNS runs [s]."""
+    """Seconds to make (and hold) n generators seeded ``seed + i`` with :func:`timegap_env.generators.generators` and
+    with ``np.random.default_rng`` one by one, both with the garbage collector paused (as ``generators`` pauses it),
+    each the best of SEEDING_RUNS runs [s]."""
     seeds = list(range(seed, seed + n))
 
     def seconds(make: Callable[[], list[np.random.Generator]]) -> float:
-        start = time.perf_counter()
-        make()
-        return time.perf_counter() - start
+        with collection_paused():
+            start = time.perf_counter()
+            made = make()
+            elapsed = time.perf_counter() - start
+        del made
+        return elapsed
 
     ours, numpys = (min(seconds(make) for _ in range(SEEDING_RUNS))
                     for make in (lambda: generators(seeds), lambda: [np.random.default_rng(s) for s in seeds]))
@@ -196,14 +201,14 @@ def seeding_seconds(n: int, seed: int = 0) -> tuple[float, float]:
 
 def leaders_seconds(n: int, seed: int = 0) -> float:
     """Seconds to build the leaders of n envs of the default mix (``EnvConfig.scenario_weights``), each family its
-    share of them, in batches of LEADER_BATCH as a reset builds them (every sample of every profile drawn and
-    integrated): the part of a batched reset that is arithmetic on the profiles rather than per-env bookkeeping [s]."""
+    share of them (rounded so that the shares add up to n), in batches of LEADER_BATCH as a reset builds them (every
+    sample of every profile drawn and integrated): the part of a batched reset that is arithmetic on the profiles
+    rather than per-env bookkeeping [s]."""
     config = EnvConfig()
     weights = config.scenario_weights
-    total = sum(weights.values())
+    bounds = np.rint(n * np.cumsum([0.0, *weights.values()]) / sum(weights.values())).astype(int)
     start = time.perf_counter()
-    for family, weight in weights.items():
-        count = round(n * weight / total)
-        for first in range(seed, seed + count, LEADER_BATCH):
-            make_leaders(family, list(range(first, min(first + LEADER_BATCH, seed + count))), config.leader)
+    for family, first, last in zip(weights, bounds[:-1], bounds[1:]):
+        for batch in range(seed + first, seed + last, LEADER_BATCH):
+            make_leaders(family, list(range(batch, min(batch + LEADER_BATCH, seed + last))), config.leader)
     return time.perf_counter() - start

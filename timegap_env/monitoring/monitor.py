@@ -383,13 +383,13 @@ def update_env(  # noqa: ANN201, PLR0913
                 w0, w1, w2, w3, w4 = b0, b1, b2, b3, b4
             else:
                 slots[i, p, 0], slots[i, p, 1], slots[i, p, 2], slots[i, p, 3], slots[i, p, 4] = x0, x1, x2, x3, x4
-                s0 = s1 = s2 = s3 = s4 = 0.0  # the previous block's suffix, cleared
+                h0 = h1 = h2 = h3 = h4 = 0.0  # h: the previous block's suffix sums (zeros if cleared since)
                 if cleared < 0:
                     suffix = slots[i, p + 1]
-                    s0, s1, s2, s3, s4 = suffix[0], suffix[1], suffix[2], suffix[3], suffix[4]
+                    h0, h1, h2, h3, h4 = suffix[0], suffix[1], suffix[2], suffix[3], suffix[4]
                 weight = rule.suffix_weight[p]
-                w0, w1, w2 = s0 * weight + b0, s1 * weight + b1, s2 * weight + b2
-                w3, w4 = s3 * weight + b3, s4 * weight + b4
+                w0, w1, w2 = h0 * weight + b0, h1 * weight + b1, h2 * weight + b2
+                w3, w4 = h3 * weight + b3, h4 * weight + b4
             j = k * n_vehicles + i
             sums[0, j], sums[1, j], sums[2, j], sums[3, j], sums[4, j], prior_taus[j] = w0, w1, w2, w3, w4, prior_tau
             if rule.raw_gap:

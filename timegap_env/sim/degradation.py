@@ -220,9 +220,9 @@ def _uniform(rng: np.random.Generator, low: float, high: float) -> float:
 
 
 def _distinct(values: np.ndarray) -> bool:
-    """Whether no two of ``values`` (1-d ints) are equal: sorted, no neighbours equal (numpy's unique hashes them,
-    slower for a reset's tens of thousands of envs)."""
-    ordered = np.sort(values)
+    """Whether no two of ``values`` (ints, any shape) are equal: sorted, no neighbours equal (numpy's unique hashes
+    them, slower for a reset's tens of thousands of envs)."""
+    ordered = np.sort(values, axis=None)
     return not (ordered[1:] == ordered[:-1]).any()
 
 
