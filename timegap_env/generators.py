@@ -74,7 +74,7 @@ def generators(seeds: Sequence[Any]) -> list[np.random.Generator]:
     """``[np.random.default_rng(seed) for seed in seeds]``, the same draws, made faster for many int seeds."""
     hashed = [i for i, seed in enumerate(seeds) if _is_entropy(seed)]
     if len(hashed) < HASHED_FROM:
-        hashed = []
+        return [np.random.default_rng(seed) for seed in seeds]
     entropy = [int(seeds[i]) for i in hashed]
     made: list[np.random.Generator | None] = [None] * len(seeds)
     for i, seed, row in zip(hashed, entropy, seed_words(entropy)):

@@ -170,16 +170,6 @@ def measure_sizes(sizes: tuple[int, ...], reset_sizes: tuple[int, ...], step_dia
             for run, stepper in zip(runs, steppers)]
 
 
-def generators_seconds(n: int, seed: int = 0) -> float:
-    """Seconds to create (and hold) n NumPy generators ``np.random.default_rng(seed + i)``: the floor of seeding
-    n envs one generator each, a reference for the batched reset [s]."""
-    start = time.perf_counter()
-    made = [np.random.default_rng(seed + i) for i in range(n)]
-    seconds = time.perf_counter() - start
-    del made
-    return seconds
-
-
 def seeding_seconds(n: int, seed: int = 0) -> tuple[float, float]:
     """Seconds to make (and hold) n generators seeded ``seed + i`` with :func:`timegap_env.generators.generators` and
     with ``np.random.default_rng`` one by one, both with the garbage collector paused (as ``generators`` pauses it),
