@@ -254,6 +254,10 @@ class PlatoonConfig(ConfigMixin):
         return np.broadcast_to(array, (self.n_followers,)).copy()
 
 
+RECORDED_PARTS = ("all", "train", "held_out")  # LeaderConfig.recorded_part's values
+HELD_OUT_EVERY = 4  # the held-out part of the recorded leaders: every this-th of them, the first included [-]
+
+
 @dataclasses.dataclass(frozen=True)
 class LeaderConfig(ConfigMixin):
     """What every leader profile shares: its tick, length and speed band."""
@@ -265,11 +269,15 @@ class LeaderConfig(ConfigMixin):
     initial_speed: float = 22.0  # speed at t = 0 of an integrated profile [m/s], within speed_band
     min_recorded_duration: float = 30.0  # shortest recorded leader (NGSIM vehicle, OpenACC lead car) drawn [s],
     # (0, MAX_DURATION]
+    recorded_part: str = "all"  # which recorded leaders are drawn, one of RECORDED_PARTS: "all"; "held_out", a fixed
+    # quarter (every HELD_OUT_EVERY-th NGSIM vehicle by id, OpenACC run by name), which the benchmark holds out;
+    # "train", the rest
 
     def __post_init__(self) -> None:
         self._number("dt", MIN_DT, MAX_DT)
         self._number("duration", self.dt, MAX_EPISODE_TICKS * self.dt)
         self._number("min_recorded_duration", 0.0, MAX_DURATION, open_low=True)
+        self._choice("recorded_part", RECORDED_PARTS)
         low, high = self._pair("speed_band", 0.0, MAX_SPEED)
         speed = self._number("initial_speed", 0.0, MAX_SPEED)
         if not low <= speed <= high:

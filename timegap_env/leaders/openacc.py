@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from timegap_env.config import MAX_SPEED, LeaderConfig
-from timegap_env.leaders.profile import LeaderProfile, csv_errors, open_csv
+from timegap_env.leaders.profile import LeaderProfile, csv_errors, open_csv, recorded_part
 
 PATH_VARIABLE = "TIMEGAP_OPENACC_PATH"  # a directory of OpenACC files
 SHARED_DIR = Path("shared", "data", "openacc")
@@ -241,9 +241,11 @@ def openacc_leader(seed: int | None, leader: LeaderConfig) -> LeaderProfile:
     directory = default_openacc_dir()
     if not directory.exists():
         raise FileNotFoundError(f"OpenACC data not found at {directory}: set ${PATH_VARIABLE} to a directory of OpenACC files")
-    stretches = [stretch for stretch in lead_car_speeds(directory) if stretch[1].size * TICK >= leader.min_recorded_duration]
+    stretches = recorded_part([stretch for stretch in lead_car_speeds(directory)
+                               if stretch[1].size * TICK >= leader.min_recorded_duration], leader.recorded_part)
     if not stretches:
-        raise ValueError(f"no OpenACC run in {directory} has {leader.min_recorded_duration} s of lead-car speeds without a gap")
+        raise ValueError(f"no OpenACC run in {directory} has {leader.min_recorded_duration} s of lead-car speeds without a "
+                         f"gap (LeaderConfig.recorded_part = {leader.recorded_part!r})")
     name, speed = stretches[np.random.default_rng(seed).integers(len(stretches))]
     n = min(speed.size, leader.n_samples)
     return LeaderProfile.from_speed(np.maximum(speed[:n], 0.0), TICK, name=f"openacc-{name}")

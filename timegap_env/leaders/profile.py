@@ -28,14 +28,16 @@ import gzip
 import io
 import math
 import zlib
-from collections.abc import Iterator
-from typing import Any, cast
+from collections.abc import Iterator, Sequence
+from typing import Any, TypeVar, cast
 from pathlib import Path
 
 import numba
 import numpy as np
 
-from timegap_env.config import MAX_SPEED, LeaderConfig, shown
+from timegap_env.config import HELD_OUT_EVERY, MAX_SPEED, RECORDED_PARTS, LeaderConfig, shown
+
+T = TypeVar("T")
 
 
 GZIP_MAGIC = b"\x1f\x8b"  # the first two bytes of every gzip file
@@ -135,6 +137,18 @@ def check_speeds(speed: np.ndarray, where: str) -> None:
         at = ", ".join(map(str, index))
         raise ValueError(f"{where}speed[{at}] = {float(speed[index])!r} m/s: every speed must lie in [0, MAX_SPEED = "
                          f"{MAX_SPEED:g}] m/s ({np.count_nonzero(bad)} do not)")
+
+
+def recorded_part(items: Sequence[T], part: str) -> list[T]:
+    """The ``part`` (a :data:`~timegap_env.config.RECORDED_PARTS` name) of recorded leaders ``items``, given in a
+    fixed order (NGSIM vehicles by id, OpenACC runs by name): all of them; the held-out part, every
+    :data:`~timegap_env.config.HELD_OUT_EVERY`-th from the first; or the training part, the others."""
+    if part == "all":
+        return list(items)
+    if part not in RECORDED_PARTS:
+        raise ValueError(f"LeaderConfig.recorded_part = {part!r}: must be one of {RECORDED_PARTS}")
+    held_out = part == "held_out"
+    return [item for i, item in enumerate(items) if (i % HELD_OUT_EVERY == 0) == held_out]
 
 
 @dataclasses.dataclass(frozen=True)

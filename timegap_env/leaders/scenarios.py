@@ -25,7 +25,7 @@ from timegap_env.config import (
     AggressiveCyclesConfig, ConfigMixin, HardBrakingConfig, LeaderConfig, SinusoidConfig, StochasticHumanConfig, shown,
 )
 from timegap_env.leaders import idm, ngsim, openacc, regimes, synthetic
-from timegap_env.leaders.profile import LeaderProfile, LeaderProfiles
+from timegap_env.leaders.profile import LeaderProfile, LeaderProfiles, recorded_part
 
 Build = Callable[[int | None, Any, LeaderConfig], LeaderProfile]  # (seed, params, leader) -> profile
 BatchBuild = Callable[[Sequence[int | None], Any, LeaderConfig], LeaderProfiles]  # (seeds, params, leader) -> rows
@@ -110,10 +110,11 @@ def ngsim_leader(seed: int | None, leader: LeaderConfig, *, within_band: bool) -
         raise IsADirectoryError(f"NGSIM data at {path} is a directory: set ${ngsim.PATH_VARIABLE} to an NGSIM "
                                 "trajectory CSV (.csv or .csv.gz)")
     table = _ngsim_table(path)
-    ids = ngsim.vehicle_ids(table, min_duration=leader.min_recorded_duration)
+    ids = recorded_part(ngsim.vehicle_ids(table, min_duration=leader.min_recorded_duration), leader.recorded_part)
     if not ids:
         raise ValueError(f"{ngsim.no_vehicle_reason(table, leader.min_recorded_duration)} (a leader needs "
-                         f"LeaderConfig.min_recorded_duration = {leader.min_recorded_duration} s)")
+                         f"LeaderConfig.min_recorded_duration = {leader.min_recorded_duration} s, from "
+                         f"LeaderConfig.recorded_part = {leader.recorded_part!r})")
     vehicle = np.random.default_rng(seed).choice(ids)
     return ngsim.vehicle_profile(table, int(vehicle), within_band=leader if within_band else None)
 
