@@ -58,6 +58,7 @@ class EpisodeRecord:
     rewards: dict[str, float] = dataclasses.field(default_factory=dict)  # each reward term summed (diagnostics on)
     truth: dict[str, np.ndarray] = dataclasses.field(default_factory=dict)  # ground truth at reset, per follower
     time_below_stable: float = float("nan")  # [s per follower] below the smallest stable setting (diagnostics on)
+    cost: float = float("nan")  # info["cost"] summed over the episode (where the info has it: v1's keys) [-]
 
     def row(self) -> dict[str, Any]:
         """A flat row: seed, scenario, degradation, steps, return, time below stable, the summary, ``reward_<term>``."""
@@ -181,7 +182,7 @@ def _side_by_side(policies: Sequence[Any], config: Config, seeds: Sequence[int],
         choose = [chooser(policy) for policy in policies]
         states: list[Any] = [None] * m  # a policy's memory (a learned policy's frame stack), from step to step
         returns, steps = np.zeros(n * m), np.zeros(n * m, dtype=np.int64)
-        below = np.zeros(n * m)
+        below, cost = np.zeros(n * m), np.zeros(n * m)
         terms: dict[str, np.ndarray] = {}
         active = np.ones(n * m, dtype=bool)
         summaries: list[dict[str, Any]] = [{} for _ in range(n * m)]
@@ -212,6 +213,9 @@ def _side_by_side(policies: Sequence[Any], config: Config, seeds: Sequence[int],
                     step_terms = {name: np.where(done, final_terms[name], value) for name, value in step_terms.items()}
                 for name, value in step_terms.items():
                     terms[name] = terms.get(name, np.zeros(n * m)) + np.where(active, value, 0.0)
+            if "cost" in infos:
+                step_cost = np.where(done, infos["final_info"]["cost"], infos["cost"]) if done.any() else infos["cost"]
+                cost += np.where(active, step_cost, 0.0)
             ended = done & active
             for env in np.flatnonzero(ended):
                 summaries[env] = {name: value[env].item() for name, value in summary_of(infos["final_info"]).items()}
@@ -226,6 +230,7 @@ def _side_by_side(policies: Sequence[Any], config: Config, seeds: Sequence[int],
             summary=summaries[env], rewards={name: float(value[env]) for name, value in terms.items()},
             truth={name: np.array(value[env]) for name, value in truth_at_reset.items()} if step_diagnostics else {},
             time_below_stable=float(below[env]) if step_diagnostics else float("nan"),
+            cost=float(cost[env]) if "cost" in infos else float("nan"),
         )
         for env in range(n * m)
     ]
