@@ -68,7 +68,9 @@ from timegap_env.sim import (
 )
 
 ENV_ID = ENV_IDS[0]  # the first task, kept bit for bit; a config given as a dict overrides its defaults
-LATEST_ENV_ID = ENV_IDS[max(ENV_IDS)]  # the default task (docs/task.md says how it was chosen)
+LATEST_ENV_ID = ENV_IDS[max(ENV_IDS)]  # the newest task
+DEFAULT_TASK = LATEST_ENV_ID  # the default task of every script, the benchmark and the docs (docs/task.md: how it
+# was chosen); TimeGapMonitor-v0 stays reproducible bit for bit by its id
 MO_ENV_ID = "mo-TimeGapMonitor-v1"  # LATEST_ENV_ID with the reward terms as a vector (MO-Gymnasium's API)
 
 # No max_episode_steps: the env truncates itself at EnvConfig.episode_duration. No passive env checker: the tests run
@@ -83,7 +85,7 @@ if MO_ENV_ID not in registry:
              kwargs={"version": 1})
 
 __all__ = [
-    "__version__", "COMMERCIAL_ACC", "ENV_ID", "ENV_IDS", "LATEST_ENV_ID", "MO_ENV_ID", "MONITOR_PRESETS", "SCENARIOS", "AggressiveCyclesConfig", "ChartConfig", "DegradationConfig", "EnvConfig",
+    "__version__", "COMMERCIAL_ACC", "ENV_ID", "DEFAULT_TASK", "ENV_IDS", "LATEST_ENV_ID", "MO_ENV_ID", "MONITOR_PRESETS", "SCENARIOS", "AggressiveCyclesConfig", "ChartConfig", "DegradationConfig", "EnvConfig",
     "HardBrakingConfig", "HumanLeaderConfig", "LeaderConfig", "LeaderFamily", "LeaderProfile", "MonitorConfig", "OpenAccRun",
     "PlatoonConfig", "RewardScales", "RewardWeights", "SensorConfig", "SinusoidConfig", "StochasticHumanConfig", "TimeGapEstimate", "TimeGapMonitor",
     "Trajectory", "acc_platoon", "acc_presets", "aggressive_cycles", "default_ngsim_path", "default_openacc_dir", "estimate_time_gap", "hard_braking", "idm_leader",
