@@ -119,6 +119,20 @@ def ngsim_leader(seed: int | None, leader: LeaderConfig, *, within_band: bool) -
     return ngsim.vehicle_profile(table, int(vehicle), within_band=leader if within_band else None)
 
 
+@functools.lru_cache(maxsize=4096)
+def _seeded_idm_leader(seed: int, leader: LeaderConfig) -> LeaderProfile:
+    """:func:`idm_leader` of an int seed, kept: highway-env's driver takes about 0.3 s a profile, and every policy
+    of an evaluation replays the same seeds."""
+    return idm.idm_leader(synthetic.hard_braking(seed, leader=leader), seed=seed)
+
+
+def idm_leader(seed: int | None, leader: LeaderConfig) -> LeaderProfile:
+    """highway-env's IDM driver reacting to scripted hard braking ahead of it (the same profile for the same seed)."""
+    if seed is None:
+        return idm.idm_leader(synthetic.hard_braking(seed, leader=leader), seed=seed)
+    return _seeded_idm_leader(int(seed), leader)
+
+
 # The leader families, name -> record: the one place a family is written (register_family adds one at run time).
 LEADER_FAMILIES: dict[str, LeaderFamily] = {family.name: family for family in (
     LeaderFamily("aggressive_cycles", synthetic.aggressive_cycles,
@@ -144,8 +158,7 @@ LEADER_FAMILIES: dict[str, LeaderFamily] = {family.name: family for family in (
                  "A real NGSIM I-80 driver's acceleration, integrated within the speed band."),
     LeaderFamily("openacc", lambda seed, params, leader: openacc.openacc_leader(seed, leader),
                  "The human-driven lead car of a real ACC platoon (OpenACC AstaZero)."),
-    LeaderFamily("idm",
-                 lambda seed, params, leader: idm.idm_leader(synthetic.hard_braking(seed, leader=leader), seed=seed),
+    LeaderFamily("idm", lambda seed, params, leader: idm_leader(seed, leader),
                  "highway-env's IDM driver reacting to scripted hard braking ahead of it."),
 )}
 

@@ -1,0 +1,148 @@
+"""``train.benchmark``: the efficiency basis, the constants' frontier, a user's policy against the constant it holds,
+the cache, the lock, and bad command lines as one line (short episodes, small groups)."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+import timegap_env
+from timegap_env.config import EnvConfig
+from timegap_env.experiments import registry
+from train import benchmark
+from train.benchmark import Cache, Group, efficiency, frontier_efficiency, frontier_rate, run_group
+
+REPO = Path(__file__).resolve().parents[2]
+SHORT = {"episode_duration": 20.0}  # 20-s episodes: a group of a few dozen plays in seconds
+TINY = Group("tiny", "short episodes of the task's mix", SHORT, 24, references=False, selection=24)
+
+HOLDER = '''
+import numpy as np
+
+
+class HoldOne:
+    """Holds the ladder's 1.4 s for the whole episode, the platoon's setting."""
+
+    action_mode = "platoon"
+
+    def __init__(self, config):
+        self.index = list(config.setting_levels).index(1.4)
+
+    def predict(self, obs, state=None, episode_start=None, deterministic=True):
+        return np.full(obs.shape[0], self.index), state
+'''
+
+
+def constants_and(*extra: benchmark.Entry) -> list[benchmark.Entry]:
+    config = benchmark.group_config(TINY)
+    return [benchmark.registered(name) for name in registry.fixed_names(config)] + [benchmark.registered("rule_platoon"),
+                                                                                  *extra]
+
+
+@pytest.fixture
+def holder_module(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> str:
+    (tmp_path / "holder_policy.py").write_text(HOLDER)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    return "holder_policy:HoldOne"
+
+
+def test_the_default_task_is_v1() -> None:
+    assert timegap_env.DEFAULT_TASK == "TimeGapMonitor-v1" == benchmark.TASK
+
+
+def test_efficiency_is_per_second_driven_so_crashing_early_pays_nothing() -> None:
+    config = EnvConfig.from_dict(version=1)
+    full = efficiency(-100.0, 0.0, config.episode_duration, config)
+    assert full == -100.0  # an episode driven to the end: its return without the collision term
+    # the same rate of reward, cut short by a crash after 50 s: the collision term is left out, the rest scaled up
+    crashed = efficiency(-20.0 - config.reward_weights.collision, -1.0, 50.0, config)
+    assert crashed == pytest.approx(full)
+    # the return without the collision term would have rewarded the crash (-20 > -100)
+    assert -20.0 > full
+
+
+def test_the_frontier_of_constants_and_its_mixes() -> None:
+    rates = np.array([0.04, 0.01, 0.0])  # three constants: risky and efficient ... safe and slow
+    effs = np.array([-50.0, -80.0, -120.0])
+    assert frontier_efficiency(rates, effs, np.array(0.01)) == pytest.approx(-80.0)
+    assert frontier_efficiency(rates, effs, np.array(0.025)) == pytest.approx(-65.0)  # a mix of the first two
+    assert frontier_efficiency(rates, effs, np.array(0.5)) == pytest.approx(-50.0)  # more risk buys nothing more
+    assert frontier_rate(rates, effs, np.array(-65.0)) == pytest.approx(0.025)
+    assert frontier_rate(rates, effs, np.array(-130.0)) == pytest.approx(0.0)
+    # a dominated constant does not lower the frontier
+    assert frontier_efficiency(np.append(rates, 0.03), np.append(effs, -200.0), np.array(0.03)) == pytest.approx(-60.0)
+    # batched over resamples: (B, k) points, (B,) rates
+    batch = frontier_efficiency(np.stack([rates, rates]), np.stack([effs, effs + 10]), np.array([0.01, 0.01]))
+    assert batch == pytest.approx([-80.0, -70.0])
+
+
+def test_a_users_policy_holding_one_setting_scores_exactly_as_that_constant(holder_module: str, tmp_path: Path) -> None:
+    entries = constants_and(benchmark.policy_entry(holder_module))
+    result = run_group(TINY, entries, 10_000, TINY.episodes, Cache(tmp_path / "cache"), benchmark.Backend())
+    rows = {row["policy"]: row for row in result.rows}
+    mine, constant = rows["HoldOne"], rows["fixed_1.4"]
+    different = {key for key in constant if key not in ("policy", "kind") and
+                 not (mine[key] == constant[key] or (mine[key] != mine[key] and constant[key] != constant[key]))}
+    assert not different
+    assert np.array_equal(result.played["HoldOne"].fingerprints, result.played["fixed_1.4"].fingerprints)
+    assert rows["fixed_1.4"]["frontier_efficiency_gain"] <= 1e-9  # no constant beats the constants' frontier
+
+
+def test_a_computed_group_plays_only_what_it_has_not_played(monkeypatch: pytest.MonkeyPatch, holder_module: str,
+                                                            tmp_path: Path) -> None:
+    cache = tmp_path / "cache"
+    first = run_group(TINY, constants_and(), 10_000, TINY.episodes, Cache(cache), benchmark.Backend())
+    played: list[Any] = []
+    original = benchmark.play
+    monkeypatch.setattr(benchmark, "play", lambda *args: played.append(args) or original(*args))
+    again = run_group(TINY, constants_and(benchmark.policy_entry(holder_module)), 10_000, TINY.episodes,
+                      Cache(cache), benchmark.Backend())
+    assert len(played) == 1 and played[0][0].__class__.__name__ == "HoldOne"  # the new policy alone
+    assert [row for row in again.rows if row["policy"] != "HoldOne"] == first.rows
+
+
+def test_the_lock_refuses_a_second_writer_and_takes_over_a_dead_ones(tmp_path: Path) -> None:
+    out = tmp_path / "bench"
+    with benchmark.claimed(out):
+        with pytest.raises(FileExistsError, match="another run"):
+            with benchmark.claimed(out):
+                pass
+    assert not (tmp_path / "bench.lock").exists()
+    dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
+    (tmp_path / "bench.lock").write_text(dead.stdout.strip())
+    with benchmark.claimed(out):
+        assert (tmp_path / "bench.lock").read_text() == str(os.getpid())
+
+
+@pytest.mark.parametrize(("arguments", "says"), [
+    (["--policy", "no_such_policy"], "--policy no_such_policy: unknown"),
+    (["--policy", "no_such_module_xyz:Thing"], "cannot import 'no_such_module_xyz'"),
+    (["--groups", "default", "nowhere"], "--groups nowhere: unknown"),
+    (["--episodes", "0"], "--episodes: '0': must be an integer >= 1"),
+    (["--episodes", "-3"], "must be an integer >= 1"),
+    (["--first-seed", "12"], "--first-seed 12: must be >= 10000"),
+    (["--out", "results"], "--out results: exists; --force replaces it"),
+])
+def test_bad_command_lines_give_one_line(arguments: list[str], says: str, tmp_path: Path) -> None:
+    run = subprocess.run([sys.executable, "-m", "train.benchmark", "--cache", str(tmp_path / "c"), *arguments],
+                         capture_output=True, text=True, cwd=REPO, timeout=300)
+    assert run.returncode != 0
+    lines = [line for line in run.stderr.splitlines() if line.strip() and "first run compiles" not in line]
+    assert len(lines) == 1 and says in lines[0], run.stderr
+    assert not list(tmp_path.glob("*partial*"))
+
+
+def test_the_held_out_recorded_leaders_are_a_fixed_quarter() -> None:
+    from timegap_env.leaders.profile import recorded_part
+
+    items = list(range(10))
+    held_out, train = recorded_part(items, "held_out"), recorded_part(items, "train")
+    assert held_out == [0, 4, 8] and sorted(held_out + train) == items
+    with pytest.raises(ValueError, match="recorded_part = 'some'"):
+        recorded_part(items, "some")
