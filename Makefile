@@ -26,12 +26,12 @@ demo: $(STAMP)
 	MPLBACKEND=Agg $(PY) -m train.value_of_information
 	MPLBACKEND=Agg $(PY) -m train.detection_benchmark
 	MPLBACKEND=Agg $(PY) -m train.tune_rule
-	MPLBACKEND=Agg $(PY) -m train.tune_rule --env-id TimeGapMonitor-v1 --out results/rule/v1
+	MPLBACKEND=Agg $(PY) -m train.tune_rule --env-id TimeGapMonitor-v1 --out results/rule
 	MPLBACKEND=Agg $(PY) -m train.evaluate
 	MPLBACKEND=Agg $(PY) -m train.task_map
-	MPLBACKEND=Agg $(PY) -m train.evaluate_task --chart-step-tuning results/rule/v1/tuning.csv --model results/ppo_v1 results/ppo_v1_nomonitor results/ppo_v1_rawgap
+	MPLBACKEND=Agg $(PY) -m train.evaluate_task --chart-step-tuning results/rule/tuning.csv --model results/ppo_v1 results/ppo_v1_nomonitor results/ppo_v1_rawgap
 	MPLBACKEND=Agg $(PY) -m train.evaluate_task --policies rule_platoon --model results/ppo_v1 results/ppo_v1_nomonitor results/ppo_v1_rawgap --baseline ppo_v1 --groups v1 regimes --out results/task/ablation
-	MPLBACKEND=Agg $(PY) -m train.evaluate_task --chart-step-tuning results/rule/v1/tuning.csv --model results/ppo_v1 results/ppo_v1_nomonitor results/ppo_v1_rawgap --groups larger_degradations regimes ngsim_in_band openacc stop_and_go emergency_braking --out results/task/groups
+	MPLBACKEND=Agg $(PY) -m train.evaluate_task --chart-step-tuning results/rule/tuning.csv --model results/ppo_v1 results/ppo_v1_nomonitor results/ppo_v1_rawgap --groups larger_degradations regimes ngsim_in_band openacc stop_and_go emergency_braking --out results/task/groups
 
 test: $(STAMP)
 	MPLBACKEND=Agg $(PY) -m pytest -q
@@ -46,11 +46,11 @@ clients:  # the env through SB3, sb3-contrib, rl-zoo3, RLlib, TorchRL, Tianshou,
 	bash .ci/clients
 
 group-idm: $(STAMP)  # v1's policies behind highway-env's IDM driver (issue 25's IDM group; ~40 min: slow leaders)
-	MPLBACKEND=Agg $(PY) -m train.evaluate_task --chart-step-tuning results/rule/v1/tuning.csv --model results/ppo_v1 results/ppo_v1_nomonitor results/ppo_v1_rawgap --groups idm --out results/task/idm
+	MPLBACKEND=Agg $(PY) -m train.evaluate_task --chart-step-tuning results/rule/tuning.csv --model results/ppo_v1 results/ppo_v1_nomonitor results/ppo_v1_rawgap --groups idm --out results/task/idm
 
 sumo: $(STAMP)  # SUMO as a second simulator (issue 26): the sumo extra, the tests marked sumo, results/sumo (~10 min)
 	bash .ci/sumo
-	MPLBACKEND=Agg $(PY) -m train.sumo_report --chart-step-tuning results/rule/v1/tuning.csv --backend processes
+	MPLBACKEND=Agg $(PY) -m train.sumo_report --chart-step-tuning results/rule/tuning.csv --backend processes
 
 morl:  # MORL-Baselines' Envelope on mo-TimeGapMonitor-v1 -> results/morl (in .venv-clients: make clients makes it)
 	MPLBACKEND=Agg .venv-clients/bin/python -m train.train_morl
@@ -74,8 +74,8 @@ recipes: $(STAMP)  # every other recipe tried on v1 (issue 25) and the chosen on
 	  $(PY) -m train.train_ppo --env-id TimeGapMonitor-v1 --seed $$seed --env-config '{"monitor": {"estimator": "raw_gap"}}' --out results/recipes/ppo_rawgap_seed$$seed || exit 1; \
 	done
 	MPLBACKEND=Agg $(PY) -m train.compare_curves results/ppo_v1 results/ppo_v1_nomonitor results/ppo_v1_rawgap results/recipes/ppo_* --out results/recipes/curves
-	MPLBACKEND=Agg $(PY) -m train.evaluate_task --split selection --chart-step-tuning results/rule/v1/tuning.csv --model results/ppo_v1 results/ppo_v1_nomonitor results/ppo_v1_rawgap results/recipes/ppo_* --out results/recipes/selection
-	MPLBACKEND=Agg $(PY) -m train.evaluate_task --chart-step-tuning results/rule/v1/tuning.csv --model results/ppo_v1 results/ppo_v1_nomonitor results/ppo_v1_rawgap results/recipes/ppo_* --out results/recipes/held_out
+	MPLBACKEND=Agg $(PY) -m train.evaluate_task --split selection --chart-step-tuning results/rule/tuning.csv --model results/ppo_v1 results/ppo_v1_nomonitor results/ppo_v1_rawgap results/recipes/ppo_* --out results/recipes/selection
+	MPLBACKEND=Agg $(PY) -m train.evaluate_task --chart-step-tuning results/rule/tuning.csv --model results/ppo_v1 results/ppo_v1_nomonitor results/ppo_v1_rawgap results/recipes/ppo_* --out results/recipes/held_out
 	MPLBACKEND=Agg $(PY) -m train.evaluate_task --policies rule_platoon --model results/ppo_v1 results/ppo_v1_nomonitor results/ppo_v1_rawgap results/recipes/ppo_seed* results/recipes/ppo_nomonitor_seed* results/recipes/ppo_rawgap_seed* --groups regimes --out results/recipes/regimes_seeds
 
 bench: $(STAMP)

@@ -1,7 +1,7 @@
 """SUMO as a second simulator (issue 26): the physics cross-check and the policies' transfer, one command.
 
     python -m train.sumo_report [--pieces 3 10 10] [--held-out 50] [--model results/ppo_v1]
-                                [--chart-step-tuning results/rule/v1/tuning.csv] [--backend processes]
+                                [--chart-step-tuning results/rule/tuning.csv] [--backend processes]
                                 [--out results/sumo]
 
 Needs the sumo extra (``pip install -e '.[sumo]'``; ``make sumo`` sets it up and runs this).

@@ -11,7 +11,7 @@ The grid is a YAML file (``train/sweeps/example.yml`` is one):
   cell's dotted fields go into them.
 - ``policies``: by name, from the policy registry (``timegap_env.experiments.registry``: the paper's rule, the
   chart-step rule, the V2V-aware heuristic),
-  ``fixed_<setting>`` for any ladder level, and ``ppo``, the trained model at ``model`` (default ``results/ppo``).
+  ``fixed_<setting>`` for any ladder level, and ``ppo``, the trained model at ``model`` (default ``results/v0/ppo``).
 - ``seeds``: ``{start, count, batch}``: episodes reset with seeds start .. start + count - 1, run ``batch`` at a
   time. Held out from training (start >= ``EVAL_SEED_START``) unless the grid states ``held_out: false`` (then
   every seed lies below it).
@@ -73,7 +73,7 @@ from timegap_env.experiments.rollout import rollout
 from timegap_env.experiments.stats import BOOTSTRAP_RESAMPLES, BOOTSTRAP_SEED, bootstrap_mean
 
 DEFAULT_OUT = Path("results/sweep")  # a grid's results go to DEFAULT_OUT / its file's stem
-DEFAULT_MODEL = Path("results/ppo")
+DEFAULT_MODEL = Path("results/v0/ppo")
 DEFAULT_BATCH = 16  # episodes per piece, one vector env [-]
 DEFAULT_CHUNK = 16  # pieces per Backend.map call, after each of which episodes.csv is written [-]
 EPISODES_FILE, SUMMARY_FILE = "episodes.csv", "summary.md"

@@ -1,9 +1,9 @@
 """Train PPO (Stable-Baselines3) on ``TimeGapMonitor-v0`` or ``-v1`` (``--env-id``), every platoon in one native
 vector env.
 
-    python -m train.train_ppo                                    # the committed model in results/ppo/
+    python -m train.train_ppo                                    # the committed model in results/v0/ppo/
     python -m train.train_ppo --timesteps 20000 --out /tmp/ppo   # a short run elsewhere (no warm-up: see below)
-    python -m train.train_ppo --resume --timesteps 3000000       # continue results/ppo/ to 3 M steps in all
+    python -m train.train_ppo --resume --timesteps 3000000       # continue results/v0/ppo/ to 3 M steps in all
     python -m train.train_ppo --env-config '{"action_mode": "platoon"}' --frame-stack 4 --out /tmp/ppo  # a variant
 
 Hyperparameters come from ``hyperparams/ppo.yml`` (rl-zoo3's layout, which rl-zoo3 trains from as it
@@ -20,7 +20,7 @@ it, ``<out>.partial-<random>`` (a copy of ``--out`` with ``--resume``), where it
 moves it to ``--out`` when it has ended, the run that was there deleted only then. Stopped or failed
 before that (Ctrl-C, a crash, a full disk), ``--out`` is as it was; the work directory is deleted, or, if
 it holds a checkpoint of this run, kept and named (``--resume --out <it>`` continues it). So ``make train``
-regenerates the committed ``results/ppo`` in place, and a run into an existing run directory replaces it
+regenerates the committed ``results/v0/ppo`` in place, and a run into an existing run directory replaces it
 only by a finished run. ``--out`` must be absent, empty or a run directory (only the files below): a
 directory holding anything else is refused before any work (a finished run replaces the whole
 directory), as is ``--out`` naming a file. The run directory holds exactly:
@@ -139,7 +139,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                         help="yml keyed by env id: the warm-up's n_timesteps and env_kwargs (default: %(default)s)")
     parser.add_argument("--no-warmup", dest="warmup", action="store_const", const=None,
                         help="train in env_kwargs from the start")
-    parser.add_argument("--out", type=Path, default=Path("results/ppo"),
+    parser.add_argument("--out", type=Path, default=Path("results/v0/ppo"),
                         help="run directory: model.zip, vecnormalize.pkl, training.md, ...; written when the run ends, "
                              "replacing a run there (default: %(default)s)")
     parser.add_argument("--resume", action="store_true",

@@ -1,9 +1,9 @@
 """Train PPO (Ray RLlib, new API stack) on ``TimeGapMonitor-v0`` with several env runners, each a native vector env.
 
-    python -m train.train_rllib                                   # the committed run in results/rllib/ (Ray here)
+    python -m train.train_rllib                                   # the committed run in results/v0/rllib/ (Ray here)
     python -m train.train_rllib --timesteps 50000 --out /tmp/rllib  # a short run elsewhere
     python -m train.train_rllib --address auto --env-runners 16   # join a running Ray cluster
-    python -m train.train_rllib --select-scale 1 1/30 0.02        # choose the reward scale: results/rllib/selection.md
+    python -m train.train_rllib --select-scale 1 1/30 0.02        # choose the reward scale: results/v0/rllib/selection.md
 
 Ray starts on this machine (``ray.init()``) unless ``--address`` names a cluster to join (e.g. ``auto`` or
 ``ray://head:10001``); there the runners get this repository's code as Ray's ``working_dir``. Each of the
@@ -34,7 +34,7 @@ episodes seeded ``EVAL_SEED`` on: 9000-9031, below the held-out seeds, in the en
 ``REWARD_SCALE`` is set to. It keeps no checkpoint and runs no held-out episode; the runners' platoons must be
 seeded below the check episodes'.
 
-``--out`` (default ``results/rllib``) receives ``checkpoint/`` (RLlib's ``algo.save``, the env's
+``--out`` (default ``results/v0/rllib``) receives ``checkpoint/`` (RLlib's ``algo.save``, the env's
 ``env.json`` added), which ``timegap_env.agents.rllib_policy.RLlibPolicy.load`` reads, and ``training.md``: the
 command, every iteration (env steps, episodes ended and their mean return, time, throughput), the wall time,
 the policy's mean return on the check episodes and, unless ``--eval-episodes 0``, on ``train.evaluate``'s
@@ -87,14 +87,14 @@ MAPPED = {  # ppo.yml's PPO key -> PPOConfig.training's; the keys of UNMAPPED: s
 UNMAPPED = {"n_envs", "n_steps", "n_timesteps", "policy", "normalize", "policy_kwargs", "env_kwargs"}  # read apart;
 # n_timesteps is the SB3 run's length, not this one's (--timesteps)
 REWARD_SCALE = 1 / 30  # normalize's counterpart, chosen by --select-scale 1 1/30 0.02 on the check episodes
-# (results/rllib/selection.md); 1/30 is about 1 / the std of the discounted return (gamma 0.99) that VecNormalize
-# divided the rewards by at the end of the SB3 run (results/ppo/vecnormalize.pkl: variance 880). SB3 also clips
+# (results/v0/rllib/selection.md); 1/30 is about 1 / the std of the discounted return (gamma 0.99) that VecNormalize
+# divided the rewards by at the end of the SB3 run (results/v0/ppo/vecnormalize.pkl: variance 880). SB3 also clips
 # the scaled rewards at 10, which caps a collision's cost; not done here.
 SCALE_CHOICE = (  # how REWARD_SCALE was chosen, for the report of a run that uses it
     "chosen by `python -m train.train_rllib --select-scale 1 1/30 0.02` among no scaling, 1/30 (about 1 / the std "
     "of the discounted return the SB3 run's VecNormalize divided by) and 0.02: one run of each at the default "
     "seed and length (0, 1 M env steps), the highest mean return on `train.train_ppo`'s 32 check episodes (seeds "
-    f"9000-9031; no held-out episode); its table: `results/rllib/{SELECTION_FILE}`. An earlier version had set 1/30 "
+    f"9000-9031; no held-out episode); its table: `results/v0/rllib/{SELECTION_FILE}`. An earlier version had set 1/30 "
     "after comparing these candidates' returns on the held-out episodes below, so those were seen before this choice.")
 RLLIB_OWN = {  # PPOConfig.training settings ppo.yml has no key for, set as SB3's PPO behaves
     "use_kl_loss": False,  # RLlib adds a KL penalty by default, SB3 does not
@@ -124,7 +124,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                         help="platoons in each runner's native vector env (default: the yml's n_envs / runners)")
     parser.add_argument("--address", default=None,
                         help="Ray cluster to join, e.g. auto or ray://head:10001 (default: start Ray here)")
-    parser.add_argument("--out", type=Path, default=Path("results/rllib"),
+    parser.add_argument("--out", type=Path, default=Path("results/v0/rllib"),
                         help="run directory: checkpoint/ and training.md (default: %(default)s)")
     parser.add_argument("--seed", type=int, default=0,
                         help="seed of RLlib and the envs: runner w's platoon i gets (seed + w) x envs + i (default: 0)")

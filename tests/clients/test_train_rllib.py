@@ -131,7 +131,7 @@ def test_selection_chooses_the_highest_mean_return_on_the_check_episodes() -> No
 
 def test_reward_scale_is_the_one_the_committed_selection_chose() -> None:
     """REWARD_SCALE was once set after a look at held-out returns; it must be what --select-scale chose on the check
-    episodes (results/rllib/selection.md), among no scaling, 1/30 and 0.02, scored on the check episodes."""
+    episodes (results/v0/rllib/selection.md), among no scaling, 1/30 and 0.02, scored on the check episodes."""
     report = COMMITTED_SELECTION.read_text()
     chosen = re.search(r"^Chosen: rewards x ([0-9.e-]+)", report, re.MULTILINE)
     assert chosen is not None, f"{COMMITTED_SELECTION}: no 'Chosen: rewards x' line"

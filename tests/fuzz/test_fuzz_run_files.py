@@ -1,4 +1,4 @@
-"""Fuzz of a trained run's files (issue 22, items 1-2): the committed run (``results/ppo``: ``model.zip``,
+"""Fuzz of a trained run's files (issue 22, items 1-2): the committed run (``results/v0/ppo``: ``model.zip``,
 ``vecnormalize.pkl``, ``env.json``) copied to a temporary directory and corrupted.
 
 ``timegap_env.agents.learned.LearnedPolicy.load`` must raise ``timegap_env.agents.learned.RunFileError`` (or ``FileNotFoundError`` for a

@@ -9,8 +9,8 @@ import pytest
 
 from timegap_env.agents.policies import FixedPolicy, PaperRulePolicy
 from timegap_env.config import EnvConfig
-from timegap_env.experiments import heldout, value
-from train import detection_benchmark, evaluate, value_of_information
+from timegap_env.experiments import value
+from train import benchmark, detection_benchmark, value_of_information
 from timegap_env.experiments.backends import Backend, add_arguments
 
 
@@ -57,7 +57,7 @@ def test_the_command_line_flags():
         parser.parse_args(["--backend", "dask"])
 
 
-@pytest.mark.parametrize("script", [evaluate, value_of_information, detection_benchmark])
+@pytest.mark.parametrize("script", [benchmark, value_of_information, detection_benchmark])
 def test_the_scripts_refuse_an_address_without_ray(script, capsys):
     with pytest.raises(SystemExit):
         script.main(["--address", "auto"])
@@ -70,19 +70,21 @@ def test_without_ray_the_ray_backend_says_how_to_get_it():
         Backend("ray").map(power, [(2, 3)])
 
 
-def test_evaluate_runs_one_picklable_piece_per_policy_and_group():
-    policies = {"rule_platoon": PaperRulePolicy(), "fixed_1.6": FixedPolicy(1.6)}
-    plan = evaluate.plan_episodes(3, ["training_mix", "idm"])
+def test_the_benchmark_runs_picklable_pieces_of_at_most_a_chunk_and_the_serial_results():
+    group = benchmark.Group("tiny", "short episodes", {"episode_duration": 10.0}, 5, references=False, selection=3)
+    entries = [benchmark.registered("fixed_1.6"), benchmark.registered("rule_platoon")]
     backend = Recording()
-    records, _, timings = evaluate.run_all(policies, plan, None, backend)
-    assert [(piece[0], piece[2], piece[3]) for piece in backend.pieces] == [
-        (heldout.timed_batch, group, seeds) for _ in policies for group, seeds in
-        (("training_mix", [plan[0].seed, plan[1].seed]), ("idm", [plan[2].seed]))]
+    result = benchmark.run_group(group, entries, 10_000, 5, benchmark.Cache(None), backend)
+    played = [piece for piece in backend.pieces if list(piece[3]) == list(range(10_000, 10_005))]
+    assert [type(piece[1]).__name__ for piece in played] == ["FixedPolicy", "PaperRulePolicy"]
+    assert all(piece[0] is benchmark.play and len(piece[3]) <= benchmark.CHUNK for piece in backend.pieces)
     for piece in backend.pieces:
         pickle.loads(pickle.dumps(piece))  # plain pickle: no lambda, no local function
-    direct = heldout.run_batch(policies["fixed_1.6"], "idm", [plan[2].seed], False)[0]
-    assert records["fixed_1.6"][-1] == direct[0]
-    assert set(timings) == set(policies) and all(spent > 0 for spent in timings.values())
+    direct = benchmark.play(PaperRulePolicy(benchmark.group_config(group)), benchmark.group_config(group),
+                            list(range(10_000, 10_005)))
+    assert dataclasses.asdict(result.played["rule_platoon"]).keys() == dataclasses.asdict(direct).keys()
+    assert all((getattr(result.played["rule_platoon"], name) == getattr(direct, name)).all()
+               for name in dataclasses.asdict(direct))
 
 
 def test_value_of_information_pieces_are_picklable_and_give_the_serial_results():

@@ -17,7 +17,7 @@ from timegap_env.leaders import default_openacc_dir
 
 ROOT = Path(__file__).resolve().parents[2]
 SCRIPTS = sorted(path.stem for path in (ROOT / "train").glob("*.py") if 'if __name__ == "__main__":' in path.read_text())
-DIRECTORY_OUT = ["calibrate_openacc", "choose_degradation_mix", "compare_curves", "demo", "detection_benchmark", "evaluate", "evaluate_task",
+DIRECTORY_OUT = ["calibrate_openacc", "choose_degradation_mix", "compare_curves", "demo", "detection_benchmark", "benchmark",
                  "field_validation", "reproduce_paper", "sumo_report", "sweep", "task_map", "train_morl", "train_ppo", "train_rllib", "tune_rule",
                  "value_of_information"]  # --out is a directory
 FILE_OUT = ["bench", "bench_ray", "choose_window", "record_behaviour", "render_frame"]  # --out is a file
@@ -88,12 +88,8 @@ def test_out_naming_a_file_is_refused_before_any_work(name: str, tmp_path: Path,
     target.write_text("keep me")
     arguments = (["train/sweeps/example.yml"] if name == "sweep" else []) + ["--out", str(target)]
     monkeypatch.chdir(ROOT)
-    if name == "evaluate":  # its argument errors go through argparse: usage, the message, exit 2
-        with pytest.raises(SystemExit):
-            call_main(name, arguments, monkeypatch)
-    else:
-        with pytest.raises(NotADirectoryError, match=f"--out {target}: is an existing file"):
-            call_main(name, arguments, monkeypatch)
+    with pytest.raises(NotADirectoryError, match=f"--out {target}: is an existing file"):
+        call_main(name, arguments, monkeypatch)
     assert target.read_text() == "keep me" and sorted(path.name for path in tmp_path.iterdir()) == ["results.md"]
 
 

@@ -117,7 +117,7 @@ def test_bad_settings_are_one_line_on_the_command_line_before_any_work(tmp_path:
 
 
 def test_training_md_says_why_there_is_no_share_of_the_oracle_gap() -> None:
-    # results/ppo/training.md printed "nan": the oracle (-162.4) did not beat the best constant (-159.6) there
+    # results/v0/ppo/training.md printed "nan": the oracle (-162.4) did not beat the best constant (-159.6) there
     reference = train_ppo.CurveReference([9000], 1.0, -159.6, "oracle_lookup_episode", -162.4, (-5.0, -0.5))
     assert math.isnan(reference.share(-160.0))
     assert train_ppo.share_text(reference, -160.0) == (

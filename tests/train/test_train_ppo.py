@@ -64,7 +64,7 @@ def test_rl_zoo3_understands_every_key_of_the_hyperparams() -> None:
 
 def test_the_shipped_warmup_is_the_one_the_committed_model_was_trained_with() -> None:
     steps, env_kwargs = train_ppo.load_warmup(ROOT / "hyperparams" / "ppo_warmup.yml")
-    assert steps == 150_000  # results/ppo/training.md: warm-up 151,552 steps (whole rollouts of 4096)
+    assert steps == 150_000  # results/v0/ppo/training.md: warm-up 151,552 steps (whole rollouts of 4096)
     assert env_kwargs == {"config": {"decision_interval": 5.0, "action_mode": "relative", "random_initial_setting": True}}
 
 

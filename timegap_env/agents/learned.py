@@ -1,6 +1,6 @@
 """A trained stable-baselines3 model as a policy, with the observation scaling it was trained under.
 
-    policy = LearnedPolicy.load("results/ppo")          # results/ppo/model.zip, env.json (+ vecnormalize.pkl)
+    policy = LearnedPolicy.load("results/v0/ppo")          # results/v0/ppo/model.zip, env.json (+ vecnormalize.pkl)
     action, _ = policy.predict(obs, deterministic=True)
 
 A run is read as it was trained, or not at all: ``env.json`` (``timegap_env.agents.protocol``) says what the

@@ -28,7 +28,7 @@ from timegap_env.monitoring.charts import switch_rule
 
 V2V_SETTING = 1.0  # string stable with V2V (CACC) from 1.0 s with the default gains [s]
 ACC_SETTING = 1.6  # string stable without V2V (ACC) from about 1.6 s with the default gains [s]
-# ChartStepPolicy's defaults: the best cell of `python -m train.tune_rule` on training seeds (results/rule/tuning.md).
+# ChartStepPolicy's defaults: the best cell of `python -m train.tune_rule` on training seeds (results/v0/rule/tuning.md).
 CHART_STEP_K_UP = 4  # exceedances within the chart's window that send a follower one level up [-]
 CHART_STEP_QUIET_TIME = 35.0  # time without an alarm that sends a follower one level down [s]
 CHART_STEP_MIN_SETTING = 1.6  # the lowest level the rule asks for, the driver's preferred setting [s]
@@ -222,7 +222,7 @@ class ChartStepPolicy(ObservationPolicy):
     - ``action_mode="platoon"``: the largest level any follower asks for (one up-step outvotes the rest);
     - ``action_mode="per_vehicle"``: each follower its own.
 
-    Defaults: the best cell of ``python -m train.tune_rule`` on training seeds (``results/rule/tuning.md``),
+    Defaults: the best cell of ``python -m train.tune_rule`` on training seeds (``results/v0/rule/tuning.md``),
     ``CHART_STEP_K_UP``, ``CHART_STEP_QUIET_TIME``, ``CHART_STEP_MIN_SETTING``; the tuned floor is the env's
     starting setting, so with the defaults the rule only rises above it and comes back. ``k_up`` may be at most 2 ×
     ``config.chart.switch_exceedances`` and ``quiet_time`` at most ``config.chart.exceedance_window``, where the

@@ -1,7 +1,7 @@
 """A PPO policy trained by Ray RLlib (``train/train_rllib.py``) behind the same interface as
 :class:`timegap_env.agents.learned.LearnedPolicy`, for ``train.evaluate``.
 
-    policy = RLlibPolicy.load("results/rllib")       # the run directory, or its checkpoint/ (algo.save's)
+    policy = RLlibPolicy.load("results/v0/rllib")       # the run directory, or its checkpoint/ (algo.save's)
     action, _ = policy.predict(obs, deterministic=True)
 
 Only the learner's RLModule is read (``<checkpoint>/learner_group/learner/rl_module/default_policy``),

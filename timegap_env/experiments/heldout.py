@@ -42,7 +42,7 @@ DEFAULT_EPISODES = 112  # per policy, split across the groups
 DEFAULT_REFERENCE = "rule_platoon"  # the policy the paired differences are taken against
 ALL_EPISODES = "all"  # the group name of the rows over every episode
 TTC_CAP = 30.0  # min TTCs above this are all safe; averaged as this [s]
-DEFAULT_MODEL = Path("results/ppo", MODEL_FILE)  # the committed trained model, relative to the working directory
+DEFAULT_MODEL = Path("results/v0/ppo", MODEL_FILE)  # the committed trained model, relative to the working directory
 DEFAULT_POLICIES = ("rule_platoon", "rule_per_vehicle", "chart_step", "v2v_aware")  # the fixed settings after the third
 
 @dataclasses.dataclass(frozen=True)
