@@ -48,7 +48,7 @@ from timegap_env.experiments import heldout
 from timegap_env.experiments.backends import Backend
 from timegap_env.experiments.registry import make as make_policy
 
-DEFAULT_OUT = Path("results/ray/scaling.md")
+DEFAULT_OUT = Path("runs/ray/scaling.md")
 NOOP_TASKS = 200  # empty tasks mapped at once to measure Ray's cost per task [-]
 SPIN_ITERATIONS = 100_000_000  # integers summed: a CPU-bound task of about a second [-]
 SWEEP_CELLS = 20  # config cells of the estimated sweep, each a full evaluation [-]

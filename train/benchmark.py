@@ -846,11 +846,11 @@ def claimed(out: Path) -> Iterator[None]:
 
 
 def size_groups(names: Sequence[str]) -> str:
-    """The pilot: per group, on PILOT selection seeds, the standard deviation of the paired difference of return
-    between the paper's rule and the best constant there, and the episodes that see EFFECT of its |return| at
-    POWER."""
-    lines = [f"| group | best constant's return | sd of (rule - best constant) | episodes for {EFFECT:.0%} at "
-             f"{POWER:.0%} power | given |", "|---|---|---|---|---|"]
+    """The pilot: per group, on PILOT selection seeds, the largest standard deviation of a paired difference of
+    return from the best constant there (the paper's rule's, and the constants' one ladder step either side), and
+    the episodes that see EFFECT of the best constant's |return| at POWER with it."""
+    lines = [f"| group | best constant's return | largest sd of a paired difference from it (whose) | episodes for "
+             f"{EFFECT:.0%} at {POWER:.0%} power | given |", "|---|---|---|---|---|"]
     seeds = list(range(SELECTION_SEED_START, SELECTION_SEED_START + PILOT))
     for name in names:
         group = GROUPS[name]
@@ -858,13 +858,15 @@ def size_groups(names: Sequence[str]) -> str:
             lines.append(f"| {name} | not measured: {missing(group) or group.capped} | | | {group.episodes} |")
             continue
         config = group_config(group)
-        played = {policy: play(registry.make(policy, config), config, seeds)
-                  for policy in [*registry.fixed_names(config), RULE]}
-        best = max(registry.fixed_names(config), key=lambda policy: played[policy].returns.mean())
-        sd = float(np.std(played[RULE].returns - played[best].returns, ddof=1))
+        constants = registry.fixed_names(config)
+        played = {policy: play(registry.make(policy, config), config, seeds) for policy in [*constants, RULE]}
+        best = max(constants, key=lambda policy: played[policy].returns.mean())
+        near = [constants[i] for i in (constants.index(best) - 1, constants.index(best) + 1) if 0 <= i < len(constants)]
+        sds = {policy: float(np.std(played[policy].returns - played[best].returns, ddof=1)) for policy in [RULE, *near]}
+        widest = max(sds, key=sds.__getitem__)
         level = abs(float(played[best].returns.mean()))
-        lines.append(f"| {name} | {-level:.1f} ({best}) | {sd:.1f} | {episodes_for(sd, EFFECT * level, POWER)} | "
-                     f"{group.episodes} |")
+        lines.append(f"| {name} | {-level:.1f} ({best}) | {sds[widest]:.1f} ({widest}) | "
+                     f"{episodes_for(sds[widest], EFFECT * level, POWER)} | {group.episodes} |")
         print(lines[-1], flush=True)
     return "\n".join(lines)
 

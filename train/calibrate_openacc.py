@@ -179,7 +179,7 @@ def collisions(presets: dict[str, FollowerFit], leaders: dict[str, list[LeaderPr
 
 def main(argv: Sequence[str] | None = None) -> None:
     parser = argparse.ArgumentParser(prog="python -m train.calibrate_openacc", description=__doc__.split("\n")[0])
-    parser.add_argument("--out", type=Path, default=Path("results/field"), help="report directory (default %(default)s)")
+    parser.add_argument("--out", type=Path, default=Path("runs/field"), help="report directory (default %(default)s)")
     parser.add_argument("--presets", type=Path, help="where the presets go (default: the package's; none with --cars)")
     parser.add_argument("--cars", nargs="+", metavar="CAR", help="calibrate only these car models (default: all)")
     args = parser.parse_args(argv)

@@ -39,7 +39,7 @@ from timegap_env.experiments.value import (
     run,
 )
 
-DEFAULT_OUT = Path("results/degradation")  # beside train.value_of_information's files
+DEFAULT_OUT = Path("runs/degradation")  # beside train.value_of_information's files
 WEIGHT_GRID = (1, 2, 4)  # the weights tried for each kind: every kind stays in the mix [-]
 
 DEFAULT_EPISODES = 24  # per kind

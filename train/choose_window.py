@@ -84,7 +84,7 @@ def false_alarms_per_hour(window: float | None, sensors: SensorConfig, seed: int
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--out", type=Path, default=Path("results/monitor_window.md"))
+    parser.add_argument("--out", type=Path, default=Path("runs/monitor_window.md"))
     args = parser.parse_args()
     cli.output_file(args.out)
 

@@ -104,7 +104,7 @@ def figure(runs: list[dict[str, Any]], blind: float, oracle: float, path: Path) 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("runs", type=Path, nargs="*", help="train_ppo run directories")
-    parser.add_argument("--out", default="results/recipes/curves", help="directory for curves.md and curves.png")
+    parser.add_argument("--out", default="runs/recipes/curves", help="directory for curves.md and curves.png")
     args = parser.parse_args()
     cli.output_dir(args.out)
     if not args.runs:

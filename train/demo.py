@@ -66,7 +66,7 @@ def summary_table(trajectory: Trajectory) -> str:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--seed", type=int, default=0, help="seed of the paper scenario's leader")
-    parser.add_argument("--out", type=Path, default=Path("results"), help="output directory")
+    parser.add_argument("--out", type=Path, default=Path("runs/demo"), help="output directory")
     args = parser.parse_args()
     cli.output_dir(args.out)
 

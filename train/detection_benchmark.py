@@ -268,7 +268,7 @@ def main(argv: Sequence[str] | None = None) -> None:
     parser.add_argument("--episodes", type=int, default=32, help="episodes per condition (default %(default)s)")
     parser.add_argument("--nominal-episodes", type=int, default=96,
                         help="nominal episodes for calibration and again for the test (default %(default)s)")
-    parser.add_argument("--out", type=Path, default=Path("results/monitoring"), help="output directory")
+    parser.add_argument("--out", type=Path, default=Path("runs/monitoring"), help="output directory")
     add_arguments(parser)
     args = parser.parse_args(argv)
     cli.output_dir(args.out)

@@ -684,7 +684,7 @@ def write_followers_csv(followers: list[Follower], path: Path) -> None:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--data", type=Path, default=default_openacc_dir(), help="directory of OpenACC files")
-    parser.add_argument("--out", type=Path, default=Path("results/field"), help="where the report and figures go")
+    parser.add_argument("--out", type=Path, default=Path("runs/field"), help="where the report and figures go")
     parser.add_argument("--runs", nargs="+", metavar="NAME", help="only these runs (file names without suffix)")
     args = parser.parse_args()
     cli.output_dir(args.out)

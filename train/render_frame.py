@@ -26,11 +26,12 @@ SWITCH_STEP, FRAME_STEP = 10, 40  # [steps of 1 s]
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--out", type=Path, default=Path("results/env_frame.png"))
+    parser.add_argument("--out", type=Path, default=Path("runs/env_frame.png"),
+                        help="the frame (default: %(default)s; make reproduce writes results/env_frame.png)")
     args = parser.parse_args()
     cli.output_file(args.out)
     levels = list(timegap_env.EnvConfig().setting_levels)
-    env = gym.make(timegap_env.ENV_ID, render_mode="rgb_array", config={"degradation": {"kind_weights": {"none": 1.0}}})
+    env = gym.make(timegap_env.DEFAULT_TASK, render_mode="rgb_array", config={"degradation": {"kind_weights": {"none": 1.0}}})
     env.reset(seed=args.seed, options={"scenario": "aggressive_cycles"})
     for step in range(FRAME_STEP):
         env.step(levels.index(1.6) if step < SWITCH_STEP else levels.index(1.0))

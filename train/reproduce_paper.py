@@ -139,7 +139,7 @@ def plot_switch(fixed: LoopRecord, switched: LoopRecord, env: int, path: Path) -
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--seeds", type=int, default=50, help="leader seeds 0..N-1 run at once")
-    parser.add_argument("--out", type=Path, default=Path("results/paper"))
+    parser.add_argument("--out", type=Path, default=Path("runs/paper"))
     args = parser.parse_args()
     cli.output_dir(args.out)
     args.out.mkdir(parents=True, exist_ok=True)

@@ -190,7 +190,7 @@ def main() -> None:
     parser.add_argument("--model", type=Path, nargs="*", default=[Path("results/ppo_v1")], help="learned v1 runs")
     parser.add_argument("--chart-step-tuning", type=Path, default=None,
                         help="a tune_rule --env-id TimeGapMonitor-v1 tuning.csv (default: the registered parameters)")
-    parser.add_argument("--out", default="results/sumo", help="directory of the report")
+    parser.add_argument("--out", default="runs/sumo", help="directory of the report")
     add_arguments(parser)
     args = parser.parse_args()
     cli.output_dir(args.out)

@@ -72,7 +72,7 @@ from timegap_env.experiments.registry import make as make_policy
 from timegap_env.experiments.rollout import rollout
 from timegap_env.experiments.stats import BOOTSTRAP_RESAMPLES, BOOTSTRAP_SEED, bootstrap_mean
 
-DEFAULT_OUT = Path("results/sweep")  # a grid's results go to DEFAULT_OUT / its file's stem
+DEFAULT_OUT = Path("runs/sweep")  # a grid's results go to DEFAULT_OUT / its file's stem
 DEFAULT_MODEL = Path("results/v0/ppo")
 DEFAULT_BATCH = 16  # episodes per piece, one vector env [-]
 DEFAULT_CHUNK = 16  # pieces per Backend.map call, after each of which episodes.csv is written [-]

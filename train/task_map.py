@@ -160,7 +160,7 @@ def main() -> None:
     parser.add_argument("--train", type=cli.count, default=defaults.train, help="training seeds per condition")
     parser.add_argument("--selection", type=cli.count, default=defaults.selection, help="selection seeds")
     parser.add_argument("--held-out", type=cli.count, default=defaults.held_out, help="held-out seeds")
-    parser.add_argument("--out", default="results/task", help="directory for map.md, map.csv, map.png, v1.md, ...")
+    parser.add_argument("--out", default="runs/task", help="directory for map.md, map.csv, map.png, v1.md, ...")
     add_arguments(parser)
     args = parser.parse_args()
     cli.output_dir(args.out)

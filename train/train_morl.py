@@ -207,7 +207,7 @@ def main() -> None:
     parser.add_argument("--timesteps", type=cli.count, default=DEFAULT_TIMESTEPS, help="Envelope's training steps")
     parser.add_argument("--selection", type=cli.count, default=32, help="selection seeds (from 5000)")
     parser.add_argument("--held-out", type=cli.count, default=100, help="held-out seeds (from 10000)")
-    parser.add_argument("--out", default="results/morl", help="directory for front.md, front.csv, front.png")
+    parser.add_argument("--out", default="runs/morl", help="directory for front.md, front.csv, front.png")
     args = parser.parse_args()
     cli.output_dir(args.out)
     try:

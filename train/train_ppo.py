@@ -1,9 +1,10 @@
-"""Train PPO (Stable-Baselines3) on ``TimeGapMonitor-v0`` or ``-v1`` (``--env-id``), every platoon in one native
-vector env.
+"""Train PPO (Stable-Baselines3) on the default task (``timegap_env.DEFAULT_TASK``, ``TimeGapMonitor-v1``) or
+another (``--env-id``), every platoon in one native vector env.
 
-    python -m train.train_ppo                                    # the committed model in results/v0/ppo/
+    python -m train.train_ppo                                    # a run of the default task into runs/ppo/
+    python -m train.train_ppo --out results/ppo_v1               # the committed model of the default task (make train)
     python -m train.train_ppo --timesteps 20000 --out /tmp/ppo   # a short run elsewhere (no warm-up: see below)
-    python -m train.train_ppo --resume --timesteps 3000000       # continue results/v0/ppo/ to 3 M steps in all
+    python -m train.train_ppo --resume --timesteps 3000000       # continue runs/ppo/ to 3 M steps in all
     python -m train.train_ppo --env-config '{"action_mode": "platoon"}' --frame-stack 4 --out /tmp/ppo  # a variant
 
 Hyperparameters come from ``hyperparams/ppo.yml`` (rl-zoo3's layout, which rl-zoo3 trains from as it
@@ -20,7 +21,7 @@ it, ``<out>.partial-<random>`` (a copy of ``--out`` with ``--resume``), where it
 moves it to ``--out`` when it has ended, the run that was there deleted only then. Stopped or failed
 before that (Ctrl-C, a crash, a full disk), ``--out`` is as it was; the work directory is deleted, or, if
 it holds a checkpoint of this run, kept and named (``--resume --out <it>`` continues it). So ``make train``
-regenerates the committed ``results/v0/ppo`` in place, and a run into an existing run directory replaces it
+regenerates the committed runs in place (the default ``--out`` is ``runs/ppo``, never a committed one), and a run into an existing run directory replaces it
 only by a finished run. ``--out`` must be absent, empty or a run directory (only the files below): a
 directory holding anything else is refused before any work (a finished run replaces the whole
 directory), as is ``--out`` naming a file. The run directory holds exactly:
@@ -85,7 +86,7 @@ from timegap_env.agents.policies import seconds
 from timegap_env.agents.protocol import (
     ALGORITHMS, ENV_FILE, EVAL_SEED_START, MODEL_FILE, VECNORMALIZE_FILE, env_version, read_env_file,
 )
-from timegap_env import ENV_ID, ENV_IDS, cli
+from timegap_env import DEFAULT_TASK, ENV_IDS, cli
 from timegap_env.config import TASK_VERSIONS, EnvConfig
 from timegap_env.envs.action import action_space
 from timegap_env.envs.info import summary_of, truth_of
@@ -112,13 +113,13 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--algo", default="ppo", choices=list(ALGORITHMS),
                         help="ppo (stable-baselines3) or ppo_lstm (sb3-contrib's RecurrentPPO); the default "
                              "--hyperparams is hyperparams/<algo>.yml (default: %(default)s)")
-    parser.add_argument("--env-id", default=ENV_ID, choices=list(ENV_IDS.values()),
+    parser.add_argument("--env-id", default=DEFAULT_TASK, choices=list(ENV_IDS.values()),
                         help="the env, and the section of --hyperparams and --warmup to read (default: %(default)s)")
-    parser.add_argument("--timesteps", type=int, default=None,
+    parser.add_argument("--timesteps", type=cli.count, default=None,
                         help="total environment steps of the run, warm-up included (default: n_timesteps of the yml)")
     parser.add_argument("--seed", type=int, default=0,
                         help="seed of PyTorch and the envs; phase k's sub-env i gets seed + k n_envs + i (default: 0)")
-    parser.add_argument("--n-envs", type=int, default=None,
+    parser.add_argument("--n-envs", type=cli.count, default=None,
                         help="platoons stepped together (default: n_envs of the yml)")
     parser.add_argument("--env-config", type=cli.json_object, default={},
                         help="EnvConfig overrides as JSON, merged into the config of env_kwargs and of the warm-up's "
@@ -131,7 +132,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                              "cost, raised by dual ascent while the cost exceeds it (default: unconstrained)")
     parser.add_argument("--lagrange-rate", type=float, default=1.0,
                         help="the multiplier's step per unit of cost over the budget, per rollout (default: %(default)s)")
-    parser.add_argument("--frame-stack", type=int, default=None,
+    parser.add_argument("--frame-stack", type=cli.count, default=None,
                         help="observations the policy reads at once (default: frame_stack of the yml, else 1)")
     parser.add_argument("--hyperparams", type=Path, default=None,
                         help="rl-zoo3-style yml keyed by env id (default: hyperparams/<algo>.yml)")
@@ -139,12 +140,12 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                         help="yml keyed by env id: the warm-up's n_timesteps and env_kwargs (default: %(default)s)")
     parser.add_argument("--no-warmup", dest="warmup", action="store_const", const=None,
                         help="train in env_kwargs from the start")
-    parser.add_argument("--out", type=Path, default=Path("results/v0/ppo"),
+    parser.add_argument("--out", type=Path, default=Path("runs/ppo"),
                         help="run directory: model.zip, vecnormalize.pkl, training.md, ...; written when the run ends, "
                              "replacing a run there (default: %(default)s)")
     parser.add_argument("--resume", action="store_true",
                         help="continue from <out>/model.zip (and its VecNormalize stats) up to --timesteps in all")
-    parser.add_argument("--checkpoint-freq", type=int, default=100_000,
+    parser.add_argument("--checkpoint-freq", type=cli.count, default=100_000,
                         help="replace <out>/model.zip and vecnormalize.pkl every so many steps (default: %(default)s)")
     parser.add_argument("--curve-freq", type=int, default=100_000,
                         help="a point of the learning curve every so many steps, 0: none (default: %(default)s)")
@@ -158,7 +159,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     return args
 
 
-def load_warmup(path: Path, env_id: str = ENV_ID) -> tuple[int, dict[str, Any]]:
+def load_warmup(path: Path, env_id: str = DEFAULT_TASK) -> tuple[int, dict[str, Any]]:
     """The warm-up in ``path``'s ``env_id`` section: its steps and its env's gym.make keyword arguments."""
     with open(path) as file:
         document = yaml.safe_load(file)

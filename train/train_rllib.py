@@ -1,9 +1,11 @@
-"""Train PPO (Ray RLlib, new API stack) on ``TimeGapMonitor-v0`` with several env runners, each a native vector env.
+"""Train PPO (Ray RLlib, new API stack) on the default task (``timegap_env.DEFAULT_TASK``) with several env runners,
+each a native vector env. (The committed run, ``results/v0/rllib``, learned ``TimeGapMonitor-v0`` with an earlier
+version of this script.)
 
-    python -m train.train_rllib                                   # the committed run in results/v0/rllib/ (Ray here)
+    python -m train.train_rllib                                   # a run into runs/rllib/ (Ray here)
     python -m train.train_rllib --timesteps 50000 --out /tmp/rllib  # a short run elsewhere
     python -m train.train_rllib --address auto --env-runners 16   # join a running Ray cluster
-    python -m train.train_rllib --select-scale 1 1/30 0.02        # choose the reward scale: results/v0/rllib/selection.md
+    python -m train.train_rllib --select-scale 1 1/30 0.02        # choose the reward scale (v0's: results/v0/rllib)
 
 Ray starts on this machine (``ray.init()``) unless ``--address`` names a cluster to join (e.g. ``auto`` or
 ``ray://head:10001``); there the runners get this repository's code as Ray's ``working_dir``. Each of the
@@ -34,11 +36,11 @@ episodes seeded ``EVAL_SEED`` on: 9000-9031, below the held-out seeds, in the en
 ``REWARD_SCALE`` is set to. It keeps no checkpoint and runs no held-out episode; the runners' platoons must be
 seeded below the check episodes'.
 
-``--out`` (default ``results/v0/rllib``) receives ``checkpoint/`` (RLlib's ``algo.save``, the env's
+``--out`` (default ``runs/rllib``) receives ``checkpoint/`` (RLlib's ``algo.save``, the env's
 ``env.json`` added), which ``timegap_env.agents.rllib_policy.RLlibPolicy.load`` reads, and ``training.md``: the
 command, every iteration (env steps, episodes ended and their mean return, time, throughput), the wall time,
-the policy's mean return on the check episodes and, unless ``--eval-episodes 0``, on ``train.evaluate``'s
-held-out episodes beside the paper's rule and the fixed 1.6 s setting. The run writes into
+the policy's mean return on the check episodes and, unless ``--eval-episodes 0``, on the default task's
+held-out episodes beside the paper's rule and the fixed 1.2 s setting (the benchmark compares it in full). The run writes into
 ``<out>.partial-<random>`` (a copy of ``--out``, so its ``selection.md`` stays) and replaces ``--out`` only when
 it has ended: stopped or failed before, it leaves ``--out`` as it was.
 """
@@ -64,17 +66,19 @@ import numpy as np
 
 from timegap_env.agents.protocol import ENV_FILE, EVAL_SEED_START
 from timegap_env.agents.rllib_policy import CHECKPOINT_DIR, RLlibPolicy
-from timegap_env import cli
-from timegap_env import ENV_ID
+from timegap_env import ENV_IDS, cli
+from timegap_env import DEFAULT_TASK
 from timegap_env.experiments.backends import runtime_env
 
-QUALIFIED_ID = f"timegap_env:{ENV_ID}"  # gymnasium imports timegap_env, which registers the id, in any process
+QUALIFIED_ID = f"timegap_env:{DEFAULT_TASK}"  # gymnasium imports timegap_env, which registers the id, in any process
 RLLIB_ENV = "timegap_rllib"  # RLlib's name of make_env
 REPORT_FILE = "training.md"
 SELECTION_FILE = "selection.md"  # --select-scale's report
 DEFAULT_TIMESTEPS = 1_000_000  # about 2-3 min on this 2-core machine, half the SB3 run's 2 M [env steps]
 DEFAULT_ENV_RUNNERS = 2  # one per core of this machine
-EVAL_POLICIES = ("rule_platoon", "fixed_1.6")  # train.evaluate's policies the report compares with
+EVAL_POLICIES = ("rule_platoon", "fixed_1.2")  # the paper's rule (the reference) and the default task's best constant
+DEFAULT_EVAL_EPISODES = 1_000  # held-out episodes of the report's check (the benchmark's own are sized by power)
+DEFAULT_VERSION = {env_id: version for version, env_id in ENV_IDS.items()}[DEFAULT_TASK]
 MAPPED = {  # ppo.yml's PPO key -> PPOConfig.training's; the keys of UNMAPPED: see Settings.from_args
     "gamma": "gamma",
     "gae_lambda": "lambda_",
@@ -124,7 +128,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                         help="platoons in each runner's native vector env (default: the yml's n_envs / runners)")
     parser.add_argument("--address", default=None,
                         help="Ray cluster to join, e.g. auto or ray://head:10001 (default: start Ray here)")
-    parser.add_argument("--out", type=Path, default=Path("results/v0/rllib"),
+    parser.add_argument("--out", type=Path, default=Path("runs/rllib"),
                         help="run directory: checkpoint/ and training.md (default: %(default)s)")
     parser.add_argument("--seed", type=int, default=0,
                         help="seed of RLlib and the envs: runner w's platoon i gets (seed + w) x envs + i (default: 0)")
@@ -133,7 +137,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--env-config", type=cli.json_object, default={},
                         help="EnvConfig overrides as JSON, merged into env_kwargs' config (default: none)")
     parser.add_argument("--eval-episodes", type=int, default=None,
-                        help="held-out episodes of train.evaluate for the report, 0: none (default: its 112)")
+                        help="held-out episodes of the default task for the report's check, 0: none (default: "
+                             f"{DEFAULT_EVAL_EPISODES}; the full comparison: python -m train.benchmark --policy <out>)")
     parser.add_argument("--reward-scale", type=parse_scale, default=None,
                         help="the rewards PPO learns from: the env's times this, e.g. 1/30 (default: REWARD_SCALE "
                              f"= {REWARD_SCALE:.4g} if the yml normalizes rewards, else 1)")
@@ -184,37 +189,51 @@ def net_arch_of(policy_kwargs: dict[str, Any], where: Path) -> list[int]:
     arch = policy_kwargs.get("net_arch", [64, 64])  # SB3's default for PPO's MlpPolicy
     if isinstance(arch, dict):
         if arch.get("pi") != arch.get("vf"):
-            raise ValueError(f"hyperparams {ENV_ID}.policy_kwargs.net_arch = {arch!r} in {where}: RLlib's default "
+            raise ValueError(f"hyperparams {DEFAULT_TASK}.policy_kwargs.net_arch = {arch!r} in {where}: RLlib's default "
                              "module needs pi and vf of the same sizes")
         arch = arch["pi"]
     extra = set(policy_kwargs) - {"net_arch"}
     if extra:
-        raise ValueError(f"hyperparams {ENV_ID}.policy_kwargs keys {sorted(extra)} in {where}: no RLlib counterpart")
+        raise ValueError(f"hyperparams {DEFAULT_TASK}.policy_kwargs keys {sorted(extra)} in {where}: no RLlib counterpart")
     return list(arch)
 
 
 @dataclasses.dataclass(frozen=True)
 class HeldOut:
-    """train.evaluate's summary rows over all its held-out episodes, for the policy and EVAL_POLICIES."""
+    """The policy and EVAL_POLICIES on the default task's held-out episodes: a summary row each."""
 
     episodes: int  # per policy
-    rows: list[dict[str, Any]]  # summarise's rows of the group "all"
+    rows: list[dict[str, Any]]  # name, return_mean/_ci_low/_ci_high, return_vs_reference_*, collisions, episodes, ...
     seconds: float  # wall time of the evaluation [s]
 
 
 def held_out_returns(policy: Any, episodes: int | None) -> HeldOut:
-    """``policy`` and EVAL_POLICIES on ``episodes`` (None: train.evaluate's default) of train.evaluate's held-out
-    episodes: its groups, plan, runs and statistics."""
-    from timegap_env.experiments import heldout, registry
+    """``policy`` and EVAL_POLICIES on ``episodes`` (None: DEFAULT_EVAL_EPISODES) held-out episodes of the default
+    task (seeds from EVAL_SEED_START), each in its own action mode, paired against the paper's rule. The full
+    comparison is the benchmark's: ``python -m train.benchmark --policy <out>``."""
+    from timegap_env.config import EnvConfig
+    from timegap_env.experiments import registry
+    from timegap_env.experiments.rollout import rollout
+    from timegap_env.experiments.stats import bootstrap_mean
 
     start = time.perf_counter()
-    groups, _ = heldout.available_groups()
-    plan = heldout.plan_episodes(episodes or heldout.DEFAULT_EPISODES, groups)
-    policies = {"rllib_ppo": policy, **{name: registry.make(name) for name in EVAL_POLICIES}}
-    records, _, _ = heldout.run_all(policies, plan, None)
-    rows = heldout.summarise(policies, records, heldout.DEFAULT_REFERENCE)
-    return HeldOut(len(plan), [row for row in rows if row["group"] == heldout.ALL_EPISODES],
-                   time.perf_counter() - start)
+    config = EnvConfig.from_dict(version=DEFAULT_VERSION)
+    seeds = list(range(EVAL_SEED_START, EVAL_SEED_START + (episodes or DEFAULT_EVAL_EPISODES)))
+    policies = {"rllib_ppo": policy, **{name: registry.make(name, config) for name in EVAL_POLICIES}}
+    records = {name: rollout(each, config, seeds, step_diagnostics=False).records for name, each in policies.items()}
+    reference = np.array([record.episode_return for record in records[EVAL_POLICIES[0]]])
+    rows = []
+    for name, played in records.items():
+        returns = np.array([record.episode_return for record in played])
+        mean, low, high = bootstrap_mean(returns)
+        versus = bootstrap_mean(returns - reference)
+        rows.append({"name": name, "return_mean": mean, "return_ci_low": low, "return_ci_high": high,
+                     "return_vs_reference_mean": versus[0], "return_vs_reference_ci_low": versus[1],
+                     "return_vs_reference_ci_high": versus[2], "episodes": len(played),
+                     "collisions": sum(bool(record.summary["collision"]) for record in played),
+                     "mean_setting_mean": float(np.mean([record.summary["mean_setting"] for record in played])),
+                     "switches_mean": float(np.mean([record.summary["switches"] for record in played]))})
+    return HeldOut(len(seeds), rows, time.perf_counter() - start)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -282,10 +301,10 @@ class Settings:
         hyperparams = load_hyperparams(args.hyperparams)
         unknown = set(hyperparams) - set(MAPPED) - UNMAPPED
         if unknown:
-            raise ValueError(f"hyperparams {ENV_ID} keys {sorted(unknown)} in {args.hyperparams}: no RLlib "
+            raise ValueError(f"hyperparams {DEFAULT_TASK} keys {sorted(unknown)} in {args.hyperparams}: no RLlib "
                              f"counterpart here; mapped: {sorted(MAPPED)}, read apart: {sorted(UNMAPPED)}")
         if hyperparams["policy"] != "MlpPolicy":
-            raise ValueError(f"hyperparams {ENV_ID}.policy = {hyperparams['policy']!r} in {args.hyperparams}: only "
+            raise ValueError(f"hyperparams {DEFAULT_TASK}.policy = {hyperparams['policy']!r} in {args.hyperparams}: only "
                              "'MlpPolicy' has an RLlib counterpart here (its default MLP module)")
         runners = args.env_runners
         envs = max(1, hyperparams["n_envs"] // max(runners, 1)) if args.envs_per_runner is None else args.envs_per_runner
@@ -450,7 +469,7 @@ class Run:
         default_scale = s.reward_scale == REWARD_SCALE
         c = self.checked
         lines = [
-            f"# PPO (Ray RLlib, new API stack) on {ENV_ID}", "",
+            f"# PPO (Ray RLlib, new API stack) on {DEFAULT_TASK}", "",
             f"Command: `{self.command}`", "",
             "| | |", "|---|---|",
             f"| Ray | {self.ray} |",
@@ -477,10 +496,10 @@ class Run:
         if held_out is not None:
             lines += [
                 f"## Held-out evaluation ({held_out.episodes} episodes per policy, {held_out.seconds:.0f} s)", "",
-                ("By this command, through `train.evaluate`'s functions (`available_groups`, `plan_episodes`, "
-                 "`build_policies`, `run_all`, `summarise`): its held-out groups and seeds, deterministic actions. "
-                 "Mean return [95 % bootstrap interval]; Δ: paired difference to the paper's rule on the same "
-                 "episodes; switches: follower setting changes per episode."), "",
+                (f"By this command: the default task's held-out seeds from {EVAL_SEED_START}, deterministic actions, "
+                 "each policy in its own action mode. Mean return [95 % bootstrap interval]; Δ: paired difference "
+                 "to the paper's rule on the same episodes; switches: follower setting changes per episode. The "
+                 f"full comparison: `python -m train.benchmark --policy {out}`."), "",
                 "| policy | return | Δ return vs paper rule (platoon) | collisions | mean τ* [s] | switches |",
                 "|---|---|---|---|---|---|",
                 *(f"| {r['name']} | {r['return_mean']:.1f} [{r['return_ci_low']:.1f}, {r['return_ci_high']:.1f}] | "
@@ -533,7 +552,7 @@ def selection_report(command: str, settings: Settings, seed: int, ray: str, cand
     chosen_text = f"{chosen.scale:.6g}" + (f" ({named})" if named != f"{chosen.scale:g}" else "")
     verdict = "the chosen scale" if chosen.scale == REWARD_SCALE else "not the chosen scale: set it to the chosen one"
     return "\n".join([
-        f"# Reward scale of train.train_rllib, chosen on the check episodes ({ENV_ID})", "",
+        f"# Reward scale of train.train_rllib, chosen on the check episodes ({DEFAULT_TASK})", "",
         f"Command: `{command}` ({ray}; {wall_seconds / 60:.1f} min in all)", "",
         (f"One run per candidate scale, each as the command without `--select-scale` would train it with "
          f"`--reward-scale` set to the candidate: seed {seed}, {settings.runners} env runners x {settings.envs} "

@@ -1,6 +1,6 @@
 """Tune the chart step rule (``timegap_env.agents.policies.ChartStepPolicy``) on training seeds: a small grid, mean return per cell.
 
-    python -m train.tune_rule [--episodes 256] [--out results/rule] [--env-id TimeGapMonitor-v0|-v1]
+    python -m train.tune_rule [--episodes 256] [--out runs/rule] [--env-id TimeGapMonitor-v1|-v0]
                               [--k-up 1 2 3 4 6] [--quiet-time 10 20 35] [--min-setting 1.0 1.2 1.4 1.6]
 
 Every cell of the grid k_up x quiet_time x min_setting runs the platoon-wide rule on the same episodes of
@@ -25,7 +25,7 @@ import numpy as np
 
 from timegap_env.agents.policies import ChartStepPolicy, FixedPolicy, NamedPolicy, seconds
 from timegap_env.agents.protocol import EVAL_SEED_START, env_version
-from timegap_env import ENV_IDS, cli
+from timegap_env import DEFAULT_TASK, ENV_IDS, cli
 from timegap_env.config import EnvConfig
 from timegap_env.experiments.registry import fixed_name
 from timegap_env.experiments.registry import make as make_policy
@@ -33,7 +33,7 @@ from timegap_env.experiments.rollout import rollout_side_by_side
 from timegap_env.experiments.value import SELECTION_SEED_START, kind_groups
 
 DEFAULT_EPISODES = 256
-DEFAULT_OUT = Path("results/rule")
+DEFAULT_OUT = Path("runs/rule")  # never a committed result: make reproduce writes results/rule (v1), results/v0/rule
 TUNING_SEED_START = 3_000  # first tuning seed, below SELECTION_SEED_START and EVAL_SEED_START [-]
 K_UP = (1, 2, 3, 4, 6)  # exceedances within the chart's window that send a follower up [-]
 QUIET_TIMES = (10.0, 20.0, 35.0)  # time without an alarm that sends a follower down, at most the window [s]
@@ -58,8 +58,8 @@ def main(argv: Sequence[str] | None = None) -> None:
     parser.add_argument("--episodes", type=int, default=DEFAULT_EPISODES,
                         help=f"tuning episodes, seeds {TUNING_SEED_START} on (default %(default)s)")
     parser.add_argument("--out", type=Path, default=None,
-                        help=f"output directory (default {DEFAULT_OUT} for v0, {DEFAULT_OUT}/v1 for v1)")
-    parser.add_argument("--env-id", default=ENV_IDS[0], choices=list(ENV_IDS.values()),
+                        help=f"output directory (default {DEFAULT_OUT}/<env id>)")
+    parser.add_argument("--env-id", default=DEFAULT_TASK, choices=list(ENV_IDS.values()),
                         help="the task the rule is tuned for (default: %(default)s)")
     parser.add_argument("--k-up", type=int, nargs="+", default=K_UP, help="grid of k_up (default %(default)s)")
     parser.add_argument("--quiet-time", type=float, nargs="+", default=QUIET_TIMES,
@@ -68,7 +68,7 @@ def main(argv: Sequence[str] | None = None) -> None:
                         help="grid of min_setting [s] (default %(default)s)")
     args = parser.parse_args(argv)
     if args.out is None:
-        args.out = DEFAULT_OUT if args.env_id == ENV_IDS[0] else DEFAULT_OUT / f"v{env_version(args.env_id)}"
+        args.out = DEFAULT_OUT / args.env_id
     cli.output_dir(args.out)
     if not 1 <= args.episodes <= SELECTION_SEED_START - TUNING_SEED_START:
         parser.error(f"--episodes {args.episodes}: must be in [1, {SELECTION_SEED_START - TUNING_SEED_START}], "
@@ -131,7 +131,7 @@ def write_csv(path: Path, config: EnvConfig, policies: Sequence[NamedPolicy], re
 
 def write_report(path: Path, config: EnvConfig, seeds: Sequence[int], cells: Sequence[ChartStepPolicy],
                  references: Sequence[NamedPolicy], results: dict[str, np.ndarray], best: int,
-                 env_id: str = ENV_IDS[0]) -> str:
+                 env_id: str = DEFAULT_TASK) -> str:
     """tuning.md: the references, the grid by mean return, the best cell per degradation kind."""
     policies = [*cells, *references]
     yardstick = next(i for i, policy in enumerate(policies) if isinstance(policy, FixedPolicy))  # the first constant

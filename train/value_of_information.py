@@ -58,7 +58,7 @@ from timegap_env.experiments.value import (
 )
 
 DEFAULT_EPISODES = 120
-DEFAULT_OUT = Path("results/degradation")
+DEFAULT_OUT = Path("runs/degradation")
 def auc(positive: np.ndarray, negative: np.ndarray) -> float:
     """P(a positive scores above a negative), ties counting half (the Mann-Whitney AUC)."""
     if positive.size == 0 or negative.size == 0:

@@ -20,7 +20,7 @@ import yaml
 
 from timegap_env.agents.learned import RunFileError
 from timegap_env.agents.rllib_policy import CHECKPOINT_DIR, RLlibPolicy, find_checkpoint
-from timegap_env import ENV_ID
+from timegap_env import DEFAULT_TASK
 from timegap_env.config import EnvConfig
 from timegap_env.envs.observation import observation_space
 from timegap_env.experiments.training import EVAL_EPISODES, EVAL_SEED
@@ -51,7 +51,7 @@ INSTALL = "needs the ray extra: pip install -e '.[ray]' (or run bash .ci/clients
 def _yml(tmp_path: Path, **changes: object) -> Path:
     """hyperparams/ppo.yml with ``changes`` to its env section (None: key removed), written in ``tmp_path``."""
     document = yaml.safe_load(PPO_YML.read_text())
-    section = document[ENV_ID]
+    section = document[DEFAULT_TASK]
     for key, value in changes.items():
         if value is None:
             section.pop(key)
@@ -63,7 +63,7 @@ def _yml(tmp_path: Path, **changes: object) -> Path:
 
 
 def test_settings_map_the_sb3_yml() -> None:
-    yml = yaml.safe_load(PPO_YML.read_text())[ENV_ID]
+    yml = yaml.safe_load(PPO_YML.read_text())[DEFAULT_TASK]
     settings = Settings.from_args(parse_args(["--hyperparams", str(PPO_YML)]))
     assert (settings.runners, settings.envs, settings.n_steps) == (2, yml["n_envs"] // 2, yml["n_steps"])
     assert settings.train_batch == yml["n_envs"] * yml["n_steps"]
@@ -161,7 +161,7 @@ def test_runner_env_spreads_seeds_scales_rewards_and_leaves_infos_out() -> None:
     """Runner w's vector env, seeded seed + w by RLlib, steps platoons (seed + w) x num_envs + i."""
     n, scale = 3, 0.5
     envs = make_env({"config": SHORT, "autoreset_mode": "next_step", "reward_scale": scale, "num_envs": n})
-    native = gym.make_vec(ENV_ID, num_envs=n, vectorization_mode="vector_entry_point", config=SHORT,
+    native = gym.make_vec(DEFAULT_TASK, num_envs=n, vectorization_mode="vector_entry_point", config=SHORT,
                           autoreset_mode="next_step")
     obs, infos = envs.reset(seed=2)
     expected, _ = native.reset(seed=[2 * n + i for i in range(n)])
@@ -223,7 +223,7 @@ def test_train_rllib_end_to_end_then_the_policy_acts(tmp_path: Path) -> None:
     policy = RLlibPolicy.load(out)
     assert policy.action_mode == "relative"
     assert policy.observation_shape == observation_space(EnvConfig()).shape
-    envs = gym.make_vec(ENV_ID, num_envs=5, vectorization_mode="vector_entry_point",
+    envs = gym.make_vec(DEFAULT_TASK, num_envs=5, vectorization_mode="vector_entry_point",
                         config={**SHORT, "action_mode": "relative"})
     obs, _ = envs.reset(seed=10_000)
     for _ in range(3):

@@ -16,7 +16,7 @@ import yaml
 from stable_baselines3 import PPO
 
 from timegap_env.agents.learned import LearnedPolicy
-from timegap_env import ENV_ID
+from timegap_env import DEFAULT_TASK
 from train import train_ppo
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -25,7 +25,7 @@ ROOT = Path(__file__).resolve().parents[2]
 def tiny(tmp_path: Path, out: Path, *extra: str) -> list[str]:
     """Arguments of a tiny normalised run into ``out`` (2 platoons, 5 s episodes, no warm-up)."""
     hyperparams = tmp_path / "ppo.yml"
-    hyperparams.write_text(yaml.safe_dump({ENV_ID: {
+    hyperparams.write_text(yaml.safe_dump({DEFAULT_TASK: {
         "n_envs": 2, "n_timesteps": 32, "policy": "MlpPolicy", "normalize": True, "n_steps": 16, "batch_size": 32,
         "n_epochs": 1, "policy_kwargs": "dict(net_arch=[8])", "env_kwargs": {"config": {"episode_duration": 5.0}},
     }}))

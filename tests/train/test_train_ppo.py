@@ -21,7 +21,7 @@ from stable_baselines3.common.vec_env import VecNormalize
 
 from timegap_env.agents.learned import LearnedPolicy, RunFileError
 from timegap_env.agents.protocol import EVAL_SEED_START, read_env_file
-from timegap_env import ENV_ID, ENV_IDS
+from timegap_env import DEFAULT_TASK, ENV_IDS
 from timegap_env.envs.observation import FEATURES, MONITOR_FEATURES
 from timegap_env.envs.sb3 import TimeGapVecEnv
 from timegap_env.experiments import training
@@ -53,7 +53,7 @@ RL_ZOO3_SETS = {"self", "env", "seed", "tensorboard_log", "verbose", "device"}
 
 def test_rl_zoo3_understands_every_key_of_the_hyperparams() -> None:
     with open(ROOT / "hyperparams" / "ppo.yml") as file:
-        hyperparams = yaml.safe_load(file)[ENV_ID]
+        hyperparams = yaml.safe_load(file)[DEFAULT_TASK]
     ppo_arguments = set(inspect.signature(PPO.__init__).parameters) - RL_ZOO3_SETS
     unknown = set(hyperparams) - RL_ZOO3_RUN_KEYS - ppo_arguments
     assert not unknown, f"keys rl-zoo3 would pass to PPO.__init__, which does not take them: {sorted(unknown)}"
@@ -70,23 +70,23 @@ def test_the_shipped_warmup_is_the_one_the_committed_model_was_trained_with() ->
 
 def test_warmup_errors_name_the_file(tmp_path: Path) -> None:
     path = tmp_path / "warmup.yml"
-    path.write_text(yaml.safe_dump({ENV_ID: {"n_timesteps": 0, "env_kwargs": {}}}))
+    path.write_text(yaml.safe_dump({DEFAULT_TASK: {"n_timesteps": 0, "env_kwargs": {}}}))
     with pytest.raises(ValueError, match="n_timesteps = 0 in .*warmup.yml"):
         train_ppo.load_warmup(path)
-    path.write_text(yaml.safe_dump({ENV_ID: {"n_timesteps": 10}}))
+    path.write_text(yaml.safe_dump({DEFAULT_TASK: {"n_timesteps": 10}}))
     with pytest.raises(ValueError, match="warmup.yml: needs exactly the keys"):
         train_ppo.load_warmup(path)
 
 
 def test_hyperparams_errors_name_the_field(tmp_path: Path) -> None:
     path = tmp_path / "bad.yml"
-    path.write_text(yaml.safe_dump({ENV_ID: {"n_envs": 2, "n_timesteps": 10, "policy": "MlpPolicy", "n_stpes": 8}}))
+    path.write_text(yaml.safe_dump({DEFAULT_TASK: {"n_envs": 2, "n_timesteps": 10, "policy": "MlpPolicy", "n_stpes": 8}}))
     with pytest.raises(ValueError, match="n_stpes"):
         train_ppo.load_hyperparams(path)
     path.write_text(yaml.safe_dump({"CartPole-v1": {}}))
-    with pytest.raises(ValueError, match=ENV_ID):
+    with pytest.raises(ValueError, match=DEFAULT_TASK):
         train_ppo.load_hyperparams(path)
-    path.write_text(yaml.safe_dump({ENV_ID: {"n_envs": 2, "n_timesteps": 10, "policy": "MlpPolicy",
+    path.write_text(yaml.safe_dump({DEFAULT_TASK: {"n_envs": 2, "n_timesteps": 10, "policy": "MlpPolicy",
                                              "warmup": {"n_timesteps": 5, "env_kwargs": {}}}}))
     with pytest.raises(ValueError, match="warm-up moved to its own file"):  # a yml of before the move
         train_ppo.load_hyperparams(path)
@@ -94,12 +94,12 @@ def test_hyperparams_errors_name_the_field(tmp_path: Path) -> None:
 
 def test_tiny_training_run_saves_loads_and_resumes(tmp_path: Path) -> None:
     hyperparams = tmp_path / "ppo.yml"
-    hyperparams.write_text(yaml.safe_dump({ENV_ID: {
+    hyperparams.write_text(yaml.safe_dump({DEFAULT_TASK: {
         "n_envs": 4, "n_timesteps": 128, "policy": "MlpPolicy", "normalize": True, "n_steps": 16, "batch_size": 32,
         "n_epochs": 1, "policy_kwargs": "dict(net_arch=[16])", "env_kwargs": {"config": {"episode_duration": 10.0}},
     }}))
     warmup = tmp_path / "warmup.yml"
-    warmup.write_text(yaml.safe_dump({ENV_ID: {
+    warmup.write_text(yaml.safe_dump({DEFAULT_TASK: {
         "n_timesteps": 64, "env_kwargs": {"config": {"episode_duration": 10.0, "decision_interval": 5.0}}}}))
     out = tmp_path / "run"
     common = ["--hyperparams", str(hyperparams), "--warmup", str(warmup), "--out", str(out), "--tensorboard-log",
@@ -108,7 +108,7 @@ def test_tiny_training_run_saves_loads_and_resumes(tmp_path: Path) -> None:
     assert sorted(p.name for p in out.iterdir()) == ["curve.csv", "curve.png", "env.json", "model.zip", "training.md",
                                                      "vecnormalize.pkl"]
     assert json.loads((out / "env.json").read_text()) == {"env_kwargs": {"config": {"episode_duration": 10.0}},
-                                                          "frame_stack": 1, "normalize": True, "env_id": ENV_ID,
+                                                          "frame_stack": 1, "normalize": True, "env_id": DEFAULT_TASK,
                                                           "hidden_features": [], "algo": "ppo"}
     assert LearnedPolicy.load(out).action_mode == "platoon"
     model = PPO.load(out / "model.zip", device="cpu")
@@ -142,7 +142,7 @@ def test_tiny_training_run_saves_loads_and_resumes(tmp_path: Path) -> None:
 
 def test_a_relative_frame_stacked_run_is_loaded_as_it_was_trained(tmp_path: Path) -> None:
     hyperparams = tmp_path / "ppo.yml"
-    hyperparams.write_text(yaml.safe_dump({ENV_ID: {
+    hyperparams.write_text(yaml.safe_dump({DEFAULT_TASK: {
         "n_envs": 2, "n_timesteps": 32, "policy": "MlpPolicy", "normalize": True, "frame_stack": 3, "n_steps": 16,
         "batch_size": 32, "n_epochs": 1, "env_kwargs": {"config": {"episode_duration": 5.0, "action_mode": "relative"}},
     }}))
@@ -152,7 +152,7 @@ def test_a_relative_frame_stacked_run_is_loaded_as_it_was_trained(tmp_path: Path
     policy = LearnedPolicy.load(out)
     assert policy.action_mode == "relative" and policy.model.action_space.n == 3 and policy.frame_stack == 3
     assert len((out / "curve.csv").read_text().splitlines()) == 1 + 3  # at 16 and 32 steps, and the end
-    env = gym.make_vec(ENV_ID, num_envs=2, vectorization_mode="vector_entry_point",
+    env = gym.make_vec(DEFAULT_TASK, num_envs=2, vectorization_mode="vector_entry_point",
                        config={"episode_duration": 5.0, "action_mode": "relative"})
     obs, _ = env.reset(seed=[1, 2])
     action, stack = policy.predict(obs)
@@ -194,7 +194,7 @@ def test_training_seeds_stay_below_evaluation_seeds(tmp_path: Path) -> None:
 def tiny_run(tmp_path: Path) -> list[str]:
     """Arguments of a tiny run in ``tmp_path`` (2 platoons, 5 s episodes, normalised), with the shipped warm-up."""
     hyperparams = tmp_path / "ppo.yml"
-    hyperparams.write_text(yaml.safe_dump({ENV_ID: {
+    hyperparams.write_text(yaml.safe_dump({DEFAULT_TASK: {
         "n_envs": 2, "n_timesteps": 32, "policy": "MlpPolicy", "normalize": True, "n_steps": 16, "batch_size": 32,
         "n_epochs": 1, "env_kwargs": {"config": {"episode_duration": 5.0}},
     }}))
@@ -287,7 +287,7 @@ def test_hidden_features_are_hidden_in_training_and_when_loaded(tmp_path: Path) 
     """--hide-features monitor: env.json names the six monitor features, the training env reads them as 0, and the
     loaded policy hides them too, so its actions do not depend on them."""
     hyperparams = tmp_path / "ppo.yml"
-    hyperparams.write_text(yaml.safe_dump({ENV_ID: {
+    hyperparams.write_text(yaml.safe_dump({DEFAULT_TASK: {
         "n_envs": 2, "n_timesteps": 32, "policy": "MlpPolicy", "normalize": True, "n_steps": 16, "batch_size": 32,
         "n_epochs": 1, "policy_kwargs": "dict(net_arch=[8])", "env_kwargs": {"config": {"episode_duration": 10.0}},
     }}))

@@ -13,7 +13,7 @@ from typing import Any
 
 import yaml
 
-from timegap_env import ENV_ID
+from timegap_env import DEFAULT_TASK
 
 EVAL_SEED = 9_000  # first seed of the end-of-training check, below EVAL_SEED_START [-]
 EVAL_EPISODES = 32  # episodes of the end-of-training check [-]
@@ -31,7 +31,7 @@ RUN_KEYS = {"n_envs", "n_timesteps", "policy", "normalize", "frame_stack", "env_
 STRING_KWARGS = ("policy_kwargs", "normalize")  # may be Python expressions as in rl-zoo3: "dict(net_arch=[64])"
 
 
-def load_hyperparams(path: Path, env_id: str = ENV_ID, algorithm: Any = None) -> dict[str, Any]:
+def load_hyperparams(path: Path, env_id: str = DEFAULT_TASK, algorithm: Any = None) -> dict[str, Any]:
     """The ``env_id`` section of an rl-zoo3-style yml, expressions in ``STRING_KWARGS`` evaluated, its keys checked
     against ``algorithm``'s arguments (default: stable-baselines3's PPO)."""
     import torch  # only here: the library steps the env without torch
