@@ -46,6 +46,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import functools
 import hashlib
 import importlib
 import json
@@ -89,6 +90,7 @@ EFFECT = 0.05  # the groups are sized to detect this share of the best constant'
 POWER = 0.8  # ... at this power, two-sided at 95 % [-]
 RESAMPLES = 2_000  # bootstrap resamples of the episodes per group, shared by its policies (paired) [-]
 CHUNK = 500  # episodes per rollout (one vector env), a piece of work for the backend [-]
+ENTRIES_PER_MAP = 8  # policies whose pieces go to the backend at once [-]
 PILOT = 400  # --size: selection episodes per group the sizes were measured on [-]
 TUNING = Path("results/rule/tuning.csv")  # train.tune_rule's tuning of chart_step on the task
 RULE = "rule_platoon"  # the paper's rule: every gain is also stated over it
@@ -114,7 +116,7 @@ class Group:
 # least 2500), except where ``capped`` says why not.
 GROUPS: dict[str, Group] = {group.name: group for group in (
     Group("default", "the task's own mix (TimeGapMonitor-v1)", {}, 2_500),
-    Group("regimes", "traffic that changes within every episode", {"scenario_weights": {"regimes": 1.0}}, 2_000),
+    Group("regimes", "traffic that changes within every episode", {"scenario_weights": {"regimes": 1.0}}, 3_250),
     Group("larger_degradations", "every episode degraded beyond the training ranges",
           {"degradation": LARGER_DEGRADATIONS}, 2_000),
     Group("commercial_acc", "every follower a commercial ACC car calibrated to OpenACC",
@@ -122,7 +124,7 @@ GROUPS: dict[str, Group] = {group.name: group for group in (
     Group("stop_and_go", "congestion waves, a family the training never drew",
           {"scenario_weights": {"stop_and_go": 1.0}}, 2_750),
     Group("emergency_braking", "emergency stops at 6-7.5 m/s^2, never drawn in training",
-          {"scenario_weights": {"emergency_braking": 1.0}}, 1_250),
+          {"scenario_weights": {"emergency_braking": 1.0}}, 3_500),
     Group("ngsim", "real drivers: the held-out quarter of the NGSIM I-80 vehicles (55 of 217), within the band",
           {"scenario_weights": {"ngsim_in_band": 1.0}, "leader": {"recorded_part": "held_out"}}, 1_000,
           data="ngsim_in_band"),
@@ -172,6 +174,8 @@ def efficiency(episode_return: float, collision_term: float, duration: float, co
 
 def play(policy: Any, config: EnvConfig, seeds: Sequence[int]) -> Played:
     """``policy`` on ``seeds`` in the env of ``config`` (the rollout harness): what it played."""
+    if "torch" in sys.modules:  # a learned policy: one thread (torch's default, one per core, fights the workers)
+        sys.modules["torch"].set_num_threads(1)
     records = rollout(policy, config, seeds).records
     durations = [record.summary["duration"] for record in records]
     return Played(
@@ -328,8 +332,7 @@ def reference_entry(name: str, cache_key: str) -> Entry:
     def make(config: EnvConfig, references: References | None) -> Any:
         assert references is not None  # only played where the group has references
         if name == "v2v_pair":
-            up, down = references.pair
-            return lambda obs, infos: flag_aware_actions(up, down, obs, infos)
+            return functools.partial(flag_aware_actions, *references.pair)  # a chooser (obs, infos) -> actions
         return getattr(references, name)
     return Entry(name, "reference", make, f"reference:{name}:{cache_key}")
 
@@ -466,14 +469,25 @@ def run_group(group: Group, entries: Sequence[Entry], first_seed: int, episodes:
             config, {weighting: REWARD_PRESETS[weighting]}, *REFERENCE_PLAN.seeds()[:2], backend)[weighting])
         entries += [reference_entry(name, references_key) for name in REFERENCES]
     seeds = list(range(first_seed, first_seed + episodes))
+    chunks = [seeds[i:i + CHUNK] for i in range(0, len(seeds), CHUNK)]
+    keys = {entry.name: cache.key("played", *base, first_seed, episodes, entry.key) if entry.key else ""
+            for entry in entries}
     played: dict[str, Played] = {}
     for entry in entries:
-        def compute(entry: Entry = entry) -> Played:
-            policy = entry.make(config, references)
-            return join(backend.map(play, [(policy, config, seeds[i:i + CHUNK]) for i in range(0, len(seeds), CHUNK)]))
-        key = cache.key("played", *base, first_seed, episodes, entry.key)
-        played[entry.name] = cache.through(key, compute) if entry.key else compute()
-        progress(f"{group.name}: {entry.name}")
+        if keys[entry.name] and (kept := cache.get(keys[entry.name])) is not None:
+            played[entry.name] = kept
+            progress(f"{group.name}: {entry.name} (cached)")
+    pending = [entry for entry in entries if entry.name not in played]
+    for start in range(0, len(pending), ENTRIES_PER_MAP):  # a map of several policies: the workers stay busy
+        batch = pending[start:start + ENTRIES_PER_MAP]
+        parts = backend.map(play, [(entry.make(config, references), config, chunk) for entry in batch
+                                   for chunk in chunks])
+        for i, entry in enumerate(batch):
+            played[entry.name] = join(parts[i * len(chunks):(i + 1) * len(chunks)])
+            if keys[entry.name]:
+                cache.put(keys[entry.name], played[entry.name])
+            progress(f"{group.name}: {entry.name}")
+    played = {entry.name: played[entry.name] for entry in entries}  # in the entries' order
     constants = [name for name in registry.fixed_names(config) if name in played]
     returns = np.stack([played[name].returns for name in constants])
     played["hindsight"] = join([played[constants[c]].take(np.array([i])) for i, c in enumerate(returns.argmax(axis=0))])
@@ -663,6 +677,9 @@ def leaderboard(benchmark: Benchmark) -> tuple[list[dict[str, Any]], list[dict[s
                                **dict(zip(("efficiency", "efficiency_low", "efficiency_high"),
                                           resampler.interval(p.efficiency))),
                                "cost": float(p.cost.mean()), **frontier_gains(p, constants, resampler)}
+        best = result.played[result.best]
+        against = result.played[RULE] if p is best and RULE in result.played else best
+        row["mde"] = paired_mde(p.returns - against.returns, POWER) if against is not p else math.nan
         beaten = []
         for other, q in played.items():
             if other == policy:
@@ -697,26 +714,28 @@ def markdown(benchmark: Benchmark, board: Sequence[Mapping[str, Any]]) -> str:
              "plays the same held-out episodes of each group (their fingerprints checked); intervals are 95 % "
              f"(percentile bootstrap over episodes, {RESAMPLES} resamples shared by a group's policies; Wilson for "
              "a single policy's collision rate). Seeds: held-out from "
-             f"{benchmark.first_seed}; the constants' choices on selection seeds {SELECTION_SEED_START}-"
-             f"{SELECTION_SEED_START + CONSTANT_SELECTION - 1}; the references' tables on training seeds "
+             f"{benchmark.first_seed}; the constants' choices on selection seeds from {SELECTION_SEED_START} (each "
+             "group's count below); the references' tables on training seeds "
              f"0-{REFERENCE_PLAN.train - 1} and their choices on selection seeds {SELECTION_SEED_START}-"
              f"{SELECTION_SEED_START + REFERENCE_PLAN.selection - 1}.", "",
              f"## Leaderboard: {ranked.group.name} ({ranked.group.description}), {ranked.seeds[1]} episodes", "",
              "Ranked by mean return. A recipe's training seeds are pooled (per episode, the mean over its seeds); "
              "IQM and P(improvement over the paper's rule) are over seeds x every group, in % of each group's best "
-             "constant. Frontier: efficiency beyond the best mix of constants at the same collision rate.", "",
-             "| rank | policy | runs | return [CI] | collisions per 100 episodes [CI] | efficiency [CI] "
+             "constant. mde: the smallest difference of return from the best constant detectable at 80 % power "
+             "(paired). Frontier: efficiency beyond the best mix of constants at the same collision rate.", "",
+             "| rank | policy | runs | return [CI] | mde | collisions per 100 episodes [CI] | efficiency [CI] "
              "| beyond the constants' frontier: efficiency [CI] | IQM over groups, % [CI] | P(beats the rule) [CI] "
-             "| beats (paired, on return) |", "|---|---|---|---|---|---|---|---|---|---|"]
+             "| beats (paired, on return) |", "|---|---|---|---|---|---|---|---|---|---|---|"]
     for rank, row in enumerate(board, start=1):
-        lines.append(f"| {rank} | {row['policy']} | {row['runs']} | {ci(row, 'return')} | "
+        lines.append(f"| {rank} | {row['policy']} | {row['runs']} | {ci(row, 'return')} | {fmt(row['mde'])} | "
                      f"{ci(row, 'collision_rate', 2, 100.0)} | {ci(row, 'efficiency')} | "
                      f"{ci(row, 'frontier_efficiency_gain')}{' **beyond**' if row['beyond_frontier'] else ''} | "
                      f"{ci(row, 'iqm')} | {ci(row, 'poi_over_rule', 2)} | {beats_text(row['beats'], kinds)} |")
     for name, result in benchmark.groups.items():
         lines += ["", f"## {name}: {result.group.description}", "",
                   f"{result.seeds[1]} episodes (seeds {result.seeds[0]}-{sum(result.seeds) - 1}). Best constant "
-                  f"(selection seeds): {result.best}; best safe constant (at most {SAFE_BUDGET:.0%} collisions "
+                  f"(selection seeds {SELECTION_SEED_START}-{SELECTION_SEED_START + result.group.selection - 1}): "
+                  f"{result.best}; best safe constant (at most {SAFE_BUDGET:.0%} collisions "
                   f"there): {result.best_safe}. mde: the smallest difference of return from the best constant "
                   f"detectable at {POWER:.0%} power (the best constant's row: from the rule).", "",
                   "| policy | collisions [Wilson CI of the rate, %] | cost | efficiency [CI] | return [CI] | mde "

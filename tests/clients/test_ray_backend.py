@@ -15,7 +15,7 @@ from pathlib import Path
 import pytest
 
 from timegap_env.experiments import value
-from train import detection_benchmark, evaluate, value_of_information
+from train import benchmark, detection_benchmark, value_of_information
 from timegap_env.experiments.backends import Backend
 
 pytestmark = pytest.mark.slow
@@ -43,23 +43,14 @@ def test_ray_map_keeps_the_order_says_how_it_ran_and_raises_a_piece_error() -> N
         backend.map(math.sqrt, [(4.0,), (-1.0,)])
 
 
-def test_evaluate_on_ray_equals_serial(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
-                                       capsys: pytest.CaptureFixture[str]) -> None:
-    monkeypatch.setattr(evaluate, "DEFAULT_TRAIN_EPISODES", 1)  # a quick oracle: both read it in this process
-    monkeypatch.setattr(value, "SELECTION_EPISODES", 2)
-    runs = {}
+def test_the_benchmark_on_ray_equals_serial() -> None:
+    group = benchmark.Group("tiny", "short episodes", {"episode_duration": 20.0}, 12, references=False, selection=6)
+    entries = [benchmark.registered(name) for name in ("fixed_1.0", "fixed_1.6", "rule_platoon", "v2v_aware")]
+    rows = {}
     for backend in ("serial", "ray"):
-        evaluate.main(["--episodes", "14", "--policies", "rule_platoon", "fixed_1.6", "oracle", "ppo",
-                       "--out", str(tmp_path / backend), "--backend", backend])
-        runs[backend] = files(tmp_path / backend)
-    capsys.readouterr()
-    tables = {backend: run.pop("table.md").decode().split("\n") for backend, run in runs.items()}
-    assert runs["ray"] == runs["serial"]  # table.csv, episodes.csv and both figures
-    runtime = {backend: [line for line in table if line.startswith("Runtime: ")] for backend, table in tables.items()}
-    assert [line for line in tables["ray"] if not line.startswith("Runtime: ")] == \
-        [line for line in tables["serial"] if not line.startswith("Runtime: ")]
-    assert "batches: serial: 28 pieces one after another in this process" in runtime["serial"][0]
-    assert f"batches: {RAY_SPREAD}28 tasks of 1 CPU" in runtime["ray"][0]
+        result = benchmark.run_group(group, entries, 10_000, 12, benchmark.Cache(None), Backend(backend))
+        rows[backend] = result.rows
+    assert rows["ray"] == rows["serial"]
 
 
 def test_value_of_information_on_ray_equals_serial(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
