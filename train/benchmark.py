@@ -49,6 +49,7 @@ import dataclasses
 import functools
 import hashlib
 import importlib
+import inspect
 import json
 import math
 import os
@@ -197,12 +198,17 @@ def join(parts: Sequence[Played]) -> Played:
 # --- the cache ------------------------------------------------------------------------------------------------------
 
 def code_digest() -> str:
-    """A digest of the package's code and data files and of this script: any edit makes every cache key new."""
+    """A digest of the package's code and data files and of this script's functions whose results are cached (what
+    an episode plays and how it is recorded, the constants' choice): an edit to any of them makes every key new.
+    Scores are computed from the cached episodes at every run, so their code is not in it."""
     digest = hashlib.sha256()
     package = Path(timegap_env.__file__).parent
-    for path in sorted([*package.rglob("*.py"), *package.rglob("*.json"), Path(__file__)]):
-        digest.update(str(path.relative_to(path.parents[1] if path == Path(__file__) else package.parent)).encode())
+    for path in sorted([*package.rglob("*.py"), *package.rglob("*.json")]):
+        digest.update(str(path.relative_to(package.parent)).encode())
         digest.update(path.read_bytes())
+    for cached in (Played, efficiency, play, join, select_constants):
+        digest.update(inspect.getsource(cached).encode())
+    digest.update(repr((CHUNK, REFERENCE_PLAN, SAFE_BUDGET)).encode())
     return digest.hexdigest()[:16]
 
 

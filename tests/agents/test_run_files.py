@@ -19,7 +19,7 @@ from timegap_env.agents.learned import LearnedPolicy, RunFileError, load_vecnorm
 from timegap_env.agents.protocol import ENV_FILE, MODEL_FILE, VECNORMALIZE_FILE, read_env_file
 from timegap_env.agents.rllib_policy import CHECKPOINT_MARKER, MODULE_PATH, RLlibPolicy
 
-COMMITTED = Path(__file__).resolve().parents[2] / "results" / "ppo"  # relative mode: Discrete(3), normalised
+COMMITTED = Path(__file__).resolve().parents[2] / "results" / "v0" / "ppo"  # relative mode: Discrete(3), normalised
 
 
 @pytest.fixture

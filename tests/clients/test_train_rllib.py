@@ -43,7 +43,7 @@ from train.train_rllib import (
 
 REPO = Path(__file__).resolve().parents[2]
 PPO_YML = REPO / "hyperparams" / "ppo.yml"
-COMMITTED_SELECTION = REPO / "results" / "rllib" / SELECTION_FILE
+COMMITTED_SELECTION = REPO / "results" / "v0" / "rllib" / SELECTION_FILE
 SHORT = {"episode_duration": 20.0}  # [s]: 20 decisions
 INSTALL = "needs the ray extra: pip install -e '.[ray]' (or run bash .ci/clients)"
 

@@ -34,7 +34,7 @@ torch = pytest.importorskip("torch")
 learned = pytest.importorskip("timegap_env.agents.learned")
 LearnedPolicy, RunFileError = learned.LearnedPolicy, learned.RunFileError
 
-RUN = Path(__file__).resolve().parents[2] / "results" / "ppo"
+RUN = Path(__file__).resolve().parents[2] / "results" / "v0" / "ppo"
 MODEL, STATS, ENV = "model.zip", "vecnormalize.pkl", "env.json"
 
 

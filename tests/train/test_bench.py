@@ -23,12 +23,12 @@ def expected_measures(sizes: bench.Sizes) -> list[str]:
     memory = [f"native vector env, {n} envs: peak memory" for n in sizes.vector_sizes]
     reset = [f"batched reset, envs.reset(seed=0), {n} envs" for n in sizes.reset_sizes]
     return [
-        "TimeGapMonitor-v0 as gym.make gives it (default info) [steps/s]",
-        "TimeGapMonitor-v0, one env, truth_info=True",
-        "TimeGapMonitor-v0, one env, step_diagnostics=False",
-        "TimeGapMonitor-v1, one env, default info (+ vector reward",
+        "TimeGapMonitor-v1 (the default task) as gym.make gives it (default info) [steps/s]",
+        "TimeGapMonitor-v1, one env, truth_info=True",
         "TimeGapMonitor-v1, one env, step_diagnostics=False",
-        "TimeGapMonitor-v0, one env, default info [steps/s] against highway-env",
+        "TimeGapMonitor-v1, one env, default info (+ vector reward, cost, objectives) against TimeGapMonitor-v0",
+        "TimeGapMonitor-v1, one env, step_diagnostics=False against TimeGapMonitor-v0",
+        "TimeGapMonitor-v1, one env, default info [steps/s] against highway-env",
         "one env: a fused_step call",
         "one env: of that call, numba unpacking",
         "fused_step's arithmetic per env-step",
