@@ -62,7 +62,7 @@ def scenario_tables():
 
 def test_the_docs_have_their_pages_and_blocks():
     names = {page.name for page in PAGES}
-    assert {"index.md", "environment.md", "evaluation.md", "extending.md", "api.md"} <= names
+    assert {"index.md", "environment.md", "benchmark.md", "extending.md", "api.md"} <= names
     assert len(BLOCKS) >= 15
 
 
@@ -166,5 +166,5 @@ def test_mkdocs_builds_the_site_strictly(tmp_path: Path):
                          env={**os.environ, "NO_MKDOCS_2_WARNING": "1"})
     assert run.returncode == 0, f"{' '.join(command)} exited {run.returncode}:\n{run.stdout[-3000:]}{run.stderr[-5000:]}"
     site = tmp_path / "site"
-    assert (site / "index.html").is_file() and (site / "results" / "eval" / "table" / "index.html").is_file()
+    assert (site / "index.html").is_file() and (site / "results" / "benchmark" / "leaderboard" / "index.html").is_file()
     assert "Observation Space" in (site / "environment" / "index.html").read_text(encoding="utf-8")

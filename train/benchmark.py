@@ -145,7 +145,8 @@ RECIPES: dict[str, tuple[str, ...]] = {
 }
 RULES = (RULE, "chart_step", "v2v_aware")  # the rules every benchmark plays
 REFERENCES = ("v2v_pair", "regime_aware", "degradation_aware", "full_oracle")  # played; "hindsight" is derived
-KINDS = ("constant", "rule", "reference", "learned", "policy")
+KIND_NAMES = {"constant": "constant", "rule": "rule", "reference": "reference (knows the truth)",
+              "learned": "learned (seeds pooled)", "policy": "policy"}  # an entry's kind, as the leaderboard names it
 
 
 # --- what a policy played --------------------------------------------------------------------------------------------
@@ -257,7 +258,7 @@ class Entry:
     :class:`References`, None where it has none)."""
 
     name: str
-    kind: str  # one of KINDS
+    kind: str  # one of KIND_NAMES
     make: Callable[[EnvConfig, References | None], Any]
     key: str  # what determines its play, for the cache ("": never cached)
     recipe: str = ""  # a learned recipe's name: this entry is one of its training seeds
@@ -404,21 +405,36 @@ def frontier_rate(rates: np.ndarray, efficiencies: np.ndarray, target: np.ndarra
     return np.where(np.isfinite(best), best, richest)
 
 
-def frontier_gains(played: Played, constants: Sequence[Played], resampler: Resampler) -> dict[str, Any]:
+@dataclasses.dataclass(frozen=True)
+class Frontier:
+    """The constants' points on a group's safety/efficiency plane, on its episodes and in each bootstrap resample."""
+
+    rates: np.ndarray  # (k,) collision rates [-]
+    efficiencies: np.ndarray  # (k,)
+    resampled_rates: np.ndarray  # (RESAMPLES, k)
+    resampled_efficiencies: np.ndarray  # (RESAMPLES, k)
+
+    @classmethod
+    def of(cls, constants: Sequence[Played], resampler: Resampler) -> Frontier:
+        rates = [constant.collided.astype(float) for constant in constants]
+        efficiencies = [constant.efficiency for constant in constants]
+        return cls(np.array([r.mean() for r in rates]), np.array([e.mean() for e in efficiencies]),
+                   np.stack([resampler.means(r) for r in rates], axis=-1),
+                   np.stack([resampler.means(e) for e in efficiencies], axis=-1))
+
+
+def frontier_gains(played: Played, frontier: Frontier, resampler: Resampler) -> dict[str, Any]:
     """``played``'s efficiency beyond the constants' frontier at its collision rate, and its collision rate below
     the frontier's at its efficiency, each with its paired 95 % interval."""
-    rates = np.stack([constant.collided for constant in constants], axis=-1).astype(float)  # (n, k)
-    efficiencies = np.stack([constant.efficiency for constant in constants], axis=-1)
-    point = (rates.mean(axis=0), efficiencies.mean(axis=0), played.collided.mean(), played.efficiency.mean())
-    index = resampler.index
-    resampled = (rates[index].mean(axis=1), efficiencies[index].mean(axis=1),
-                 played.collided.astype(float)[index].mean(axis=1), played.efficiency[index].mean(axis=1))
+    point = (frontier.rates, frontier.efficiencies, np.asarray(played.collided.mean()),
+             np.asarray(played.efficiency.mean()))
+    resampled = (frontier.resampled_rates, frontier.resampled_efficiencies,
+                 resampler.means(played.collided.astype(float)), resampler.means(played.efficiency))
     row: dict[str, Any] = {}
     for name, gain in (("frontier_efficiency_gain", lambda r, e, pr, pe: pe - frontier_efficiency(r, e, pr)),
                        ("frontier_safety_gain", lambda r, e, pr, pe: frontier_rate(r, e, pe) - pr)):
         low, high = np.quantile(gain(*resampled), [0.025, 0.975])
-        row |= {name: float(gain(*(np.asarray(value) for value in point))), f"{name}_low": float(low),
-                f"{name}_high": float(high)}
+        row |= {name: float(gain(*point)), f"{name}_low": float(low), f"{name}_high": float(high)}
     row["beyond_frontier"] = bool(row["frontier_efficiency_gain_low"] > 0 or row["frontier_safety_gain_low"] > 0)
     return row
 
@@ -511,6 +527,7 @@ def run_group(group: Group, entries: Sequence[Entry], first_seed: int, episodes:
 def score_rows(result: GroupResult, constants: Sequence[Played]) -> list[dict[str, Any]]:
     """scores.csv's rows of one group: one per entry."""
     played, resampler = result.played, Resampler(result.seeds[1])
+    frontier = Frontier.of(constants, resampler)
     best, safe, rule = played[result.best], played[result.best_safe], played.get(RULE)
     rows = []
     for name, p in played.items():
@@ -532,7 +549,7 @@ def score_rows(result: GroupResult, constants: Sequence[Played]) -> list[dict[st
             if other is not None:
                 row |= dict(zip((f"gain_over_{label}", f"gain_over_{label}_low", f"gain_over_{label}_high"),
                                 resampler.interval(p.returns - other.returns)))
-        rows.append(row | frontier_gains(p, constants, resampler))
+        rows.append(row | frontier_gains(p, frontier, resampler))
     return rows
 
 
@@ -672,7 +689,8 @@ def leaderboard(benchmark: Benchmark) -> tuple[list[dict[str, Any]], list[dict[s
     played = {policy: pooled(result, names) if len(names) > 1 else result.played[names[0]]
               for policy, names in members.items()}
     aggregates = {row["policy"]: row for row in benchmark.aggregates}
-    constants = [result.played[name] for name in registry.fixed_names(group_config(result.group))]
+    frontier = Frontier.of([result.played[name] for name in registry.fixed_names(group_config(result.group))],
+                           resampler)
     pairwise, rows = [], []
     for policy, p in played.items():
         row: dict[str, Any] = {"policy": policy, "kind": result.entries[members[policy][0]].kind,
@@ -682,7 +700,7 @@ def leaderboard(benchmark: Benchmark) -> tuple[list[dict[str, Any]], list[dict[s
                                           resampler.interval(p.collided))),
                                **dict(zip(("efficiency", "efficiency_low", "efficiency_high"),
                                           resampler.interval(p.efficiency))),
-                               "cost": float(p.cost.mean()), **frontier_gains(p, constants, resampler)}
+                               "cost": float(p.cost.mean()), **frontier_gains(p, frontier, resampler)}
         best = result.played[result.best]
         against = result.played[RULE] if p is best and RULE in result.played else best
         row["mde"] = paired_mde(p.returns - against.returns, POWER) if against is not p else math.nan
@@ -729,11 +747,12 @@ def markdown(benchmark: Benchmark, board: Sequence[Mapping[str, Any]]) -> str:
              "IQM and P(improvement over the paper's rule) are over seeds x every group, in % of each group's best "
              "constant. mde: the smallest difference of return from the best constant detectable at 80 % power "
              "(paired). Frontier: efficiency beyond the best mix of constants at the same collision rate.", "",
-             "| rank | policy | runs | return [CI] | mde | collisions per 100 episodes [CI] | efficiency [CI] "
+             "| rank | policy | kind | runs | return [CI] | mde | collisions per 100 episodes [CI] | efficiency [CI] "
              "| beyond the constants' frontier: efficiency [CI] | IQM over groups, % [CI] | P(beats the rule) [CI] "
-             "| beats (paired, on return) |", "|---|---|---|---|---|---|---|---|---|---|---|"]
+             "| beats (paired, on return) |", "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for rank, row in enumerate(board, start=1):
-        lines.append(f"| {rank} | {row['policy']} | {row['runs']} | {ci(row, 'return')} | {fmt(row['mde'])} | "
+        lines.append(f"| {rank} | {row['policy']} | {KIND_NAMES[row['kind']]} | {row['runs']} | {ci(row, 'return')} | "
+                     f"{fmt(row['mde'])} | "
                      f"{ci(row, 'collision_rate', 2, 100.0)} | {ci(row, 'efficiency')} | "
                      f"{ci(row, 'frontier_efficiency_gain')}{' **beyond**' if row['beyond_frontier'] else ''} | "
                      f"{ci(row, 'iqm')} | {ci(row, 'poi_over_rule', 2)} | {beats_text(row['beats'], kinds)} |")
