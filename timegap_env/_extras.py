@@ -4,14 +4,20 @@ from __future__ import annotations
 
 import importlib.util
 
-__all__ = ["require"]
+__all__ = ["MissingExtra", "require"]
+
+
+class MissingExtra(ImportError):
+    """An optional dependency is not installed; the message names the extra (the scripts print it as one line)."""
+
+    missing_extra = True
 
 
 def require(extra: str, *modules: str, needed_for: str) -> None:
     """Raise ImportError, naming ``pip install 'timegap_env[<extra>]'``, unless every one of ``modules`` is importable."""
     missing = [module for module in modules if not _importable(module)]
     if missing:
-        raise ImportError(
+        raise MissingExtra(
             f"{needed_for} needs {', '.join(missing)}, which the core install leaves out: "
             f"pip install 'timegap_env[{extra}]'",
             name=missing[0],

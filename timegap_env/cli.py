@@ -35,12 +35,14 @@ PARTIAL_SUFFIX = ".partial-"  # a run's work directory beside its --out: <out>.p
 
 
 def run(main: Callable[[], Any], prog: str) -> None:
-    """Call ``main()``; bad input (:data:`INPUT_ERRORS`) exits with status 1 and its one-line message, Ctrl-C with
-    130, other exceptions propagate with their traceback."""
+    """Call ``main()``; bad input (:data:`INPUT_ERRORS`, or an error whose class has ``missing_extra = True``: an
+    optional dependency not installed) exits with status 1 and its one-line message, Ctrl-C with 130, other
+    exceptions propagate with their traceback."""
     try:
         main()
-    except INPUT_ERRORS as error:
-        if os.environ.get(TRACEBACK_VARIABLE, "") not in ("", "0"):
+    except Exception as error:
+        if not (isinstance(error, INPUT_ERRORS) or getattr(error, "missing_extra", False)) \
+                or os.environ.get(TRACEBACK_VARIABLE, "") not in ("", "0"):
             raise
         message = " ".join(str(error).split()) or type(error).__name__  # one line, whatever the message held
         sys.exit(f"{prog}: error: {message} ({TRACEBACK_VARIABLE}=1 shows the traceback)")

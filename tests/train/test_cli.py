@@ -152,3 +152,23 @@ def test_a_work_directory_is_published_whole_or_not_at_all(tmp_path: Path) -> No
     assert not any(fresh.iterdir())
     cli.publish(fresh, tmp_path / "new")
     assert (tmp_path / "new").is_dir()
+
+
+def test_a_missing_extra_is_one_line_and_a_bugs_import_error_keeps_its_traceback(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    from timegap_env._extras import MissingExtra
+    from timegap_env.sim.sumo import SumoNotInstalled
+
+    monkeypatch.delenv(cli.TRACEBACK_VARIABLE, raising=False)
+    for error in (MissingExtra("rendering needs pygame: pip install 'timegap_env[render]'"),
+                  SumoNotInstalled("simulator = 'sumo' needs libsumo, which is not installed: pip install x")):
+        def main(error: BaseException = error) -> None:
+            raise error
+        with pytest.raises(SystemExit) as stopped:
+            cli.run(main, "python -m train.x")
+        assert str(stopped.value.code).startswith(f"python -m train.x: error: {error}")
+
+    def buggy() -> None:
+        raise ImportError("cannot import name 'x'")
+    with pytest.raises(ImportError):
+        cli.run(buggy, "python -m train.x")

@@ -63,6 +63,12 @@ class SumoError(RuntimeError):
     """SUMO failed, or cannot run here; the message says where and what to do."""
 
 
+class SumoNotInstalled(SumoError):
+    """libsumo is not installed (the scripts print it as one line)."""
+
+    missing_extra = True
+
+
 class SumoBusyError(SumoError):
     """Another SUMO simulation runs in this process (libsumo allows one)."""
 
@@ -72,7 +78,7 @@ def import_libsumo() -> ModuleType:
     try:
         import libsumo
     except ImportError as error:
-        raise SumoError(f"simulator = 'sumo' needs libsumo, which is not installed: {SUMO_EXTRA} ({error})") from error
+        raise SumoNotInstalled(f"simulator = 'sumo' needs libsumo, which is not installed: {SUMO_EXTRA} ({error})") from error
     return libsumo
 
 
@@ -347,4 +353,4 @@ def _road_xml(length: float) -> str:
 """
 
 
-__all__ = ["SUMO_EXTRA", "SumoBusyError", "SumoError", "SumoPlatoon", "engine_tau", "import_libsumo"]
+__all__ = ["SUMO_EXTRA", "SumoBusyError", "SumoError", "SumoNotInstalled", "SumoPlatoon", "engine_tau", "import_libsumo"]
