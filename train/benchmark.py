@@ -197,11 +197,13 @@ def join(parts: Sequence[Played]) -> Played:
 # --- the cache ------------------------------------------------------------------------------------------------------
 
 def code_digest() -> str:
-    """A digest of the package's code and data files and of this script: any edit makes every cache key new."""
+    """A digest of the package's code and data files, of the study code (train/studies) and of this script: any edit
+    makes every cache key new."""
     digest = hashlib.sha256()
-    package = Path(timegap_env.__file__).parent
-    for path in sorted([*package.rglob("*.py"), *package.rglob("*.json"), Path(__file__)]):
-        digest.update(str(path.relative_to(path.parents[1] if path == Path(__file__) else package.parent)).encode())
+    package, script = Path(timegap_env.__file__).parent, Path(__file__)
+    studies = script.parent / "studies"
+    for path in sorted([*package.rglob("*.py"), *package.rglob("*.json"), *studies.rglob("*.py"), script]):
+        digest.update(str(path.relative_to(package.parent if path.is_relative_to(package) else script.parents[1])).encode())
         digest.update(path.read_bytes())
     return digest.hexdigest()[:16]
 
