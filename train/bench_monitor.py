@@ -16,8 +16,8 @@ from __future__ import annotations
 import argparse
 
 from timegap_env import cli
-from timegap_env.benchmarks.monitor import bench
 from timegap_env.config import MonitorConfig
+from train.speed.monitor import bench
 
 
 def report(n_envs: int, n_vehicles: int, n_ticks: int, config: MonitorConfig) -> None:

@@ -12,7 +12,7 @@ Per group, with the seeds of each step fixed and disjoint:
 - the **constants** (every ladder setting) play selection seeds 5000-5999: the best constant (the highest mean
   return) and the best *safe* constant (the highest among those colliding in at most SAFE_BUDGET of them) are
   chosen there;
-- the **references** that know the truth (``timegap_env.experiments.task_map.choose_references``: the V2V pair,
+- the **references** that know the truth (``train.studies.task_map.choose_references``: the V2V pair,
   regime-aware, degradation-aware and full oracles) build their tables on training seeds 0-15 and are chosen on
   selection seeds 5000-5127; ``hindsight`` is the best constant of each held-out episode;
 - **every policy** (the constants, the paper's rule, the other rules, the references, every training seed of the
@@ -71,14 +71,14 @@ from timegap_env.agents.protocol import EVAL_SEED_START
 from timegap_env.config import ENV_IDS, REWARD_PRESETS, TASK_VERSIONS, EnvConfig
 from timegap_env.experiments import registry
 from timegap_env.experiments.backends import Backend, add_arguments
-from timegap_env.experiments.heldout import LARGER_DEGRADATIONS
+from train.studies.heldout import LARGER_DEGRADATIONS
 from timegap_env.experiments.rollout import rollout
 from timegap_env.experiments.stats import (
     WILSON_Z, episodes_for, iqm, paired_mde, performance_profile, probability_of_improvement_interval,
     stratified_bootstrap, wilson_interval,
 )
-from timegap_env.experiments.task_map import Plan, References, choose_references
-from timegap_env.experiments.value import SELECTION_SEED_START, flag_aware_actions
+from train.studies.task_map import Plan, References, choose_references
+from train.studies.value import SELECTION_SEED_START, flag_aware_actions
 from timegap_env.leaders.scenarios import missing_data
 
 TASK = timegap_env.DEFAULT_TASK
@@ -199,13 +199,14 @@ def join(parts: Sequence[Played]) -> Played:
 # --- the cache ------------------------------------------------------------------------------------------------------
 
 def code_digest() -> str:
-    """A digest of the package's code and data files and of this script's functions whose results are cached (what
-    an episode plays and how it is recorded, the constants' choice): an edit to any of them makes every key new.
-    Scores are computed from the cached episodes at every run, so their code is not in it."""
+    """A digest of the package's code and data files, of the study code it plays through (train/studies) and of this
+    script's functions whose results are cached (what an episode plays and how it is recorded, the constants'
+    choice): an edit to any of them makes every key new. Scores are computed from the cached episodes at every run,
+    so their code is not in it."""
     digest = hashlib.sha256()
-    package = Path(timegap_env.__file__).parent
-    for path in sorted([*package.rglob("*.py"), *package.rglob("*.json")]):
-        digest.update(str(path.relative_to(package.parent)).encode())
+    package, studies = Path(timegap_env.__file__).parent, Path(__file__).parent / "studies"
+    for path in sorted([*package.rglob("*.py"), *package.rglob("*.json"), *studies.rglob("*.py")]):
+        digest.update(str(path.relative_to(package.parent if path.is_relative_to(package) else studies.parents[1])).encode())
         digest.update(path.read_bytes())
     for cached in CACHED_CODE:
         digest.update(inspect.getsource(cached).encode())

@@ -257,8 +257,8 @@ def check_returns(policy: Any, env_kwargs: dict[str, Any]) -> Checked:
     the held-out seeds) in the env of ``env_kwargs`` (gym.make's), through value_of_information.run as its
     learning curve does."""
     from timegap_env.config import EnvConfig
-    from timegap_env.experiments.training import EVAL_EPISODES, EVAL_SEED
-    from timegap_env.experiments.value import run
+    from train.studies.training import EVAL_EPISODES, EVAL_SEED
+    from train.studies.value import run
 
     seeds = list(range(EVAL_SEED, EVAL_SEED + EVAL_EPISODES))
     result = run(EnvConfig.from_dict(env_kwargs.get("config")), seeds,
@@ -296,7 +296,7 @@ class Settings:
         """The settings of ``args``; a yml key with no counterpart, sizes below 1 or seeds reaching the evaluation's
         raise ValueError naming them."""
         # SB3's parser of the yml and its env_kwargs; the first seed of its check episodes
-        from timegap_env.experiments.training import EVAL_SEED, load_hyperparams, with_env_config
+        from train.studies.training import EVAL_SEED, load_hyperparams, with_env_config
 
         hyperparams = load_hyperparams(args.hyperparams)
         unknown = set(hyperparams) - set(MAPPED) - UNMAPPED

@@ -23,7 +23,7 @@ from timegap_env.agents.rllib_policy import CHECKPOINT_DIR, RLlibPolicy, find_ch
 from timegap_env import DEFAULT_TASK
 from timegap_env.config import EnvConfig
 from timegap_env.envs.observation import observation_space
-from timegap_env.experiments.training import EVAL_EPISODES, EVAL_SEED
+from train.studies.training import EVAL_EPISODES, EVAL_SEED
 from train.train_rllib import (
     REPORT_FILE,
     REWARD_SCALE,

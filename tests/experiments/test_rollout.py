@@ -18,7 +18,7 @@ from timegap_env.config import EnvConfig
 from timegap_env.envs.info import summary_of, truth_of
 from timegap_env.envs.reward import weights_of
 from timegap_env.experiments import rollout as harness
-from timegap_env.experiments import value
+from train.studies import value
 from timegap_env.experiments.backends import Backend
 
 SEEDS = [10_000, 10_001, 10_002]

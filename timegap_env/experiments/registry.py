@@ -8,8 +8,8 @@ references), so a new policy is one :func:`register` call::
 
 ``make(name, config)`` builds the policy for the env of ``config`` (an EnvConfig or gym.make's overrides) in the
 policy's own action mode. Besides the registered names, ``fixed_<setting>`` holds one ladder level for the whole
-episode (``fixed_1.6``), ``oracle`` is *the* oracle of :mod:`timegap_env.experiments.value` (measured on training
-and selection seeds: :func:`make_oracle`) and ``ppo`` a trained run (:func:`load_learned`).
+episode (``fixed_1.6``), ``oracle`` is *the* oracle of the study code's ``value`` module (measured on training
+and selection seeds: its ``make_oracle``) and ``ppo`` a trained run (:func:`load_learned`).
 """
 
 from __future__ import annotations
@@ -95,7 +95,7 @@ def known() -> list[str]:
 def make(name: str, config: EnvConfig | Mapping[str, Any] | None = None, **parameters: Any) -> Any:
     """Policy ``name`` (a registered one or ``fixed_<setting>``) built for the env of ``config`` in its own action
     mode, ``parameters`` over its registered ones (``make("chart_step", k_up=2)``); ``ValueError`` for another name
-    (``oracle``: :func:`make_oracle`; ``ppo``: :func:`load_learned`)."""
+    (``oracle``: the study code's ``value.make_oracle``; ``ppo``: :func:`load_learned`)."""
     if name.startswith(FIXED_PREFIX):
         text = name[len(FIXED_PREFIX):]
         try:
@@ -106,18 +106,6 @@ def make(name: str, config: EnvConfig | Mapping[str, Any] | None = None, **param
     if name not in POLICIES:
         raise ValueError(f"policy {name!r}: unknown; known: {known()}")
     return POLICIES[name].make(config, **parameters)
-
-
-def make_oracle(config: EnvConfig | None = None, train_episodes: int | None = None, backend: Any = None) -> Any:
-    """*The* oracle for ``config`` (default: the default env): the lookup table measured on ``train_episodes``
-    training episodes per condition (default ``value.DEFAULT_TRAIN_EPISODES``), every oracle built and the best on
-    the selection seeds chosen, the episodes spread by ``backend`` (default: serial)."""
-    from timegap_env.experiments import value
-
-    config = config or EnvConfig()
-    table, _ = value.measure_lookup(config, value.DEFAULT_TRAIN_EPISODES if train_episodes is None else train_episodes,
-                                    backend)
-    return value.choose_oracle(config, value.all_oracles(config, table), backend)
 
 
 class LearnedPolicyError(ValueError):
@@ -177,4 +165,4 @@ def load_learned(model: Path, config: EnvConfig | None = None) -> Any:
 
 __all__ = ["FIXED_PREFIX", "LearnedPolicyError", "ORACLE", "POLICIES", "PPO", "PolicySpec", "fixed_name", "fixed_names",
            "tuned_chart_step",
-           "in_mode", "is_known", "known", "learned_exists", "load_learned", "make", "make_oracle", "register"]
+           "in_mode", "is_known", "known", "learned_exists", "load_learned", "make", "register"]

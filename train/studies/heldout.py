@@ -28,12 +28,12 @@ from timegap_env.config import EnvConfig
 from timegap_env import cli
 from timegap_env.experiments.backends import Backend
 from timegap_env.experiments.registry import (
-    FIXED_PREFIX, ORACLE, PPO, LearnedPolicyError, fixed_names, learned_exists, load_learned, make_oracle,
+    FIXED_PREFIX, ORACLE, PPO, LearnedPolicyError, fixed_names, learned_exists, load_learned,
 )
 from timegap_env.experiments.registry import make as make_policy
 from timegap_env.experiments.rollout import rollout
 from timegap_env.experiments.stats import bootstrap_mean, oracle_share, wilson_interval
-from timegap_env.experiments.value import DEFAULT_TRAIN_EPISODES
+from train.studies.value import DEFAULT_TRAIN_EPISODES, make_oracle
 from timegap_env.leaders import default_ngsim_path, default_openacc_dir, openacc_paths
 
 
@@ -154,7 +154,7 @@ def build_policies(
     (``DEFAULT_POLICIES``, the fixed settings of the ladder, the oracle, and PPO only if ``model``, a zip or a run
     directory, exists). The learned policy is ``ppo`` if given, else loaded from ``model`` (before the oracle, which
     takes a while). The oracle's lookup is measured on training seeds and the oracle chosen on selection seeds
-    (``registry.make_oracle``, ``train_episodes`` per condition), their episodes spread by ``backend`` (default:
+    (``value.make_oracle``, ``train_episodes`` per condition), their episodes spread by ``backend`` (default:
     serial)."""
     config = EnvConfig()  # the default, whose action mode is one setting for the platoon
     defaults = [*DEFAULT_POLICIES[:3], *fixed_names(config), *DEFAULT_POLICIES[3:]]

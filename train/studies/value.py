@@ -172,6 +172,15 @@ def choose_oracle(config: EnvConfig, oracles: Sequence[TruthPolicy], backend: Ba
     return oracles[int(np.argmax([result["return"].mean() for result in results]))]
 
 
+def make_oracle(config: EnvConfig | None = None, train_episodes: int | None = None, backend: Any = None) -> Any:
+    """*The* oracle for ``config`` (default: the default env): the lookup table measured on ``train_episodes``
+    training episodes per condition (default ``DEFAULT_TRAIN_EPISODES``), every oracle built and the best on
+    the selection seeds chosen, the episodes spread by ``backend`` (default: serial)."""
+    config = config or EnvConfig()
+    table, _ = measure_lookup(config, DEFAULT_TRAIN_EPISODES if train_episodes is None else train_episodes, backend)
+    return choose_oracle(config, all_oracles(config, table), backend)
+
+
 def kind_groups(kinds: np.ndarray) -> list[tuple[str, np.ndarray]]:
     """("all", every episode), then each kind present, NOMINAL first: (label, mask)."""
     present = [NOMINAL] + [k for k in DEGRADATION_KINDS if k in set(kinds)]
@@ -180,4 +189,4 @@ def kind_groups(kinds: np.ndarray) -> list[tuple[str, np.ndarray]]:
 
 __all__ = ["BATCH", "DEFAULT_TRAIN_EPISODES", "MARGINS", "MONITOR_SIGNALS", "SELECTION_EPISODES", "SELECTION_SEED_START",
            "TARGET_SHARE", "all_oracles", "choose_oracle", "constant_pieces", "constants", "diagonal", "gather_constants",
-           "kind_groups", "measure_lookup", "oracle_piece", "pair_pieces", "run", "training_conditions"]
+           "kind_groups", "make_oracle", "measure_lookup", "oracle_piece", "pair_pieces", "run", "training_conditions"]

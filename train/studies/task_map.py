@@ -36,10 +36,10 @@ from timegap_env.config import REWARD_PRESETS, TASK_VERSIONS, EnvConfig, RewardP
 from timegap_env.envs.reward import REWARD_TERMS
 from timegap_env.leaders.scenarios import LEADER_FAMILIES, SCENARIOS, family_params
 from timegap_env.experiments.backends import Backend
-from timegap_env.experiments.heldout import LARGER_DEGRADATIONS
+from train.studies.heldout import LARGER_DEGRADATIONS
 from timegap_env.experiments.rollout import rollout
 from timegap_env.experiments.stats import bootstrap_mean
-from timegap_env.experiments.value import (
+from train.studies.value import (
     MARGINS, SELECTION_SEED_START, oracle_actions, pair_pieces, training_conditions,
 )
 
