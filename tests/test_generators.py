@@ -85,7 +85,7 @@ def test_a_sub_env_draws_the_episode_a_single_env_of_its_seed_draws():
         envs.reset(seed=[7, None, 2**70, *range(n_envs - 3)])
         assert isinstance(envs._rngs[0].bit_generator.seed_seq, SeedWords)  # hashed in arrays
         for sub_env, seed in ((0, 7), (2, 2**70), (n_envs - 1, n_envs - 4)):
-            single = gymnasium.make("TimeGapMonitor-v0").unwrapped
+            single = gymnasium.make(timegap_env.DEFAULT_TASK).unwrapped
             single.reset(seed=seed)
             assert envs.task.episodes.fingerprint(sub_env) == single.task.episodes.fingerprint(0)
         states = [rng.bit_generator.state for rng in envs._rngs]

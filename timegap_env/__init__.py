@@ -1,9 +1,11 @@
 """TimeGapMonitor: a platoon simulator, a Bayesian time-gap monitor, control charts, and the
-Gymnasium environment ``TimeGapMonitor-v0`` built from them (registered on import).
+Gymnasium environments built from them (registered on import: every task of :mod:`timegap_env.tasks`, one record
+per id; ``DEFAULT_TASK`` is the default).
 
 The package follows the data flow, one folder a stage:
 
 - :mod:`timegap_env.config`: every default, with units (the one source of truth);
+- :mod:`timegap_env.tasks`: the tasks, one record per registered id (config, info layout, seeds, held-out groups);
 - :mod:`timegap_env.leaders`: the human-driven leader (synthetic families, NGSIM, highway-env's IDM);
 - :mod:`timegap_env.sim`: the platoon's physics, string stability, ``simulate(...) -> Trajectory``;
 - :mod:`timegap_env.monitoring`: sensors, the Bayesian monitor, control charts, the monitored loop;
@@ -53,7 +55,7 @@ def _say_when_compiling() -> None:
 _say_when_compiling()  # before the imports below, some of which compile a kernel
 
 from timegap_env.config import (
-    ENV_IDS, MONITOR_PRESETS, AggressiveCyclesConfig, ChartConfig, DegradationConfig, EnvConfig, HardBrakingConfig,
+    MONITOR_PRESETS, AggressiveCyclesConfig, ChartConfig, DegradationConfig, EnvConfig, HardBrakingConfig,
     HumanLeaderConfig, LeaderConfig, MonitorConfig, PlatoonConfig, RewardScales, RewardWeights, SensorConfig,
     SinusoidConfig, StochasticHumanConfig,
 )
@@ -67,28 +69,29 @@ from timegap_env.sim import (
     COMMERCIAL_ACC, Trajectory, acc_platoon, acc_presets, platoon_string_stability, simulate, string_stability,
 )
 
-ENV_ID = ENV_IDS[0]  # the first task, kept bit for bit; a config given as a dict overrides its defaults
-LATEST_ENV_ID = ENV_IDS[max(ENV_IDS)]  # the newest task
-DEFAULT_TASK = LATEST_ENV_ID  # the default task of every script, the benchmark and the docs (docs/task.md: how it
-# was chosen); TimeGapMonitor-v0 stays reproducible bit for bit by its id
-MO_ENV_ID = "mo-TimeGapMonitor-v1"  # LATEST_ENV_ID with the reward terms as a vector (MO-Gymnasium's API)
+from timegap_env.tasks import DEFAULT_TASK, TASKS, Task, get_task
 
-# No max_episode_steps: the env truncates itself at EnvConfig.episode_duration. No passive env checker: the tests run
+ENV_ID = list(TASKS)[0]  # the first task, kept bit for bit; a config given as a dict overrides its defaults
+LATEST_ENV_ID = list(TASKS)[-1]  # the newest task
+MO_ENV_ID = "mo-TimeGapMonitor-v1"  # DEFAULT_TASK with the reward terms as a vector (MO-Gymnasium's API)
+
+# The id is the task: its record gives the env everything (the env refuses another task_id under it). No
+# max_episode_steps: the env truncates itself at EnvConfig.episode_duration. No passive env checker: the tests run
 # gymnasium's check_env, and the checker (gymnasium 1.2-1.4) breaks every step() after a reset() that raised (e.g. on a
 # bad option) with "cannot unpack non-iterable NoneType object", even after a good reset.
-for _version, _id in ENV_IDS.items():
+for _id in TASKS:
     if _id not in registry:
         register(id=_id, disable_env_checker=True, entry_point="timegap_env.envs.env:TimeGapMonitorEnv",
-                 vector_entry_point="timegap_env.envs.vector_env:TimeGapMonitorVectorEnv", kwargs={"version": _version})
+                 vector_entry_point="timegap_env.envs.vector_env:TimeGapMonitorVectorEnv", kwargs={"task_id": _id})
 if MO_ENV_ID not in registry:
     register(id=MO_ENV_ID, disable_env_checker=True, entry_point="timegap_env.envs.mo_env:MOTimeGapMonitorEnv",
-             kwargs={"version": 1})
+             kwargs={"task_id": DEFAULT_TASK})
 
 __all__ = [
-    "__version__", "COMMERCIAL_ACC", "ENV_ID", "DEFAULT_TASK", "ENV_IDS", "LATEST_ENV_ID", "MO_ENV_ID", "MONITOR_PRESETS", "SCENARIOS", "AggressiveCyclesConfig", "ChartConfig", "DegradationConfig", "EnvConfig",
+    "__version__", "COMMERCIAL_ACC", "ENV_ID", "DEFAULT_TASK", "LATEST_ENV_ID", "MO_ENV_ID", "MONITOR_PRESETS", "SCENARIOS", "AggressiveCyclesConfig", "ChartConfig", "DegradationConfig", "EnvConfig",
     "HardBrakingConfig", "HumanLeaderConfig", "LeaderConfig", "LeaderFamily", "LeaderProfile", "MonitorConfig", "OpenAccRun",
-    "PlatoonConfig", "RewardScales", "RewardWeights", "SensorConfig", "SinusoidConfig", "StochasticHumanConfig", "TimeGapEstimate", "TimeGapMonitor",
-    "Trajectory", "acc_platoon", "acc_presets", "aggressive_cycles", "default_ngsim_path", "default_openacc_dir", "estimate_time_gap", "hard_braking", "idm_leader",
+    "PlatoonConfig", "RewardScales", "RewardWeights", "SensorConfig", "SinusoidConfig", "StochasticHumanConfig", "TASKS", "Task", "TimeGapEstimate", "TimeGapMonitor",
+    "Trajectory", "acc_platoon", "acc_presets", "aggressive_cycles", "default_ngsim_path", "default_openacc_dir", "estimate_time_gap", "get_task", "hard_braking", "idm_leader",
     "make_leader", "openacc_paths", "platoon_string_stability", "posterior", "read_ngsim", "read_openacc", "register_family", "simulate",
     "sinusoid", "stochastic_human", "string_stability", "vehicle_ids", "vehicle_profile",
 ]

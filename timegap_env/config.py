@@ -531,7 +531,7 @@ class RewardWeights(ConfigMixin):
     def of(cls, value: Any, field: str = "reward_weights") -> RewardWeights:
         """``value`` as weights: RewardWeights, a preset's name (:data:`REWARD_PRESETS`) or a sequence of one weight
         per field in field order; ``ValueError`` naming ``field`` and the value otherwise. (A dict of some weights
-        overrides the version's: :meth:`EnvConfig.from_dict` and :meth:`EnvConfig.nested_overrides` take it.)"""
+        overrides the task's or EnvConfig's: :meth:`EnvConfig.from_dict` and :meth:`EnvConfig.nested_overrides` take it.)"""
         names = [f.name for f in dataclasses.fields(cls)]
         if isinstance(value, cls):
             return value
@@ -746,7 +746,9 @@ NESTED_CONFIGS: dict[str, type[ConfigMixin]] = {  # EnvConfig's nested configs, 
 
 @dataclasses.dataclass(frozen=True)
 class EnvConfig(ConfigMixin):
-    """Everything ``TimeGapMonitor-v0`` runs with; ``gym.make(..., config={...})`` overrides it.
+    """Every field of an env's config, with the base defaults (``TimeGapMonitor-v0``'s). A task's config is these
+    defaults with its record's overrides (``timegap_env.tasks.get_task(id).config()``); ``gym.make(id, config={...})``
+    overrides that.
 
     Nested configs take dicts of their own fields, e.g. ``{"platoon": {"n_followers": 3}}``.
     A synthetic leader lasts the episode: ``leader.duration`` follows ``episode_duration``
@@ -778,8 +780,6 @@ class EnvConfig(ConfigMixin):
     # {"amplitude_range": (4.0, 8.0)}}; the families and fields are checked when the env is built
     dropout_probability_range: tuple[float, float] = (0.0, 0.05)  # per-episode sensor dropout rate drawn from [-],
     # 0 <= low <= high < 1
-    info_keys: str = "v0"  # the info's keys, one of INFO_KEYS: "v0" is v0's; "v1" adds vector_reward, cost,
-    # objectives and truth_regime (timegap_env.envs.info)
     simulator: str = "native"  # one of SIMULATORS: "native", this package's compiled platoon; "sumo", SUMO through
     # libsumo (the sumo extra; one env at a time per process), configured by ``sumo``
     sumo: SumoConfig = SumoConfig()
@@ -829,19 +829,16 @@ class EnvConfig(ConfigMixin):
             self._fail("degradation.v2v_latency_range", self.degradation.v2v_latency_range,
                        f"must stay within platoon.max_v2v_latency = {self.platoon.max_v2v_latency} s")
         self._pair("dropout_probability_range", 0.0, 1.0, open_high=True, strict=False)
-        self._choice("info_keys", INFO_KEYS)
         self._choice("simulator", SIMULATORS)
 
     @classmethod
-    def from_dict(cls, overrides: Mapping[str, Any] | EnvConfig | None = None, version: int = 0) -> EnvConfig:
-        """The default config of env version ``version`` (:data:`TASK_VERSIONS`) with ``overrides``; nested configs
-        take dicts of their own fields (over the version's), ``reward_weights`` also a preset's name or a sequence of
+    def from_dict(cls, overrides: Mapping[str, Any] | EnvConfig | None = None) -> EnvConfig:
+        """EnvConfig's own defaults with ``overrides`` (a task's config is ``timegap_env.tasks.get_task(id).config``);
+        nested configs take dicts of their own fields, ``reward_weights`` also a preset's name or a sequence of
         weights (:meth:`RewardWeights.of`). An EnvConfig is already whole: it is returned as it is."""
-        if version not in TASK_VERSIONS:
-            raise ValueError(f"env version = {shown(version)}: unknown; known: {list(TASK_VERSIONS)}")
         if isinstance(overrides, EnvConfig):
             return overrides
-        return cls().nested_overrides(TASK_VERSIONS[version]).nested_overrides(overrides)
+        return cls().nested_overrides(overrides)
 
     def nested_overrides(self, overrides: Mapping[str, Any] | None) -> EnvConfig:
         """Copy of this config with ``overrides``, nested configs as dicts of their fields over this one's (a preset's
@@ -874,16 +871,3 @@ class EnvConfig(ConfigMixin):
     def setting_span(self) -> float:
         """Largest setting level minus the smallest [s]."""
         return float(self.setting_levels[-1]) - float(self.setting_levels[0])
-
-
-INFO_KEYS = ("v0", "v1")  # EnvConfig.info_keys's values
-ENV_IDS: dict[int, str] = {0: "TimeGapMonitor-v0", 1: "TimeGapMonitor-v1"}  # env version -> its registered id
-TASK_VERSIONS: dict[int, dict[str, Any]] = {  # env version -> its defaults, as overrides of EnvConfig's (docs/task.md)
-    0: {},  # TimeGapMonitor-v0: EnvConfig's own defaults
-    1: {  # TimeGapMonitor-v1: the weighting the criterion chose, traffic that changes within an episode among the
-        # families, and the objectives in the info
-        "reward_weights": "variation_first",
-        "scenario_weights": {**_default_scenario_weights(), "regimes": 1.0},
-        "info_keys": "v1",
-    },
-}

@@ -26,7 +26,7 @@ from pathlib import Path
 import gymnasium as gym
 from numba.core.dispatcher import Dispatcher
 
-from timegap_env import ENV_IDS
+from timegap_env.tasks import TASKS
 from timegap_env.leaders.scenarios import LEADER_FAMILIES
 
 STEPS = 3  # steps after each reset: the first compiles the step, the rest check it runs
@@ -37,7 +37,7 @@ def precompile() -> int:
     number of numba cache index files (``*.nbi``) the package's ``__pycache__`` folders then hold."""
     batched = [name for name, family in LEADER_FAMILIES.items() if family.batch is not None]
     warnings.filterwarnings("ignore", message=".*is out of date", category=DeprecationWarning)  # v0, on purpose
-    for env_id in ENV_IDS.values():
+    for env_id in TASKS:
         for family in batched:
             config = {"scenario_weights": {family: 1.0}}
             env = gym.make(env_id, config=config)

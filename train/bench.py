@@ -188,7 +188,7 @@ def single_env_rows(sizes: Sizes) -> tuple[list[Row], float]:
     """Rows of measurement 1, and CartPole-v1's steps/s (the vector env's reference too)."""
     import highway_env  # noqa: F401  (registers highway-fast-v0)
 
-    task, v0 = timegap_env.DEFAULT_TASK, timegap_env.ENV_IDS[0]
+    task, v0 = timegap_env.DEFAULT_TASK, timegap_env.ENV_ID
     envs = {
         "ours": (gym.make(task), sizes.env_steps),
         "truth": (gym.make(task, truth_info=True), sizes.env_steps),

@@ -6,7 +6,8 @@ efficiency apart, the constants' frontier, learned recipes over their training s
                               [--cache runs/benchmark-cache] [--backend serial|processes|ray]
     python -m train.benchmark --size        # the pilot that sized the groups (selection seeds only)
 
-The task is ``timegap_env.DEFAULT_TASK``. Each group of :data:`GROUPS` is the task's config with a few overrides.
+The task is ``timegap_env.DEFAULT_TASK``; its record (``timegap_env.tasks``) holds the groups (:data:`GROUPS`), each
+the task's config with a few overrides, and the references.
 Per group, with the seeds of each step fixed and disjoint:
 
 - the **constants** (every ladder setting) play selection seeds 5000-5999: the best constant (the highest mean
@@ -67,24 +68,22 @@ import numpy as np
 
 import timegap_env
 from timegap_env import cli
-from timegap_env.agents.protocol import EVAL_SEED_START
-from timegap_env.config import ENV_IDS, REWARD_PRESETS, TASK_VERSIONS, EnvConfig
+from timegap_env.config import REWARD_PRESETS, EnvConfig
 from timegap_env.experiments import registry
 from timegap_env.experiments.backends import Backend, add_arguments
-from train.studies.heldout import LARGER_DEGRADATIONS
 from timegap_env.experiments.rollout import rollout
 from timegap_env.experiments.stats import (
     WILSON_Z, episodes_for, iqm, paired_mde, performance_profile, probability_of_improvement_interval,
     stratified_bootstrap, wilson_interval,
 )
 from train.studies.task_map import Plan, References, choose_references
-from train.studies.value import SELECTION_SEED_START, flag_aware_actions
+from train.studies.value import flag_aware_actions
+from timegap_env.tasks import SELECTION_SEED_START, HeldOutGroup, get_task
 from timegap_env.leaders.scenarios import missing_data
 
 TASK = timegap_env.DEFAULT_TASK
-VERSION = {env_id: version for version, env_id in ENV_IDS.items()}[TASK]
-HELD_OUT_START = EVAL_SEED_START  # the held-out episodes' first seed, of every group [-]
-CONSTANT_SELECTION = 1_000  # the constants' selection seeds: SELECTION_SEED_START on [-]
+TASK_RECORD = get_task(TASK)  # its config, seeds, held-out groups and references
+HELD_OUT_START = TASK_RECORD.seeds.held_out_start  # the held-out episodes' first seed, of every group [-]
 REFERENCE_PLAN = Plan(train=16, selection=128)  # the references' training seeds 0-15, selection 5000-5127
 SAFE_BUDGET = 0.01  # a constant is safe when it collides in at most this share of the selection episodes [-]
 EFFECT = 0.05  # the groups are sized to detect this share of the best constant's |return| ... [-]
@@ -98,44 +97,10 @@ RULE = "rule_platoon"  # the paper's rule: every gain is also stated over it
 DEFAULT_GROUP = "default"  # the task's own mix: the leaderboard's ranking
 
 
-@dataclasses.dataclass(frozen=True)
-class Group:
-    """A group of held-out episodes: the task's config with ``overrides``."""
-
-    name: str
-    description: str
-    overrides: dict[str, Any]  # EnvConfig overrides of the task's defaults
-    episodes: int  # held-out episodes: from the pilot (--size) for EFFECT at POWER, capped where noted
-    data: str = ""  # the scenario whose recorded data the group needs (missing_data says where it looked)
-    references: bool = True  # the references that know (their tables need runs of every training condition)
-    selection: int = CONSTANT_SELECTION  # the constants' selection episodes, seeds from SELECTION_SEED_START [-]
-    capped: str = ""  # why ``episodes`` is below what power asks for ("": it is not)
-
-
-# The groups, in the leaderboard's order. Sizes: `python -m train.benchmark --size` (docs/benchmark.md) gives the
-# episodes each needs to see EFFECT at POWER; a group gets that, rounded up to 250, at least 1000 (the default mix at
-# least 2500), except where ``capped`` says why not.
-GROUPS: dict[str, Group] = {group.name: group for group in (
-    Group("default", "the task's own mix (TimeGapMonitor-v1)", {}, 2_500),
-    Group("regimes", "traffic that changes within every episode", {"scenario_weights": {"regimes": 1.0}}, 3_250),
-    Group("larger_degradations", "every episode degraded beyond the training ranges",
-          {"degradation": LARGER_DEGRADATIONS}, 2_000),
-    Group("commercial_acc", "every follower a commercial ACC car calibrated to OpenACC",
-          {"degradation": {"kind_weights": {"commercial_acc": 1.0}}}, 1_500),
-    Group("stop_and_go", "congestion waves, a family the training never drew",
-          {"scenario_weights": {"stop_and_go": 1.0}}, 2_750),
-    Group("emergency_braking", "emergency stops at 6-7.5 m/s^2, never drawn in training",
-          {"scenario_weights": {"emergency_braking": 1.0}}, 3_500),
-    Group("ngsim", "real drivers: the held-out quarter of the NGSIM I-80 vehicles (55 of 217), within the band",
-          {"scenario_weights": {"ngsim_in_band": 1.0}, "leader": {"recorded_part": "held_out"}}, 1_000,
-          data="ngsim_in_band"),
-    Group("openacc", "real lead cars: the held-out quarter of the OpenACC runs (5 of 19)",
-          {"scenario_weights": {"openacc": 1.0}, "leader": {"recorded_part": "held_out"}}, 1_000, data="openacc"),
-    Group("idm", "highway-env's IDM driver behind scripted braking", {"scenario_weights": {"idm": 1.0}}, 1_000,
-          data="idm"),
-    Group("sumo", "SUMO's Plexe CC model for the platoon", {"simulator": "sumo", "sumo": {"model": "cc"}}, 50,
-          references=False, selection=100, capped="SUMO runs one episode at a time, 0.7 s each"),
-)}
+# The groups, in the leaderboard's order: the task record's. Sizes: `python -m train.benchmark --size`
+# (docs/benchmark.md) gives the episodes each needs to see EFFECT at POWER; a group gets that, rounded up to 250, at
+# least 1000 (the default mix at least 2500), except where ``capped`` says why not.
+GROUPS: dict[str, HeldOutGroup] = {group.name: group for group in TASK_RECORD.groups}
 
 # The learned recipes: each a run directory per training seed (train.train_ppo --seed k; make train).
 RECIPES: dict[str, tuple[str, ...]] = {
@@ -144,7 +109,7 @@ RECIPES: dict[str, tuple[str, ...]] = {
     "ppo_rawgap": ("results/ppo_v1_rawgap", *(f"results/recipes/ppo_rawgap_seed{seed}" for seed in range(1, 5))),
 }
 RULES = (RULE, "chart_step", "v2v_aware")  # the rules every benchmark plays
-REFERENCES = ("v2v_pair", "regime_aware", "degradation_aware", "full_oracle")  # played; "hindsight" is derived
+REFERENCES = TASK_RECORD.references  # played; "hindsight" is derived
 KIND_NAMES = {"constant": "constant", "rule": "rule", "reference": "reference (knows the truth)",
               "learned": "learned (seeds pooled)", "policy": "policy"}  # an entry's kind, as the leaderboard names it
 
@@ -446,7 +411,7 @@ def frontier_gains(played: Played, frontier: Frontier, resampler: Resampler) -> 
 class GroupResult:
     """What one group measured."""
 
-    group: Group
+    group: HeldOutGroup
     seeds: tuple[int, int]  # the held-out seeds: first, count
     best: str  # the best constant's name (chosen on selection seeds)
     best_safe: str  # the best safe constant's name
@@ -456,9 +421,9 @@ class GroupResult:
     rows: list[dict[str, Any]]  # scores.csv's rows
 
 
-def group_config(group: Group) -> EnvConfig:
+def group_config(group: HeldOutGroup) -> EnvConfig:
     """The task's config with the group's overrides."""
-    return EnvConfig.from_dict(group.overrides, version=VERSION)
+    return TASK_RECORD.config(group.overrides)
 
 
 def select_constants(config: EnvConfig, episodes: int, backend: Backend) -> tuple[str, str, dict[str, float]]:
@@ -479,7 +444,7 @@ CACHED_CODE = (Played, efficiency, play, join, select_constants)  # the code who
 # defined here (a test's stand-in for play changes no key)
 
 
-def run_group(group: Group, entries: Sequence[Entry], first_seed: int, episodes: int, cache: Cache,
+def run_group(group: HeldOutGroup, entries: Sequence[Entry], first_seed: int, episodes: int, cache: Cache,
               backend: Backend, progress: Callable[[str], None] = lambda _: None) -> GroupResult:
     """Every entry on the group's held-out episodes (and the references and the constants' choices), scored."""
     config = group_config(group)
@@ -491,7 +456,7 @@ def run_group(group: Group, entries: Sequence[Entry], first_seed: int, episodes:
     entries = list(entries)
     if group.references:
         references_key = cache.key("references", *base, dataclasses.asdict(REFERENCE_PLAN))
-        weighting = TASK_VERSIONS[VERSION]["reward_weights"]
+        weighting = TASK_RECORD.overrides["reward_weights"]
         references = cache.through(references_key, lambda: choose_references(
             config, {weighting: REWARD_PRESETS[weighting]}, *REFERENCE_PLAN.seeds()[:2], backend)[weighting])
         entries += [reference_entry(name, references_key) for name in REFERENCES]
@@ -570,7 +535,7 @@ class Benchmark:
     first_seed: int
 
 
-def missing(group: Group) -> str:
+def missing(group: HeldOutGroup) -> str:
     """Why ``group`` cannot run here ("" if it can): its data, or SUMO, is not found."""
     if group.data == "idm":
         try:

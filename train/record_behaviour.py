@@ -146,8 +146,8 @@ def record() -> dict[str, Any]:
     return {
         "episodes": [record_episode(spec) for spec in EPISODES],
         "vector_env": record_vector_env(),
-        "v1_episodes": [record_episode(spec, timegap_env.ENV_IDS[1]) for spec in V1_EPISODES],
-        "v1_vector_env": record_vector_env(timegap_env.ENV_IDS[1]),
+        "v1_episodes": [record_episode(spec, "TimeGapMonitor-v1") for spec in V1_EPISODES],
+        "v1_vector_env": record_vector_env("TimeGapMonitor-v1"),
         "render": record_render(),
         "simulate": record_simulations(),
     }

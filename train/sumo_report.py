@@ -39,6 +39,7 @@ from scipy.stats import kendalltau
 from timegap_env import cli
 from timegap_env.agents.protocol import EVAL_SEED_START
 from timegap_env.config import EnvConfig
+from timegap_env.tasks import get_task
 from timegap_env.experiments.backends import Backend, add_arguments
 from train.studies.crosscheck import SETUPS, SOURCES, crosscheck_rows, transfer_returns
 from timegap_env.experiments.registry import fixed_name, load_learned, tuned_chart_step
@@ -205,7 +206,7 @@ def main() -> None:
             notes.append(f"- source {source} left out: {missing}")
         else:
             pieces[source] = count
-    config = EnvConfig.from_dict(version=1)
+    config = get_task("TimeGapMonitor-v1").config()
     tuned = tuned_chart_step(args.chart_step_tuning) if args.chart_step_tuning else {}
     policies: dict[str, Any] = {fixed_name(level): make_policy(fixed_name(level), config) for level in config.setting_levels}
     policies |= {"rule_platoon": make_policy("rule_platoon", config), "chart_step": make_policy("chart_step", config, **tuned)}

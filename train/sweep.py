@@ -7,17 +7,18 @@ The grid is a YAML file (``train/sweeps/example.yml`` is one):
 - ``axes``: dotted ``EnvConfig`` fields, each with a list of values (``reward_weights.efficiency: [0.5, 1.0]``,
   ``degradation.gain_range: [[0.6, 0.85], [0.4, 0.6]]``, ``monitor.window: [1.0, 2.0]``); the cells are the
   product of the axes, the first axis outermost. Or ``cells``: an explicit list of such ``{field: value}`` maps.
+- ``task`` (optional): the registered task whose config the cells override (default ``timegap_env.DEFAULT_TASK``);
 - ``base`` (optional): overrides every cell shares, as ``gym.make``'s ``config`` (nested configs as dicts); a
   cell's dotted fields go into them.
 - ``policies``: by name, from the policy registry (``timegap_env.experiments.registry``: the paper's rule, the
   chart-step rule, the V2V-aware heuristic),
-  ``fixed_<setting>`` for any ladder level, and ``ppo``, the trained model at ``model`` (default ``results/v0/ppo``).
+  ``fixed_<setting>`` for any ladder level, and ``ppo``, the trained model at ``model`` (default: the task's committed PPO, ``DEFAULT_MODELS``).
 - ``seeds``: ``{start, count, batch}``: episodes reset with seeds start .. start + count - 1, run ``batch`` at a
   time. Held out from training (start >= ``EVAL_SEED_START``) unless the grid states ``held_out: false`` (then
   every seed lies below it).
 - ``description`` (optional): a sentence for the summary.
 
-Every field and value is checked before anything runs (``EnvConfig.from_dict`` on each cell, every policy built
+Every field and value is checked before anything runs (the task's config with each cell's overrides, every policy built
 for each cell's config): an unknown field or policy, or a bad value, is a ``ValueError`` naming it.
 
 A piece of work is (cell, policy, seed batch): one native vector env, ``batch`` episodes, the policy built for
@@ -26,9 +27,9 @@ the cell's config in its own action mode (as ``train.evaluate`` runs it). Pieces
 cell and policy alone, so both backends write the same bits. The trained model travels with the pieces as
 bytes, so cluster workers need no copy of ``results/``.
 
-Writes to ``--out`` (default ``results/sweep/<grid name>``):
+Writes to ``--out`` (default ``runs/sweep/<grid name>``):
 
-- ``episodes.csv``: one row per episode: ``piece`` and ``cell`` (stable hashes: the cell's overrides; those, the
+- ``episodes.csv``: one row per episode: ``piece`` and ``cell`` (stable hashes: the task and the cell's overrides; those, the
   policy, the model's bytes for ``ppo`` and the seed batch), one column per axis (its value; lists and maps as
   JSON), ``policy``, ``seed``, ``scenario`` (the leader family), ``degradation`` (the kind drawn, ``none`` if no
   follower is hit), ``return`` (undiscounted), ``collision`` (0/1) and the episode summary
@@ -62,7 +63,7 @@ import yaml
 
 from timegap_env.agents.policies import NamedPolicy, seconds
 from timegap_env.agents.protocol import ENV_FILE, EVAL_SEED_START, MODEL_FILE, VECNORMALIZE_FILE
-from timegap_env import cli
+from timegap_env import DEFAULT_TASK, cli
 from timegap_env.config import NESTED_CONFIGS, EnvConfig
 from timegap_env.envs.observation import observation_space
 from timegap_env.leaders import SCENARIOS
@@ -71,13 +72,15 @@ from timegap_env.experiments.registry import FIXED_PREFIX, POLICIES, PPO
 from timegap_env.experiments.registry import make as make_policy
 from timegap_env.experiments.rollout import rollout
 from timegap_env.experiments.stats import BOOTSTRAP_RESAMPLES, BOOTSTRAP_SEED, bootstrap_mean
+from timegap_env.tasks import get_task
 
 DEFAULT_OUT = Path("runs/sweep")  # a grid's results go to DEFAULT_OUT / its file's stem
-DEFAULT_MODEL = Path("results/v0/ppo")
+DEFAULT_MODELS = {"TimeGapMonitor-v0": Path("results/v0/ppo"), "TimeGapMonitor-v1": Path("results/ppo_v1")}  # task ->
+# its committed PPO run (make train)
 DEFAULT_BATCH = 16  # episodes per piece, one vector env [-]
 DEFAULT_CHUNK = 16  # pieces per Backend.map call, after each of which episodes.csv is written [-]
 EPISODES_FILE, SUMMARY_FILE = "episodes.csv", "summary.md"
-GRID_KEYS = ("description", "axes", "cells", "base", "policies", "seeds", "model")
+GRID_KEYS = ("description", "task", "axes", "cells", "base", "policies", "seeds", "model")
 SEED_KEYS = ("start", "count", "batch", "held_out")
 HASH_CHARS = 12  # hex digits of a piece's or cell's hash [-]
 LEADING_COLUMNS = ("piece", "cell")  # then one column per axis, then EPISODE_COLUMNS, then the episode summary
@@ -91,6 +94,7 @@ class Grid:
 
     path: Path
     description: str
+    task: str  # the registered task whose config the cells override
     columns: tuple[str, ...]  # the dotted fields the cells set, one CSV column each
     cells: tuple[dict[str, Any], ...]
     base: dict[str, Any]
@@ -103,6 +107,10 @@ class Grid:
     def overrides(self, cell: Mapping[str, Any]) -> dict[str, Any]:
         """``gym.make``'s ``config`` for ``cell``: the base with the cell's dotted fields put into it."""
         return with_fields(self.base, cell)
+
+    def config(self, cell: Mapping[str, Any]) -> EnvConfig:
+        """The env's config in ``cell``: the task's with the cell's overrides."""
+        return get_task(self.task).config(self.overrides(cell))
 
     def batches(self) -> list[tuple[int, ...]]:
         """The seeds, ``batch`` at a time."""
@@ -210,6 +218,11 @@ def load_grid(path: Path) -> Grid:
     unknown = sorted(set(raw) - set(GRID_KEYS), key=str)
     if unknown:
         raise ValueError(f"{where}: unknown key(s) {unknown}; known: {list(GRID_KEYS)}")
+    task = raw.get("task", DEFAULT_TASK)
+    try:
+        get_task(task)
+    except ValueError as error:
+        raise ValueError(f"{where}: task: {error}") from error
     columns, cells = parse_cells(raw, where)
     base = raw.get("base") or {}
     if not isinstance(base, Mapping):
@@ -228,15 +241,16 @@ def load_grid(path: Path) -> Grid:
         raise ValueError(f"{where}: unknown policies {unknown}; known: {sorted(POLICIES)}, {FIXED_PREFIX}<setting> "
                          f"(a ladder level, e.g. {FIXED_PREFIX}1.6) and {PPO}")
     seeds, batch, held_out = parse_seeds(raw.get("seeds"), where)
-    model = Path(raw.get("model", DEFAULT_MODEL)) if PPO in policies else None
-    grid = Grid(path, str(raw.get("description", "")).strip(), columns, tuple(cells), dict(base), tuple(policies),
+    if PPO in policies and "model" not in raw and task not in DEFAULT_MODELS:
+        raise ValueError(f"{where}: policy {PPO} in task {task!r}: no committed model; give model: RUN_DIR")
+    model = Path(raw.get("model", DEFAULT_MODELS.get(task, ""))) if PPO in policies else None
+    grid = Grid(path, str(raw.get("description", "")).strip(), task, columns, tuple(cells), dict(base), tuple(policies),
                 seeds, batch, held_out, model)
     learned = load_learned(model_files(model)) if model is not None else None
     for i, cell in enumerate(cells):
-        overrides = grid.overrides(cell)
         label = f"{where}: cell {i} {json.dumps(cell)}"
         try:
-            config = EnvConfig.from_dict(overrides)
+            config = grid.config(cell)
         except ValueError as error:
             raise ValueError(f"{label}: {error}") from error
         unknown_families = sorted(set(config.scenario_weights) - set(SCENARIOS))
@@ -251,7 +265,7 @@ def load_grid(path: Path) -> Grid:
                                      f"{learned.observation_shape}, this cell's env gives {expected}")
                 continue
             try:
-                make_policy(name, overrides)
+                make_policy(name, config)
             except ValueError as error:
                 raise ValueError(f"{label}: policy {name!r}: {error}") from error
     return grid
@@ -297,27 +311,27 @@ def stable_hash(value: Any) -> str:
     return hashlib.sha256(text.encode()).hexdigest()[:HASH_CHARS]
 
 
-def run_piece(overrides: dict[str, Any], policy_name: str, seeds: tuple[int, ...],
+def run_piece(config: EnvConfig, policy_name: str, seeds: tuple[int, ...],
               model: dict[str, bytes] | None) -> list[dict[str, Any]]:
-    """One episode per seed of ``policy_name`` in the native vector env with ``overrides`` (the policy's action
-    mode added); ``model``: the run's files for ``ppo``. Per episode: seed, scenario, degradation kind, return,
-    collision and the episode summary."""
+    """One episode per seed of ``policy_name`` in the native vector env of ``config`` (the policy's action mode
+    set); ``model``: the run's files for ``ppo``. Per episode: seed, scenario, degradation kind, return, collision
+    and the episode summary."""
     if policy_name != PPO:
-        return play(make_policy(policy_name, overrides), overrides, seeds)
+        return play(make_policy(policy_name, config), config, seeds)
     import torch  # one thread, as a Ray task of one CPU has: on a busy machine two threads made PPO 100 x slower
 
     threads = torch.get_num_threads()
     torch.set_num_threads(1)
     try:
-        return play(load_learned(model), overrides, seeds)
+        return play(load_learned(model), config, seeds)
     finally:
         torch.set_num_threads(threads)
 
 
-def play(policy: NamedPolicy, overrides: dict[str, Any], seeds: tuple[int, ...]) -> list[dict[str, Any]]:
+def play(policy: NamedPolicy, config: EnvConfig, seeds: tuple[int, ...]) -> list[dict[str, Any]]:
     """The episodes of :func:`run_piece` under ``policy``."""
     rows = []
-    for episode in rollout(policy, overrides, seeds).records:
+    for episode in rollout(policy, config, seeds).records:
         summary = dict(episode.summary)
         collision = int(summary.pop("collision"))
         rows.append({"seed": episode.seed, "scenario": episode.scenario, "degradation": episode.degradation,
@@ -339,13 +353,13 @@ def plan(grid: Grid) -> tuple[list[Piece], list[str], dict[str, bytes] | None]:
     """Every piece, cells outermost then policies then seed batches; each cell's id; the model's files if needed."""
     files = model_files(grid.model) if grid.model is not None else None
     model_hash = digest(files) if files is not None else None
-    cell_ids = [stable_hash(grid.overrides(cell)) for cell in grid.cells]
+    cell_ids = [stable_hash([grid.task, grid.overrides(cell)]) for cell in grid.cells]
     pieces = []
     for index, cell in enumerate(grid.cells):
         for policy in grid.policies:
             identity = policy if policy != PPO else f"{PPO}:{model_hash}"
             for seeds in grid.batches():
-                key = stable_hash([grid.overrides(cell), identity, list(seeds)])
+                key = stable_hash([grid.task, grid.overrides(cell), identity, list(seeds)])
                 pieces.append(Piece(index, policy, seeds, key))
     return pieces, cell_ids, files
 
@@ -423,7 +437,7 @@ def sweep(grid: Grid, out: Path, backend: Backend, chunk: int = DEFAULT_CHUNK) -
     calls = 0
     for start in range(0, len(todo), chunk):
         part = todo[start:start + chunk]
-        results = backend.map(run_piece, [(grid.overrides(grid.cells[p.cell]), p.policy, p.seeds,
+        results = backend.map(run_piece, [(grid.config(grid.cells[p.cell]), p.policy, p.seeds,
                                            files if p.policy == PPO else None) for p in part])
         calls += 1
         for piece, episodes in zip(part, results):
@@ -461,7 +475,7 @@ def summary(grid: Grid, pieces: Sequence[Piece], cell_ids: Sequence[str], done: 
     if grid.description:
         lines += [grid.description, ""]
     lines += [
-        f"{len(grid.cells)} cells ({' × '.join(f'`{a}`' for a in axes)}), each with the shared overrides "
+        f"Task `{grid.task}`; {len(grid.cells)} cells ({' × '.join(f'`{a}`' for a in axes)}), each with the shared overrides "
         f"`{json.dumps(grid.base)}`; policies {', '.join(f'`{p}`' for p in grid.policies)}"
         + (f" (`{PPO}`: the model in `{grid.model}`)" if grid.model is not None else "")
         + f"; seeds {first}-{last} ({'held out' if grid.held_out else 'training seeds'}), {grid.batch} per piece: "

@@ -37,12 +37,13 @@ from timegap_env.envs.reward import REWARD_TERMS
 from timegap_env.experiments.backends import Backend
 from timegap_env.experiments.rollout import rollout
 from timegap_env.experiments.stats import bootstrap_mean
+from timegap_env.tasks import get_task
 from train.studies.task_map import FRONT_OBJECTIVES, front_rows, hypervolume, pair_terms, weigh
 from train.studies.value import SELECTION_SEED_START
 
 PROG = "python -m train.train_morl"
 OBJECTIVES = ("efficiency", "string_stability", "tracking", "collision")  # the MO env's reward terms, in this order
-WEIGHTING = "variation_first"  # TimeGapMonitor-v1's weighting (TASK_VERSIONS[1])
+WEIGHTING = "variation_first"  # TimeGapMonitor-v1's weighting (its record in timegap_env.tasks)
 DEFAULT_TIMESTEPS = 35_000  # about 3 min of training on one torch thread (measured: 3000 steps in 14.5 s)
 NET_ARCH = [64, 64]
 BUFFER_SIZE = 10_000
@@ -219,7 +220,7 @@ def main() -> None:
     agent, train_episodes = train(args.timesteps)
     trained = time.perf_counter() - start
 
-    config = EnvConfig.from_dict(version=1)
+    config = get_task("TimeGapMonitor-v1").config()
     preset = REWARD_PRESETS[WEIGHTING]
     assert config.reward_weights == preset.weights and config.action_mode == "platoon"
     selection = list(range(SELECTION_SEED_START, SELECTION_SEED_START + args.selection))

@@ -43,7 +43,7 @@ directory), as is ``--out`` naming a file. The run directory holds exactly:
 
 Sub-env i of phase k's env is seeded ``--seed + k * n_envs + i``; all training seeds stay below
 ``timegap_env.agents.protocol.EVAL_SEED_START`` (10 000), where the evaluation's seeds begin. The check episodes of
-the learning curve are ``check_seeds(version)``: 32 episodes seeded from 9000 in v0, 100 from v1 on (whose
+the learning curve are ``check_seeds(task)``: 32 episodes seeded from 9000 in v0, 100 from v1 on (whose
 collision term needs more), also below 10 000; their references are v0's oracle and best constant there, or, from v1
 on, the best blind constant and the full oracle of ``results/task`` (chosen on its training and selection seeds).
 A ``--resume`` from a checkpoint or statistics that cannot be read, or that take observations of
@@ -84,10 +84,11 @@ from timegap_env.agents.learned import (
 )
 from timegap_env.agents.policies import seconds
 from timegap_env.agents.protocol import (
-    ALGORITHMS, ENV_FILE, EVAL_SEED_START, MODEL_FILE, VECNORMALIZE_FILE, env_version, read_env_file,
+    ALGORITHMS, ENV_FILE, EVAL_SEED_START, MODEL_FILE, VECNORMALIZE_FILE, read_env_file,
 )
-from timegap_env import DEFAULT_TASK, ENV_IDS, cli
-from timegap_env.config import TASK_VERSIONS, EnvConfig
+from timegap_env import DEFAULT_TASK, ENV_ID, TASKS, cli
+from timegap_env.config import EnvConfig
+from timegap_env.tasks import get_task
 from timegap_env.envs.action import action_space
 from timegap_env.envs.info import summary_of, truth_of
 from timegap_env.envs.observation import MONITOR_FEATURES, feature_columns, observation_space
@@ -113,7 +114,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--algo", default="ppo", choices=list(ALGORITHMS),
                         help="ppo (stable-baselines3) or ppo_lstm (sb3-contrib's RecurrentPPO); the default "
                              "--hyperparams is hyperparams/<algo>.yml (default: %(default)s)")
-    parser.add_argument("--env-id", default=DEFAULT_TASK, choices=list(ENV_IDS.values()),
+    parser.add_argument("--env-id", default=DEFAULT_TASK, choices=list(TASKS),
                         help="the env, and the section of --hyperparams and --warmup to read (default: %(default)s)")
     parser.add_argument("--timesteps", type=cli.count, default=None,
                         help="total environment steps of the run, warm-up included (default: n_timesteps of the yml)")
@@ -264,21 +265,21 @@ class CurveReference:
     gap_interval: tuple[float, float]  # the 95 % bootstrap interval of the oracle's mean gain over the constant there
 
     @classmethod
-    def measure(cls, config: EnvConfig, version: int) -> CurveReference:
-        """The best constant and the oracle on the check episodes (``check_seeds(version)``) in ``config``'s env
-        (one setting for the platoon). Version 0: the constant best on those episodes and the oracle
-        train.value_of_information chooses; later versions: the best blind constant and the full oracle of
+    def measure(cls, config: EnvConfig, task_id: str) -> CurveReference:
+        """The best constant and the oracle on the check episodes (``check_seeds(task_id)``) in ``config``'s env
+        (one setting for the platoon). v0: the constant best on those episodes and the oracle
+        train.value_of_information chooses; later tasks: the best blind constant and the full oracle of
         ``results/task`` (``choose_references``: tables on its training seeds, choices on its selection seeds)."""
         platoon = config.with_overrides({"action_mode": "platoon"})
-        seeds = check_seeds(version)
+        seeds = check_seeds(task_id)
         fixed = constants(platoon, seeds)["return"]  # (episodes, levels)
-        if version == 0:
+        if task_id == ENV_ID:
             table, _ = measure_lookup(platoon, DEFAULT_TRAIN_EPISODES)
             oracle = choose_oracle(platoon, all_oracles(platoon, table))
             best = int(np.argmax(fixed.mean(axis=0)))
         else:
             train, selection, _ = Plan().seeds()
-            weighting = TASK_VERSIONS[version]["reward_weights"]
+            weighting = get_task(task_id).overrides["reward_weights"]
             chosen = choose_references(platoon, {weighting: WEIGHTINGS[weighting]}, train, selection, Backend())
             oracle, best = chosen[weighting].full_oracle, chosen[weighting].blind
         oracle_returns = run(platoon, seeds, lambda obs, infos: oracle.act(truth_of(infos)))["return"]
@@ -374,11 +375,11 @@ def check_out(out: Path, resume: bool) -> None:
                          "directory when it ends, so give a new directory (or one holding a run)")
 
 
-def check_config(env_kwargs: dict[str, Any], source: str, overrides: dict[str, Any], version: int) -> EnvConfig:
-    """``env_kwargs``' config over env version ``version``'s defaults, as an EnvConfig; a ValueError naming where it
-    came from (and the field) if it is not one."""
+def check_config(env_kwargs: dict[str, Any], source: str, overrides: dict[str, Any], task_id: str) -> EnvConfig:
+    """``env_kwargs``' config over task ``task_id``'s, as an EnvConfig; a ValueError naming where it came from (and
+    the field) if it is not one."""
     try:
-        return EnvConfig.from_dict(env_kwargs.get("config"), version)
+        return get_task(task_id).config(env_kwargs.get("config"))
     except ValueError as error:
         given = f"--env-config {json.dumps(overrides)} merged into {source}" if overrides else source
         raise ValueError(f"{given}: {error}") from error
@@ -407,7 +408,6 @@ def share_text(reference: CurveReference, learned: float) -> str:
 def main(argv: list[str] | None = None) -> None:
     started = time.perf_counter()
     args = parse_args(argv)
-    version = env_version(args.env_id)
     if args.cost_budget is not None and not (math.isfinite(args.cost_budget) and args.cost_budget >= 0):
         raise ValueError(f"cost_budget = {args.cost_budget}: must be a finite number >= 0")
     if not (math.isfinite(args.lagrange_rate) and args.lagrange_rate > 0):
@@ -452,9 +452,9 @@ def main(argv: list[str] | None = None) -> None:
     if not isinstance(normalize, (bool, dict)):
         raise ValueError(f"hyperparams {args.env_id}.normalize = {normalize!r}: "
                          "must be true, false or a dict of VecNormalize arguments")
-    evaluated = check_config(env_kwargs, f"{args.hyperparams} env_kwargs", args.env_config, version)
+    evaluated = check_config(env_kwargs, f"{args.hyperparams} env_kwargs", args.env_config, args.env_id)
     if warmup:
-        check_config(phases[0][1], f"{args.warmup} env_kwargs (the warm-up)", args.env_config, version)
+        check_config(phases[0][1], f"{args.warmup} env_kwargs (the warm-up)", args.env_config, args.env_id)
     check_out(args.out, args.resume)
     # One thread: the network is tiny, the 2 cores are better left to the env (two threads measured 7x slower).
     torch.set_num_threads(1)
@@ -519,12 +519,12 @@ def main(argv: list[str] | None = None) -> None:
                                                 indent=1, sort_keys=True) + "\n")
         if model is not None:
             model.tensorboard_log = str(tensorboard)
-        reference = CurveReference.measure(evaluated, version)
+        reference = CurveReference.measure(evaluated, args.env_id)
         timings: list[tuple[str, int, float]] = []  # (phase, steps, seconds)
         for phase, (phase_end, phase_env_kwargs) in enumerate(phases):
             if model is not None and model.num_timesteps >= phase_end:
                 continue
-            phase_env: VecEnv = TimeGapVecEnv(n_envs, **phase_env_kwargs, version=version,
+            phase_env: VecEnv = TimeGapVecEnv(n_envs, **phase_env_kwargs, task_id=args.env_id,
                                               hidden_features=hidden_features)
             if saved_statistics is not None and env is None:
                 saved_statistics.set_venv(phase_env)

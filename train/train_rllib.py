@@ -30,8 +30,8 @@ seeds runner w's vector env with seed + w; ``ForRLlib`` spreads that over its pl
 share a platoon's stream; all below ``timegap_env.agents.protocol.EVAL_SEED_START``, where the evaluation's seeds begin.
 
 ``--select-scale`` chooses the reward scale: it trains one run per candidate (the same seed, steps and
-settings), scores each run's deterministic policy on ``train.train_ppo``'s check episodes (``EVAL_EPISODES``
-episodes seeded ``EVAL_SEED`` on: 9000-9031, below the held-out seeds, in the env trained in) and writes
+settings), scores each run's deterministic policy on the task's check episodes (``timegap_env.tasks.Seeds.check``: 100
+episodes seeded 9000-9099 in v1, below the held-out seeds, in the env trained in) and writes
 ``selection.md`` to ``--out``: the candidates' returns there and the one with the highest mean, which
 ``REWARD_SCALE`` is set to. It keeps no checkpoint and runs no held-out episode; the runners' platoons must be
 seeded below the check episodes'.
@@ -66,8 +66,8 @@ import numpy as np
 
 from timegap_env.agents.protocol import ENV_FILE, EVAL_SEED_START
 from timegap_env.agents.rllib_policy import CHECKPOINT_DIR, RLlibPolicy
-from timegap_env import ENV_IDS, cli
-from timegap_env import DEFAULT_TASK
+from timegap_env import DEFAULT_TASK, cli
+from timegap_env.tasks import CHECK_SEED_START, get_task
 from timegap_env.experiments.backends import runtime_env
 
 QUALIFIED_ID = f"timegap_env:{DEFAULT_TASK}"  # gymnasium imports timegap_env, which registers the id, in any process
@@ -78,7 +78,6 @@ DEFAULT_TIMESTEPS = 1_000_000  # about 2-3 min on this 2-core machine, half the 
 DEFAULT_ENV_RUNNERS = 2  # one per core of this machine
 EVAL_POLICIES = ("rule_platoon", "fixed_1.2")  # the paper's rule (the reference) and the default task's best constant
 DEFAULT_EVAL_EPISODES = 1_000  # held-out episodes of the report's check (the benchmark's own are sized by power)
-DEFAULT_VERSION = {env_id: version for version, env_id in ENV_IDS.items()}[DEFAULT_TASK]
 MAPPED = {  # ppo.yml's PPO key -> PPOConfig.training's; the keys of UNMAPPED: see Settings.from_args
     "gamma": "gamma",
     "gae_lambda": "lambda_",
@@ -211,13 +210,12 @@ def held_out_returns(policy: Any, episodes: int | None) -> HeldOut:
     """``policy`` and EVAL_POLICIES on ``episodes`` (None: DEFAULT_EVAL_EPISODES) held-out episodes of the default
     task (seeds from EVAL_SEED_START), each in its own action mode, paired against the paper's rule. The full
     comparison is the benchmark's: ``python -m train.benchmark --policy <out>``."""
-    from timegap_env.config import EnvConfig
     from timegap_env.experiments import registry
     from timegap_env.experiments.rollout import rollout
     from timegap_env.experiments.stats import bootstrap_mean
 
     start = time.perf_counter()
-    config = EnvConfig.from_dict(version=DEFAULT_VERSION)
+    config = get_task(DEFAULT_TASK).config()
     seeds = list(range(EVAL_SEED_START, EVAL_SEED_START + (episodes or DEFAULT_EVAL_EPISODES)))
     policies = {"rllib_ppo": policy, **{name: registry.make(name, config) for name in EVAL_POLICIES}}
     records = {name: rollout(each, config, seeds, step_diagnostics=False).records for name, each in policies.items()}
@@ -253,15 +251,14 @@ class Checked:
 
 
 def check_returns(policy: Any, env_kwargs: dict[str, Any]) -> Checked:
-    """``policy``'s deterministic actions on train.train_ppo's check episodes (EVAL_EPISODES seeded EVAL_SEED on, below
-    the held-out seeds) in the env of ``env_kwargs`` (gym.make's), through value_of_information.run as its
+    """``policy``'s deterministic actions on the default task's check episodes (its ``seeds.check``, below the
+    held-out seeds) in the env of ``env_kwargs`` (gym.make's), through value_of_information.run as train_ppo's
     learning curve does."""
-    from timegap_env.config import EnvConfig
-    from train.studies.training import EVAL_EPISODES, EVAL_SEED
     from train.studies.value import run
 
-    seeds = list(range(EVAL_SEED, EVAL_SEED + EVAL_EPISODES))
-    result = run(EnvConfig.from_dict(env_kwargs.get("config")), seeds,
+    task = get_task(DEFAULT_TASK)
+    seeds = task.seeds.check
+    result = run(task.config(env_kwargs.get("config")), seeds,
                  lambda obs, infos: policy.predict(obs, deterministic=True)[0])
     return Checked(seeds, result["return"], int(result["collision"].sum()))
 
@@ -296,7 +293,7 @@ class Settings:
         """The settings of ``args``; a yml key with no counterpart, sizes below 1 or seeds reaching the evaluation's
         raise ValueError naming them."""
         # SB3's parser of the yml and its env_kwargs; the first seed of its check episodes
-        from train.studies.training import EVAL_SEED, load_hyperparams, with_env_config
+        from train.studies.training import load_hyperparams, with_env_config
 
         hyperparams = load_hyperparams(args.hyperparams)
         unknown = set(hyperparams) - set(MAPPED) - UNMAPPED
@@ -321,9 +318,9 @@ class Settings:
         if args.seed < 0 or last_seed >= EVAL_SEED_START:
             raise ValueError(f"--seed {args.seed}: the runners' platoons are seeded up to {last_seed}, must stay in "
                              f"[0, {EVAL_SEED_START}) (the evaluation's seeds start there)")
-        if args.select_scale is not None and last_seed >= EVAL_SEED:
+        if args.select_scale is not None and last_seed >= CHECK_SEED_START:
             raise ValueError(f"--seed {args.seed} with --select-scale: the runners' platoons are seeded up to "
-                             f"{last_seed}, must stay below {EVAL_SEED} (the check episodes' seeds start there)")
+                             f"{last_seed}, must stay below {CHECK_SEED_START} (the check episodes' seeds start there)")
         if args.reward_scale is not None:
             reward_scale = args.reward_scale
         else:

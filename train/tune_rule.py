@@ -24,9 +24,10 @@ from pathlib import Path
 import numpy as np
 
 from timegap_env.agents.policies import ChartStepPolicy, FixedPolicy, NamedPolicy, seconds
-from timegap_env.agents.protocol import EVAL_SEED_START, env_version
-from timegap_env import DEFAULT_TASK, ENV_IDS, cli
+from timegap_env.agents.protocol import EVAL_SEED_START
+from timegap_env import DEFAULT_TASK, ENV_ID, TASKS, cli
 from timegap_env.config import EnvConfig
+from timegap_env.tasks import get_task
 from timegap_env.experiments.registry import fixed_name
 from timegap_env.experiments.registry import make as make_policy
 from timegap_env.experiments.rollout import rollout_side_by_side
@@ -59,7 +60,7 @@ def main(argv: Sequence[str] | None = None) -> None:
                         help=f"tuning episodes, seeds {TUNING_SEED_START} on (default %(default)s)")
     parser.add_argument("--out", type=Path, default=None,
                         help=f"output directory (default {DEFAULT_OUT}/<env id>)")
-    parser.add_argument("--env-id", default=DEFAULT_TASK, choices=list(ENV_IDS.values()),
+    parser.add_argument("--env-id", default=DEFAULT_TASK, choices=list(TASKS),
                         help="the task the rule is tuned for (default: %(default)s)")
     parser.add_argument("--k-up", type=int, nargs="+", default=K_UP, help="grid of k_up (default %(default)s)")
     parser.add_argument("--quiet-time", type=float, nargs="+", default=QUIET_TIMES,
@@ -74,7 +75,7 @@ def main(argv: Sequence[str] | None = None) -> None:
         parser.error(f"--episodes {args.episodes}: must be in [1, {SELECTION_SEED_START - TUNING_SEED_START}], "
                      f"the seeds below the selection seeds")
     started = time.perf_counter()
-    config = EnvConfig.from_dict(version=env_version(args.env_id))
+    config = get_task(args.env_id).config()
     seeds = list(range(TUNING_SEED_START, TUNING_SEED_START + args.episodes))
     assert seeds[-1] < min(SELECTION_SEED_START, EVAL_SEED_START)
     grid = list(itertools.product(args.k_up, args.quiet_time, args.min_setting))
@@ -149,7 +150,7 @@ def write_report(path: Path, config: EnvConfig, seeds: Sequence[int], cells: Seq
     header = [f"| policy | k_up | quiet time [s] | floor [s] | mean return | vs {policies[yardstick].name} (95 %) | "
               f"collisions | mean setting [s] | follower switches per episode | episodes with TTC < "
               f"{config.reward_scales.ttc_threshold:g} s |", "|" + "---|" * 10]
-    defaults = ", the defaults of `ChartStepPolicy`" if env_id == ENV_IDS[0] else ""  # v0's committed grid set them
+    defaults = ", the defaults of `ChartStepPolicy`" if env_id == ENV_ID else ""  # v0's committed grid set them
     lines = [
         "# Tuning the chart step rule (`python -m train.tune_rule`)", "",
         f"{len(seeds)} training episodes of {env_id} (seeds {seeds[0]}-{seeds[-1]}, below the evaluation's "

@@ -16,6 +16,7 @@ import pytest
 
 from train.studies import value
 from train import benchmark, detection_benchmark, value_of_information
+from timegap_env.tasks import HeldOutGroup
 from timegap_env.experiments.backends import Backend
 
 pytestmark = pytest.mark.slow
@@ -44,7 +45,7 @@ def test_ray_map_keeps_the_order_says_how_it_ran_and_raises_a_piece_error() -> N
 
 
 def test_the_benchmark_on_ray_equals_serial() -> None:
-    group = benchmark.Group("tiny", "short episodes", {"episode_duration": 20.0}, 12, references=False, selection=6)
+    group = HeldOutGroup("tiny", "short episodes", {"episode_duration": 20.0}, 12, references=False, selection=6)
     entries = [benchmark.registered(name) for name in ("fixed_1.0", "fixed_1.6", "rule_platoon", "v2v_aware")]
     rows = {}
     for backend in ("serial", "ray"):

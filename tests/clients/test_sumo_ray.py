@@ -9,6 +9,7 @@ from collections.abc import Iterator
 import pytest
 
 from timegap_env.agents.policies import FixedPolicy, PaperRulePolicy
+from timegap_env.tasks import get_task
 from timegap_env.config import EnvConfig
 from timegap_env.experiments.backends import Backend
 from timegap_env.experiments.rollout import Job, run_jobs
@@ -25,7 +26,7 @@ def ray_session() -> Iterator[None]:
 
 
 def test_sumo_episodes_on_ray_equal_the_serial_ones() -> None:
-    config = EnvConfig.from_dict({"simulator": "sumo"}, version=1)
+    config = get_task("TimeGapMonitor-v1").config({"simulator": "sumo"})
     jobs = [Job(policy, config, (10_000, 10_001)) for policy in (FixedPolicy(1.2), PaperRulePolicy(config))]
     serial, on_ray = run_jobs(jobs), run_jobs(jobs, Backend("ray"))
     assert [[(r.fingerprint, r.episode_return) for r in batch.records] for batch in on_ray] == \

@@ -23,7 +23,7 @@ from timegap_env.agents.rllib_policy import CHECKPOINT_DIR, RLlibPolicy, find_ch
 from timegap_env import DEFAULT_TASK
 from timegap_env.config import EnvConfig
 from timegap_env.envs.observation import observation_space
-from train.studies.training import EVAL_EPISODES, EVAL_SEED
+from timegap_env.tasks import get_task
 from train.train_rllib import (
     REPORT_FILE,
     REWARD_SCALE,
@@ -40,6 +40,8 @@ from train.train_rllib import (
     scale_text,
     selection_report,
 )
+
+EVAL_SEED, EVAL_EPISODES = get_task(DEFAULT_TASK).seeds.check_start, get_task(DEFAULT_TASK).seeds.check_episodes
 
 REPO = Path(__file__).resolve().parents[2]
 PPO_YML = REPO / "hyperparams" / "ppo.yml"
@@ -137,7 +139,8 @@ def test_reward_scale_is_the_one_the_committed_selection_chose() -> None:
     assert chosen is not None, f"{COMMITTED_SELECTION}: no 'Chosen: rewards x' line"
     assert float(chosen.group(1)) == pytest.approx(REWARD_SCALE, rel=1e-5)
     assert "--select-scale 1 1/30 0.02" in report
-    assert f"seeds {EVAL_SEED}-{EVAL_SEED + EVAL_EPISODES - 1}" in report
+    v0_check = get_task("TimeGapMonitor-v0").seeds.check  # the committed selection ran on v0
+    assert f"seeds {v0_check[0]}-{v0_check[-1]}" in report
     assert len(re.findall(r"^\| (1|1/30|0\.02)( \(chosen\))? \| ", report, re.MULTILINE)) == 3
 
 

@@ -316,7 +316,7 @@ def test_checkers_pass_without_warnings_on_every_registered_id():
     """Every scalar version passes gymnasium's and SB3's checkers; v0 warns only that it is out of date (gymnasium's
     convention once a newer version exists)."""
     ids = [env_id for env_id in gym.registry if env_id.startswith(timegap_env.ENV_ID.split("-")[0])]
-    assert ids == list(timegap_env.ENV_IDS.values()) and timegap_env.LATEST_ENV_ID == "TimeGapMonitor-v1"
+    assert ids == list(timegap_env.TASKS) and timegap_env.LATEST_ENV_ID == "TimeGapMonitor-v1"
     for env_id in ids:
         for config in ({}, {"action_mode": "per_vehicle"}, {"action_mode": "relative"}):
             with warnings.catch_warnings():

@@ -5,6 +5,7 @@ import gc
 import numpy as np
 import pytest
 
+from timegap_env.tasks import get_task
 from timegap_env.config import EnvConfig, LeaderConfig
 from timegap_env.compiled import collection_paused
 from timegap_env.envs.episodes import Episodes, check_reset_options
@@ -106,7 +107,7 @@ def expected_regimes(episodes: Episodes, env: int, family: str, codes: np.ndarra
 
 
 def test_the_regimes_of_v1_episodes_are_their_leaders_schedules():
-    config = EnvConfig.from_dict({"episode_duration": 60.0}, version=1)
+    config = get_task("TimeGapMonitor-v1").config({"episode_duration": 60.0})
     episodes = Episodes(config, 5)
     rngs = [np.random.default_rng(seed) for seed in range(5)]
     episodes.draw_many(np.arange(5), rngs, check_reset_options({"scenario": "regimes"}))
@@ -127,7 +128,7 @@ def test_a_familys_schedule_gives_the_regimes_when_its_batch_does_not():
     saved = dict(LEADER_FAMILIES)
     try:
         register_family(LeaderFamily("flat", flat, "20 m/s.", regimes=("calm", "busy"), schedule=schedule))
-        config = EnvConfig.from_dict({"episode_duration": 60.0}, version=1)
+        config = get_task("TimeGapMonitor-v1").config({"episode_duration": 60.0})
         episodes = Episodes(config, 3)
         episodes.draw_many(np.arange(3), [np.random.default_rng(seed) for seed in range(3)],
                            check_reset_options({"scenario": "flat"}))

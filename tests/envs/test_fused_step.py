@@ -74,7 +74,7 @@ def test_fused_equals_staged_over_every_degradation_kind(autoreset_mode: str) ->
     {"monitor": {"window": None, "forgetting": 0.99}},
     {"platoon": {"v2v": False, "n_followers": 3}},
     {"random_initial_setting": True, "decision_interval": 0.5},
-    {"info_keys": "v1", "scenario_weights": {"regimes": 1.0, "hard_braking": 1.0}},
+    {"scenario_weights": {"regimes": 1.0, "hard_braking": 1.0}},
     {"monitor": {"estimator": "raw_gap"}, "chart": {"kind": "ewma"}},
 ], ids=["per_vehicle", "relative", "ewma", "cusum", "forgetting", "acc_3_followers", "half_second_steps",
         "v1_objectives_and_cost", "raw_gap"])

@@ -11,7 +11,7 @@ from stable_baselines3.common.evaluation import evaluate_policy
 from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
 
-from timegap_env import ENV_ID
+from timegap_env import DEFAULT_TASK as ENV_ID  # the adapter's default task
 from timegap_env.envs.sb3 import TimeGapVecEnv
 
 SHORT = {"episode_duration": 5.0}  # 5-step episodes

@@ -9,7 +9,10 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 
 import timegap_env
-from timegap_env.config import REWARD_PRESETS, TASK_VERSIONS, EnvConfig, RewardWeights
+from timegap_env.config import REWARD_PRESETS, EnvConfig, RewardWeights
+from timegap_env.envs.env import TimeGapMonitorEnv
+from timegap_env.envs.vector_env import TimeGapMonitorVectorEnv
+from timegap_env.tasks import TASKS, get_task
 from timegap_env.envs.info import COST, OBJECTIVES_KEY, VECTOR_REWARD, objectives_of, rewards_of, truth_of
 from timegap_env.envs.reward import COST_TERMS, OBJECTIVES, REWARD_TERMS
 from timegap_env.leaders.regimes import REGIMES
@@ -24,10 +27,10 @@ def weights_vector(config: EnvConfig) -> np.ndarray:
 
 def test_v1_is_v0_with_the_tasks_overrides():
     v0, v1 = gym.make("TimeGapMonitor-v0").unwrapped.config, gym.make("TimeGapMonitor-v1").unwrapped.config
-    assert v0 == EnvConfig() and v1 == EnvConfig.from_dict(TASK_VERSIONS[1])
+    assert v0 == EnvConfig() and v1 == EnvConfig.from_dict(dict(TASKS["TimeGapMonitor-v1"].overrides))
+    assert v1 == get_task("TimeGapMonitor-v1").config()
     assert v1.reward_weights == REWARD_PRESETS["variation_first"].weights and v1.scenario_weights["regimes"] == 1.0
-    assert v1.with_overrides({"reward_weights": v0.reward_weights, "scenario_weights": v0.scenario_weights,
-                              "info_keys": "v0"}) == v0
+    assert v1.with_overrides({"reward_weights": v0.reward_weights, "scenario_weights": v0.scenario_weights}) == v0
     # a user's overrides go over the version's defaults, nested ones field by field
     tuned = gym.make("TimeGapMonitor-v1", config={"reward_weights": {"comfort": 0.1}}).unwrapped.config
     assert tuned.reward_weights == RewardWeights(**{**vars(REWARD_PRESETS["variation_first"].weights), "comfort": 0.1})
@@ -151,7 +154,7 @@ def test_mo_env_returns_the_terms_as_a_vector():
     ({"reward_weights": "operator"}, "reward_weights = 'operator': unknown preset"),
     ({"reward_weights": {"capacity": 1.0}}, "unknown RewardWeights field(s) ['capacity']"),
     ({"reward_weights": [1.0] * 7 + [float("nan")]}, "RewardWeights.switching = nan"),
-    ({"info_keys": "v2"}, "EnvConfig.info_keys = 'v2'"),
+    ({"info_keys": "v0"}, "unknown EnvConfig field(s) ['info_keys']"),  # the layout is the task's, not a switch
     ({"leader_params": {"regimes": {"free_flow_duration": (0.0, 10.0)}}}, "free_flow_duration = (0.0, 10.0)"),
 ])
 def test_bad_task_input_names_the_field_and_value(bad, message):
@@ -160,13 +163,47 @@ def test_bad_task_input_names_the_field_and_value(bad, message):
     assert message in str(error.value)
 
 
-def test_an_unknown_objective_or_version_is_refused():
+def test_an_unknown_objective_or_task_is_refused():
     with pytest.raises(ValueError, match=r"unknown objective\(s\) \[.radar.\]"):
         gym.make(timegap_env.MO_ENV_ID, objectives=["tracking", "radar"])
     with pytest.raises(ValueError, match="each may appear once"):
         gym.make(timegap_env.MO_ENV_ID, objectives=["tracking", "tracking"])
-    with pytest.raises(ValueError, match="env version = 7: unknown"):
-        EnvConfig.from_dict(version=7)
+    with pytest.raises(ValueError, match=r"task_id = 'TimeGapMonitor-v7': not a task of this env; known: \[.TimeGap"):
+        get_task("TimeGapMonitor-v7")
+    with pytest.raises(ValueError, match="task_id = 'TimeGapMonitor-v7'"):
+        TimeGapMonitorEnv(task_id="TimeGapMonitor-v7")
+
+
+@pytest.mark.parametrize("env_id, other", [("TimeGapMonitor-v1", "TimeGapMonitor-v0"),
+                                           ("TimeGapMonitor-v0", "TimeGapMonitor-v1"),
+                                           (timegap_env.MO_ENV_ID, "TimeGapMonitor-v0")])
+def test_the_id_is_the_task_no_switch_behind_it(env_id, other):
+    """Every registered id is one task record; a task_id given to make under another id is refused, single and
+    vectorised, and each id's env carries its own task."""
+    with pytest.raises(ValueError, match=f"task_id = '{other}' under the id '{env_id}': the id is the task"):
+        gym.make(env_id, task_id=other)
+    if env_id in TASKS:
+        with pytest.raises(ValueError, match="the id is the task"):
+            gym.make_vec(env_id, num_envs=2, vectorization_mode="vector_entry_point", task_id=other)
+        assert gym.make_vec(env_id, num_envs=2, vectorization_mode="vector_entry_point").unwrapped.task_id == env_id
+        assert gym.make(env_id).unwrapped.task_id == env_id
+
+
+def test_a_task_record_holds_its_config_layout_seeds_groups_and_references():
+    v0, v1 = TASKS["TimeGapMonitor-v0"], TASKS["TimeGapMonitor-v1"]
+    assert list(TASKS) == list(timegap_env.TASKS) and timegap_env.DEFAULT_TASK == v1.id
+    assert (v0.info_layout, v1.info_layout) == ("v0", "v1")
+    assert len(v0.seeds.check) == 32 and len(v1.seeds.check) == 100 and v1.seeds.check[0] == 9000
+    assert v1.seeds.selection_start < v1.seeds.check_start < v1.seeds.held_out_start
+    assert [group.name for group in v1.groups][:2] == ["default", "regimes"] and v1.group("sumo").capped
+    assert {"full_oracle", "regime_aware"} <= set(v1.references)
+    with pytest.raises(ValueError, match="group 'nope': not a held-out group of TimeGapMonitor-v1"):
+        v1.group("nope")
+    # built directly, the env classes give the default task, or the one named
+    assert TimeGapMonitorEnv().config == v1.config() and TimeGapMonitorVectorEnv(2).task_id == v1.id
+    assert TimeGapMonitorEnv(task_id=v0.id).config == v0.config()
+    with pytest.raises(TypeError):
+        v1.overrides["info"] = 1  # a record does not change under its id
 
 
 def test_presets_by_name_or_vector_equal_their_weights():

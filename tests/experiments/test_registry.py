@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from timegap_env.agents.policies import ChartStepPolicy, FixedPolicy, PaperRulePolicy, V2VAwarePolicy, fixed_policies, seconds
+from timegap_env.agents.policies import ChartStepPolicy, FixedPolicy, PaperRulePolicy, V2VAwarePolicy, as_config, fixed_policies, seconds
 from timegap_env.config import EnvConfig
 from timegap_env.experiments import registry
 
@@ -19,14 +19,14 @@ def test_the_registered_names_are_evaluates_and_sweeps():
 
 @pytest.mark.parametrize("overrides", [{}, {"preferred_setting": 1.0, "platoon": {"n_followers": 3}}])
 def test_make_builds_the_old_policies(overrides):
-    config = EnvConfig.from_dict(overrides)
+    config = as_config(overrides)
     old = {  # as train/evaluate.py and train/sweep.py built them
         "rule_platoon": PaperRulePolicy(config),
         "rule_per_vehicle": PaperRulePolicy(config.with_overrides({"action_mode": "per_vehicle"})),
         "chart_step": ChartStepPolicy(config),
-        "chart_step_per_vehicle": ChartStepPolicy(EnvConfig.from_dict({**overrides, "action_mode": "per_vehicle"})),
+        "chart_step_per_vehicle": ChartStepPolicy(as_config({**overrides, "action_mode": "per_vehicle"})),
         "v2v_aware": V2VAwarePolicy(config),
-        "v2v_aware_per_vehicle": V2VAwarePolicy(EnvConfig.from_dict({**overrides, "action_mode": "per_vehicle"})),
+        "v2v_aware_per_vehicle": V2VAwarePolicy(as_config({**overrides, "action_mode": "per_vehicle"})),
         "fixed_1.6": FixedPolicy(1.6, config),
     }
     for name, policy in old.items():

@@ -15,6 +15,7 @@ import timegap_env
 from timegap_env.agents.oracles import NOMINAL, StabilityOracle, TruthPolicy
 from timegap_env.agents.policies import ChartStepPolicy, FixedPolicy, PaperRulePolicy, V2VAwarePolicy
 from timegap_env.config import EnvConfig
+from timegap_env.tasks import get_task
 from timegap_env.envs.info import summary_of, truth_of
 from timegap_env.envs.reward import weights_of
 from timegap_env.experiments import rollout as harness
@@ -27,7 +28,7 @@ SEEDS = [10_000, 10_001, 10_002]
 # ---------------------------------------------------------------- the old loops, as they were
 def old_evaluate(policy, config_overrides, options, seeds):
     n = len(seeds)
-    venv = gym.make_vec(timegap_env.ENV_ID, num_envs=n, vectorization_mode="vector_entry_point",
+    venv = gym.make_vec(timegap_env.DEFAULT_TASK, num_envs=n, vectorization_mode="vector_entry_point",
                         config={**config_overrides, "action_mode": policy.action_mode}, autoreset_mode="same_step",
                         truth_info=True)
     obs, infos = venv.reset(seed=seeds, options=options)
@@ -64,7 +65,7 @@ def old_evaluate(policy, config_overrides, options, seeds):
 
 def old_sweep(policy, overrides, seeds):
     n = len(seeds)
-    venv = gym.make_vec(timegap_env.ENV_ID, num_envs=n, vectorization_mode="vector_entry_point",
+    venv = gym.make_vec(timegap_env.DEFAULT_TASK, num_envs=n, vectorization_mode="vector_entry_point",
                         config={**overrides, "action_mode": policy.action_mode}, autoreset_mode="same_step",
                         truth_info=True)
     obs, infos = venv.reset(seed=list(seeds))
@@ -96,7 +97,7 @@ TUNE_SUMMARY = ("collision", "mean_setting", "switches", "min_ttc")
 
 def old_tune_rule(seeds, policies):
     n, m = len(seeds), len(policies)
-    venv = gym.make_vec(timegap_env.ENV_ID, num_envs=n * m, vectorization_mode="vector_entry_point",
+    venv = gym.make_vec(timegap_env.DEFAULT_TASK, num_envs=n * m, vectorization_mode="vector_entry_point",
                         step_diagnostics=False, autoreset_mode="same_step")
     obs, _ = venv.reset(seed=list(seeds) * m)
     kinds = np.array([next((k for k in row if k != NOMINAL), NOMINAL) for row in venv.ground_truth()["kind"][:n]],
@@ -120,7 +121,7 @@ def old_tune_rule(seeds, policies):
 def old_value_run(config, seeds, choose, options=None):
     n = len(seeds)
     fields = {field.name: getattr(config, field.name) for field in dataclasses.fields(config)}
-    venv = gym.make_vec(timegap_env.ENV_ID, num_envs=n, vectorization_mode="vector_entry_point", config=fields,
+    venv = gym.make_vec(timegap_env.DEFAULT_TASK, num_envs=n, vectorization_mode="vector_entry_point", config=fields,
                         autoreset_mode="same_step", truth_info=True)
     obs, infos = venv.reset(seed=list(seeds), options=options)
     kinds = [next((k for k in row if k != NOMINAL), NOMINAL) for row in truth_of(infos)["kind"]]
@@ -240,7 +241,7 @@ class RawGapReader(PaperRulePolicy):
 
 
 def test_a_policy_that_read_the_raw_gap_plays_in_an_env_whose_monitor_reports_it():
-    config = EnvConfig()
+    config = get_task(timegap_env.DEFAULT_TASK).config()  # what overrides as a dict go over
     raw = harness.rollout(RawGapReader(config), config, SEEDS)
     assert raw.config.monitor.estimator == "raw_gap"
     as_config = harness.rollout(PaperRulePolicy(config), {"monitor": {"estimator": "raw_gap"}}, SEEDS)

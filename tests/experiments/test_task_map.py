@@ -107,7 +107,7 @@ def test_regime_oracle_reads_the_regime_and_raises_to_its_floor():
     assert np.array_equal(levels[lookup.act(truth)], [2.0, 0.8])  # the lookup's nominal entry does not raise it
     with pytest.raises(KeyError, match="regimes:free_flow"):
         RegimeOracle({"regimes:stop_and_go": 1.0}, config).act(truth)
-    with pytest.raises(KeyError, match="info_keys='v1'"):
+    with pytest.raises(KeyError, match="info layout 'v1'"):
         RegimeOracle(table, config).act({key: value for key, value in truth.items() if key != "regime"})
 
 

@@ -73,7 +73,7 @@ def run(env: Any, seed: int, steps: int, actions_seed: int = 0, options: dict | 
 
 @pytest.mark.parametrize("build", ["gym.make", "class"])
 def test_step_before_reset_and_after_the_end_raise_reset_needed(build):
-    env = make(**SHORT) if build == "gym.make" else TimeGapMonitorEnv(config=SHORT, truth_info=True)
+    env = make(**SHORT) if build == "gym.make" else TimeGapMonitorEnv(config=SHORT, truth_info=True, task_id=ENV_ID)
     with pytest.raises(ResetNeeded):
         env.step(0)
     env.reset(seed=0)
@@ -138,7 +138,8 @@ BAD_OPTIONS = [
 def test_a_failed_reset_leaves_the_env_refusing_to_step(options, build):
     """After a reset that raised, step() raises ResetNeeded (mid-episode too); the next good reset runs as a fresh
     env's would; the env's scenario is not the failed episode's (issue 22, items 5, 12)."""
-    env = make() if build == "gym.make" else TimeGapMonitorEnv(config={"platoon": {"n_followers": N_FOLLOWERS}}, truth_info=True)
+    env = make() if build == "gym.make" else TimeGapMonitorEnv(config={"platoon": {"n_followers": N_FOLLOWERS}}, truth_info=True,
+                                                                      task_id=ENV_ID)
     env.reset(seed=1, options={"scenario": "sinusoid"})
     env.step(0)
     with pytest.raises(ValueError):

@@ -18,6 +18,7 @@ from gymnasium.utils.env_checker import check_env
 
 import timegap_env
 from timegap_env.agents.policies import ChartStepPolicy, FixedPolicy, PaperRulePolicy
+from timegap_env.tasks import get_task
 from timegap_env.config import EnvConfig, PlatoonConfig, SumoConfig
 from timegap_env.envs.vector_env import TimeGapMonitorVectorEnv
 from timegap_env.experiments.backends import Backend
@@ -72,7 +73,7 @@ def test_every_kind_of_policy_steps_an_episode_in_sumo() -> None:
     pytest.importorskip("libsumo")
     from timegap_env.agents.learned import LearnedPolicy
 
-    config = EnvConfig.from_dict(SUMO, version=1)
+    config = get_task("TimeGapMonitor-v1").config(SUMO)
     learned = LearnedPolicy.load(ROOT / "results" / "ppo_v1")
     policies = [FixedPolicy(1.2), PaperRulePolicy(config), ChartStepPolicy(config), learned]
     for policy in policies:
@@ -171,7 +172,7 @@ def test_a_sumo_error_mid_episode_is_named_and_closes_the_simulation() -> None:
 @pytest.mark.sumo
 def test_episodes_spread_over_worker_processes_give_the_serial_records() -> None:
     pytest.importorskip("libsumo")
-    config = EnvConfig.from_dict(SUMO, version=1)
+    config = get_task("TimeGapMonitor-v1").config(SUMO)
     jobs = [Job(FixedPolicy(level), config, (10_000, 10_001)) for level in (1.0, 1.6)]
     serial = run_jobs(jobs)
     spread = run_jobs(jobs, Backend("processes", workers=2))

@@ -7,6 +7,7 @@ import pickle
 
 import pytest
 
+from timegap_env.tasks import HeldOutGroup
 from timegap_env.agents.policies import FixedPolicy, PaperRulePolicy
 from timegap_env.config import EnvConfig
 from train.studies import value
@@ -71,7 +72,7 @@ def test_without_ray_the_ray_backend_says_how_to_get_it():
 
 
 def test_the_benchmark_runs_picklable_pieces_of_at_most_a_chunk_and_the_serial_results():
-    group = benchmark.Group("tiny", "short episodes", {"episode_duration": 10.0}, 5, references=False, selection=3)
+    group = HeldOutGroup("tiny", "short episodes", {"episode_duration": 10.0}, 5, references=False, selection=3)
     entries = [benchmark.registered("fixed_1.6"), benchmark.registered("rule_platoon")]
     backend = Recording()
     result = benchmark.run_group(group, entries, 10_000, 5, benchmark.Cache(None), backend)

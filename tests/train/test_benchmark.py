@@ -13,14 +13,15 @@ import numpy as np
 import pytest
 
 import timegap_env
+from timegap_env.tasks import HeldOutGroup, get_task
 from timegap_env.config import EnvConfig
 from timegap_env.experiments import registry
 from train import benchmark
-from train.benchmark import Cache, Group, efficiency, frontier_efficiency, frontier_rate, run_group
+from train.benchmark import Cache, efficiency, frontier_efficiency, frontier_rate, run_group
 
 REPO = Path(__file__).resolve().parents[2]
 SHORT = {"episode_duration": 20.0}  # 20-s episodes: a group of a few dozen plays in seconds
-TINY = Group("tiny", "short episodes of the task's mix", SHORT, 24, references=False, selection=24)
+TINY = HeldOutGroup("tiny", "short episodes of the task's mix", SHORT, 24, references=False, selection=24)
 
 HOLDER = '''
 import numpy as np
@@ -57,7 +58,7 @@ def test_the_default_task_is_v1() -> None:
 
 
 def test_efficiency_is_per_second_driven_so_crashing_early_pays_nothing() -> None:
-    config = EnvConfig.from_dict(version=1)
+    config = get_task("TimeGapMonitor-v1").config()
     full = efficiency(-100.0, 0.0, config.episode_duration, config)
     assert full == -100.0  # an episode driven to the end: its return without the collision term
     # the same rate of reward, cut short by a crash after 50 s: the collision term is left out, the rest scaled up
@@ -151,7 +152,7 @@ def test_the_held_out_recorded_leaders_are_a_fixed_quarter() -> None:
 def test_the_collision_rate_of_1_0_s_agrees_on_another_range_of_seeds() -> None:
     """The issue's check: the held-out range (from 10000) and an independent one (from 100000) draw the same mix.
     1,500 episodes each (~3 % collide): a two-proportion z-test at the 0.1 % level."""
-    config = EnvConfig.from_dict(version=1)
+    config = get_task("TimeGapMonitor-v1").config()
     policy = registry.make("fixed_1.0", config)
     n = 1_500
     counts = [int(benchmark.play(policy, config, list(range(start, start + n))).collided.sum())

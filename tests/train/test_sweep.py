@@ -12,6 +12,7 @@ import yaml
 
 from train import sweep
 from timegap_env.experiments.backends import Backend
+from timegap_env.tasks import get_task
 
 TINY = {  # 2 cells x 2 policies x 2 seed batches = 8 pieces of 2 episodes of 20 s
     "axes": {"monitor.window": [1.0, 2.0]},
@@ -191,7 +192,7 @@ def test_deleted_rows_rerun_only_their_pieces_and_the_file_equals_the_full_run(f
     run(tmp_path, grid, backend)
     assert [(policy, seeds) for _, policy, seeds, _ in backend.pieces] == [
         ("rule_platoon", (10_000, 10_001)), ("rule_platoon", (10_002, 10_003))]
-    assert backend.pieces[0][0] == {**TINY["base"], "monitor": {"window": 1.0}}
+    assert backend.pieces[0][0] == get_task(sweep.DEFAULT_TASK).config({**TINY["base"], "monitor": {"window": 1.0}})
     assert (tmp_path / sweep.EPISODES_FILE).read_text() == full
 
 
@@ -240,7 +241,7 @@ def test_the_trained_policy_runs_from_its_files_and_its_key_follows_the_model(tm
     rows = rows_of(tmp_path / "a" / sweep.EPISODES_FILE)
     assert [r["policy"] for r in rows] == ["ppo", "ppo"]
     assert (tmp_path / "a" / sweep.EPISODES_FILE).read_bytes() == (tmp_path / "b" / sweep.EPISODES_FILE).read_bytes()
-    files = sweep.model_files(sweep.DEFAULT_MODEL)
+    files = sweep.model_files(sweep.DEFAULT_MODELS[sweep.DEFAULT_TASK])
     copy = tmp_path / "model"
     copy.mkdir()
     for name, data in files.items():

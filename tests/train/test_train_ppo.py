@@ -21,7 +21,7 @@ from stable_baselines3.common.vec_env import VecNormalize
 
 from timegap_env.agents.learned import LearnedPolicy, RunFileError
 from timegap_env.agents.protocol import EVAL_SEED_START, read_env_file
-from timegap_env import DEFAULT_TASK, ENV_IDS
+from timegap_env import DEFAULT_TASK, TASKS
 from timegap_env.envs.observation import FEATURES, MONITOR_FEATURES
 from timegap_env.envs.sb3 import TimeGapVecEnv
 from train.studies import training
@@ -33,7 +33,7 @@ ROOT = Path(__file__).resolve().parents[2]
 def test_hyperparams_have_rl_zoo3_layout() -> None:
     with open(ROOT / "hyperparams" / "ppo.yml") as file:
         document = yaml.safe_load(file)
-    assert list(document) == list(ENV_IDS.values())  # a section per env version
+    assert list(document) == list(TASKS)  # a section per task
     for env_id, hyperparams in document.items():
         for key in ("n_envs", "n_timesteps", "policy", "normalize", "n_steps", "batch_size", "gamma", "learning_rate",
                     "ent_coef", "policy_kwargs"):
@@ -258,7 +258,7 @@ def test_the_command_line_names_a_corrupted_checkpoint_without_a_traceback(tmp_p
 def test_a_run_names_its_env_and_loading_builds_that_version(tmp_path: Path) -> None:
     """A v1 run's env.json names TimeGapMonitor-v1, and its config is v1's defaults with the run's overrides; an
     env.json naming an unknown id is refused, naming it."""
-    v1 = ENV_IDS[1]
+    v1 = "TimeGapMonitor-v1"
     hyperparams = tmp_path / "ppo.yml"
     hyperparams.write_text(yaml.safe_dump({v1: {
         "n_envs": 2, "n_timesteps": 32, "policy": "MlpPolicy", "normalize": False, "n_steps": 16, "batch_size": 32,
@@ -270,7 +270,7 @@ def test_a_run_names_its_env_and_loading_builds_that_version(tmp_path: Path) -> 
     assert json.loads((out / "env.json").read_text())["env_id"] == v1
     config = read_env_file(out / "env.json").config
     assert config == gym.make(v1, config={"episode_duration": 10.0}).unwrapped.config
-    assert config.reward_weights.preference == 0.0 and config.info_keys == "v1"
+    assert config.reward_weights.preference == 0.0 and config == TASKS[v1].config(config)
     assert LearnedPolicy.load(out).action_mode == "platoon"
     resume = ["--hyperparams", str(hyperparams), "--no-warmup", "--out", str(out), "--no-progress-bar", "--resume",
               "--timesteps", "64"]
@@ -315,12 +315,12 @@ def test_hidden_features_are_hidden_in_training_and_when_loaded(tmp_path: Path) 
 def test_a_cost_budget_trains_with_a_lagrange_multiplier(tmp_path: Path) -> None:
     """--cost-budget 0: every rollout's cost exceeds it, so the multiplier grows and takes the cost off the rewards."""
     hyperparams = tmp_path / "ppo.yml"
-    hyperparams.write_text(yaml.safe_dump({ENV_IDS[1]: {
+    hyperparams.write_text(yaml.safe_dump({"TimeGapMonitor-v1": {
         "n_envs": 2, "n_timesteps": 64, "policy": "MlpPolicy", "normalize": False, "n_steps": 16, "batch_size": 32,
         "n_epochs": 1, "policy_kwargs": "dict(net_arch=[8])", "env_kwargs": {"config": {"episode_duration": 10.0}},
     }}))
     out = tmp_path / "run"
-    train_ppo.main(["--env-id", ENV_IDS[1], "--hyperparams", str(hyperparams), "--no-warmup", "--out", str(out),
+    train_ppo.main(["--env-id", "TimeGapMonitor-v1", "--hyperparams", str(hyperparams), "--no-warmup", "--out", str(out),
                     "--no-progress-bar", "--curve-freq", "0", "--cost-budget", "0", "--lagrange-rate", "2"])
     row = next(line for line in (out / "training.md").read_text().splitlines() if line.startswith("| constrained"))
     assert float(row.rsplit(";", 1)[1].strip(" |")) > 0
@@ -329,7 +329,7 @@ def test_a_cost_budget_trains_with_a_lagrange_multiplier(tmp_path: Path) -> None
 
 
 def test_the_adapter_takes_the_weighted_cost_off_its_rewards() -> None:
-    envs = {weight: TimeGapVecEnv(2, config={"episode_duration": 10.0}, version=1) for weight in (0.0, 3.0)}
+    envs = {weight: TimeGapVecEnv(2, config={"episode_duration": 10.0}, task_id="TimeGapMonitor-v1") for weight in (0.0, 3.0)}
     envs[3.0].cost_weight = 3.0
     for env in envs.values():
         env.seed(4)
@@ -345,13 +345,13 @@ def test_a_recurrent_run_trains_and_loads_as_recurrent(tmp_path: Path) -> None:
     from sb3_contrib import RecurrentPPO
 
     hyperparams = tmp_path / "ppo_lstm.yml"
-    hyperparams.write_text(yaml.safe_dump({ENV_IDS[1]: {
+    hyperparams.write_text(yaml.safe_dump({"TimeGapMonitor-v1": {
         "n_envs": 2, "n_timesteps": 32, "policy": "MlpLstmPolicy", "normalize": True, "n_steps": 16, "batch_size": 32,
         "n_epochs": 1, "policy_kwargs": "dict(net_arch=[8], lstm_hidden_size=8)",
         "env_kwargs": {"config": {"episode_duration": 10.0}},
     }}))
     out = tmp_path / "run"
-    train_ppo.main(["--algo", "ppo_lstm", "--env-id", ENV_IDS[1], "--hyperparams", str(hyperparams), "--no-warmup",
+    train_ppo.main(["--algo", "ppo_lstm", "--env-id", "TimeGapMonitor-v1", "--hyperparams", str(hyperparams), "--no-warmup",
                     "--out", str(out), "--no-progress-bar", "--curve-freq", "0"])
     assert json.loads((out / "env.json").read_text())["algo"] == "ppo_lstm"
     policy = LearnedPolicy.load(out)
@@ -360,12 +360,12 @@ def test_a_recurrent_run_trains_and_loads_as_recurrent(tmp_path: Path) -> None:
     _, state = policy.predict(obs)
     assert state is not None and len(state) == 2  # the LSTM's (hidden, cell), carried to the next step
     with pytest.raises(ValueError, match="frame_stack = 2 with --algo ppo_lstm"):
-        train_ppo.main(["--algo", "ppo_lstm", "--env-id", ENV_IDS[1], "--hyperparams", str(hyperparams),
+        train_ppo.main(["--algo", "ppo_lstm", "--env-id", "TimeGapMonitor-v1", "--hyperparams", str(hyperparams),
                         "--frame-stack", "2", "--out", str(tmp_path / "other")])
 
 
 def test_the_shipped_recurrent_hyperparameters_load() -> None:
     from sb3_contrib import RecurrentPPO
 
-    loaded = training.load_hyperparams(ROOT / "hyperparams" / "ppo_lstm.yml", ENV_IDS[1], RecurrentPPO)
+    loaded = training.load_hyperparams(ROOT / "hyperparams" / "ppo_lstm.yml", "TimeGapMonitor-v1", RecurrentPPO)
     assert loaded["policy"] == "MlpLstmPolicy" and loaded["policy_kwargs"]["lstm_hidden_size"] == 64

@@ -15,7 +15,7 @@ any follower needs), (n_envs, N) or (N,) for ``"per_vehicle"``.
   instead (it sees the future) and holds the setting for the episode's condition from reset on,
   so that the platoon is ready before the onset;
 - :class:`RegimeOracle`: the setting that scored best for the leader's regime now (its family, or the regime of a
-  leader whose traffic changes within the episode: ``truth["regime"]``, which envs with ``info_keys="v1"`` report),
+  leader whose traffic changes within the episode: ``truth["regime"]``, which envs of info layout "v1" (TimeGapMonitor-v1) report),
   on training seeds; with a ``floor`` (another oracle), at least the floor's setting for each follower: it then knows
   the traffic and the car's condition together.
 """
@@ -143,7 +143,7 @@ class RegimeOracle(TruthPolicy):
 
     def _settings(self, truth: Mapping[str, np.ndarray]) -> np.ndarray:
         if "regime" not in truth:
-            raise KeyError("the ground truth has no regime: run the env with info_keys='v1' (TimeGapMonitor-v1)")
+            raise KeyError("the ground truth has no regime: run an env of info layout 'v1' (TimeGapMonitor-v1)")
         regimes = np.asarray(truth["regime"]).reshape(-1)
         missing = sorted(set(regimes.tolist()) - set(self.table))
         if missing:

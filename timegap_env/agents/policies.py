@@ -25,6 +25,7 @@ import numpy as np
 from timegap_env.config import EnvConfig
 from timegap_env.envs.observation import FEATURES, FollowerView, decode_observation, exceedance_scale
 from timegap_env.monitoring.charts import switch_rule
+from timegap_env.tasks import DEFAULT_TASK, get_task
 
 V2V_SETTING = 1.0  # string stable with V2V (CACC) from 1.0 s with the default gains [s]
 ACC_SETTING = 1.6  # string stable without V2V (ACC) from about 1.6 s with the default gains [s]
@@ -56,8 +57,9 @@ class NamedPolicy(Policy, Protocol):
 
 
 def as_config(config: EnvConfig | Mapping[str, Any] | None) -> EnvConfig:
-    """An :class:`EnvConfig` from itself, a dict of overrides (``gym.make``'s ``config=``) or None (defaults)."""
-    return config if isinstance(config, EnvConfig) else EnvConfig.from_dict(config)
+    """An :class:`EnvConfig` from itself, or from a dict of overrides of the default task's config (``gym.make
+    (DEFAULT_TASK, config=...)``'s) or None (that config)."""
+    return get_task(DEFAULT_TASK).config(config)
 
 
 def seconds(setting: float) -> str:

@@ -1,8 +1,8 @@
 """What training and evaluation agree on: the seed split and the files of a trained run.
 
 Training (``train/train_ppo.py``) seeds its envs below ``EVAL_SEED_START``; the held-out
-evaluation (``train/evaluate.py``) seeds its episodes from ``EVAL_SEED_START`` on, so no
-evaluation episode was seen in training. A trained run is a directory holding ``MODEL_FILE``,
+evaluation (``train/benchmark.py``) seeds its episodes from ``EVAL_SEED_START`` on, so no
+evaluation episode was seen in training (``timegap_env.tasks.Seeds``: every step's seeds). A trained run is a directory holding ``MODEL_FILE``,
 ``ENV_FILE`` and, when observations were normalised, ``VECNORMALIZE_FILE`` (all three read by
 ``timegap_env.agents.learned``). ``ENV_FILE`` is a JSON object:
 
@@ -17,7 +17,7 @@ evaluation episode was seen in training. A trained run is a directory holding ``
   of ``timegap_env.envs.observation.FEATURES``; absent: none;
 - ``algo``: the learning algorithm, rl-zoo3's name: ``ppo`` (stable-baselines3's PPO) or ``ppo_lstm``
   (sb3-contrib's RecurrentPPO); absent: ``ppo``;
-- ``env_id``: the registered id of the env (``TimeGapMonitor-v1``, ...), whose version's defaults the ``config``
+- ``env_id``: the registered id of the env (``TimeGapMonitor-v1``, ...), whose task's config the ``config``
   overrides; runs written before the field existed leave it out and were trained in ``TimeGapMonitor-v0``.
 
 :func:`read_env_file` reads and checks it, :func:`check_spaces` checks a model against it; a file
@@ -31,7 +31,9 @@ import json
 from pathlib import Path
 from typing import Any
 
-EVAL_SEED_START = 10_000  # evaluation seeds are >= this, training seeds < this [-]
+from timegap_env.tasks import HELD_OUT_SEED_START, TASKS, get_task
+
+EVAL_SEED_START = HELD_OUT_SEED_START  # evaluation seeds are >= this, training seeds < this [-]
 MODEL_FILE = "model.zip"  # the SB3 model of a run
 VECNORMALIZE_FILE = "vecnormalize.pkl"  # SB3 VecNormalize statistics of a run, if it normalised
 ENV_FILE = "env.json"  # the env a run was trained in, its frame stacking and normalisation (JSON)
@@ -60,11 +62,9 @@ class RunEnv:
 
     @property
     def config(self) -> Any:
-        """The env's ``EnvConfig``: its version's defaults with ``env_kwargs``' config (checked by
+        """The env's ``EnvConfig``: its task's config with ``env_kwargs``' config (checked by
         :func:`read_env_file`)."""
-        from timegap_env.config import EnvConfig
-
-        return EnvConfig.from_dict(self.env_kwargs.get("config"), env_version(self.env_id))
+        return get_task(self.env_id).config(self.env_kwargs.get("config"))
 
     @property
     def action_mode(self) -> str:
@@ -72,21 +72,9 @@ class RunEnv:
         return self.config.action_mode
 
 
-def env_version(env_id: str) -> int:
-    """The version of ``env_id``, one of ``timegap_env.ENV_IDS``; ``ValueError`` naming it otherwise."""
-    from timegap_env.config import ENV_IDS
-
-    versions = {name: version for version, name in ENV_IDS.items()}
-    if env_id not in versions:
-        raise ValueError(f"env_id = {env_id!r}: not an id of this env; known: {list(versions)}")
-    return versions[env_id]
-
-
 def read_env_file(path: str | Path) -> RunEnv:
     """The run's ``ENV_FILE`` at ``path``: ``RunFileError`` naming it if it is missing, not such a JSON object, or its
     env config is not one ``gym.make`` accepts."""
-    from timegap_env.config import EnvConfig
-
     path = Path(path)
     if not path.is_file():
         raise RunFileError(f"{path}: missing; a run's {ENV_FILE} says what the model's actions mean (the env it was "
@@ -119,11 +107,11 @@ def read_env_file(path: str | Path) -> RunEnv:
     try:
         if not isinstance(env_id, str):
             raise ValueError(f"env_id = {env_id!r}: must be an env id (a string)")
-        version = env_version(env_id)
+        task = get_task(env_id)
     except ValueError as error:
-        raise RunFileError(f"{path}: {error}") from error
+        raise RunFileError(f"{path}: env_id = {env_id!r}: not a task of this env; known: {list(TASKS)}") from error
     try:
-        EnvConfig.from_dict(env_kwargs.get("config"), version)
+        task.config(env_kwargs.get("config"))
     except ValueError as error:
         raise RunFileError(f"{path}: env_kwargs.config is not a config of this env: {error}") from error
     from timegap_env.envs.observation import feature_columns

@@ -1,4 +1,4 @@
-"""``TimeGapMonitor-v1`` (and v0): choose automated vehicles' time gap setting from a Bayesian monitor's view of it."""
+"""``TimeGapMonitor-v1`` (and every task of ``timegap_env.tasks``): choose automated vehicles' time gap setting from a Bayesian monitor's view of it."""
 
 from __future__ import annotations
 
@@ -9,18 +9,19 @@ import gymnasium as gym
 from gymnasium.error import ResetNeeded
 import numpy as np
 
-from timegap_env.config import EnvConfig, shown
+from timegap_env.config import shown
 from timegap_env.envs.action import action_space
 from timegap_env.envs.info import EPISODE_PREFIX, EnvInfoPool, EnvInfoSet, info_flags, of_env, prefixed
 from timegap_env.envs.observation import observation_space
 from timegap_env.envs.rendering import DEFAULT_TIME_WINDOW
 from timegap_env.envs.task import PlatoonTask
+from timegap_env.tasks import DEFAULT_TASK, OneTask, get_task
 
 if TYPE_CHECKING:
     from timegap_env.envs.rendering import PlatoonRenderer
 
 
-class TimeGapMonitorEnv(gym.Env):
+class TimeGapMonitorEnv(OneTask, gym.Env):
     """
     ## Description
 
@@ -81,8 +82,8 @@ class TimeGapMonitorEnv(gym.Env):
     its summary ``episode_<name>``. ``truth_info=True`` adds what only the simulator knows: the
     platoon's true state (``actual_time_gap``, ``ttc``, ``jerk``, ``collision``) and the ground truth
     ``truth_<name>``, which oracles read. ``timegap_env.envs.info.truth_of(info)`` and
-    ``summary_of(info)`` read the groups back as dicts. ``env.unwrapped.scenario`` names the leader. v1
-    (``info_keys="v1"``) adds ``vector_reward``, ``cost``, ``objectives`` (and with ``truth_info``
+    ``summary_of(info)`` read the groups back as dicts. ``env.unwrapped.scenario`` names the leader. v1's
+    info layout (``Task.info_layout``) adds ``vector_reward``, ``cost``, ``objectives`` (and with ``truth_info``
     ``truth_regime``). The step writes the info's values into arrays the env reuses, but only once nothing
     references them any more (:class:`timegap_env.envs.info.EnvInfoPool`): an info you keep, or a value or view of
     it, never changes.
@@ -117,9 +118,9 @@ class TimeGapMonitorEnv(gym.Env):
 
     ``gym.make("TimeGapMonitor-v1", config={...}, render_mode=None | "rgb_array" | "human", step_diagnostics=True,
     truth_info=False)``;
-    ``config`` overrides the version's defaults (``config.TASK_VERSIONS``, over
-    :class:`timegap_env.config.EnvConfig`, units in its comments; ``version`` is the registered id's), nested
-    configs as dicts, e.g. ``{"action_mode": "per_vehicle", "platoon": {"n_followers": 3}}``.
+    ``config`` overrides the task's config (its record in ``timegap_env.tasks.TASKS``: overrides of
+    :class:`timegap_env.config.EnvConfig`, units in its comments; ``task_id`` is the registered id's, and no other
+    may be given under it), nested configs as dicts, e.g. ``{"action_mode": "per_vehicle", "platoon": {"n_followers": 3}}``.
     Unknown keys and bad values raise ``ValueError``. ``step_diagnostics=False`` leaves the per-step keys
     (monitor, reward terms) out of ``reset``'s and ``step``'s info, for learners that never read them; the
     episode summary stays. ``truth_info=True`` adds the platoon's true state and the ground truth (see Info);
@@ -129,7 +130,10 @@ class TimeGapMonitorEnv(gym.Env):
 
     * Since 2026-11-27 (issue 27) the ground truth and the platoon's true state are in the info only with
       ``truth_info=True`` (every version; episodes are unchanged bit for bit).
-    * v1: the default task (``config.TASK_VERSIONS[1]``, docs/task.md): the ``variation_first`` reward weighting,
+    * Since 2026-12-05 (issue 38) a task is one record (``timegap_env.tasks``) and the env takes its id
+      (``task_id``), not a version number; ``EnvConfig.info_keys`` is gone (the layout is the task's).
+      Built directly, the class gives ``DEFAULT_TASK`` (v1). Episodes are unchanged bit for bit.
+    * v1: the default task (``timegap_env.tasks.TASKS["TimeGapMonitor-v1"]``, docs/task.md): the ``variation_first`` reward weighting,
       the ``regimes`` leader family beside v0's four, and in the info ``vector_reward`` (the terms; the reward is
       the weights times it), ``cost``, ``objectives`` (natural units) and ``truth_regime``.
       ``mo-TimeGapMonitor-v1`` returns the terms as the reward vector.
@@ -139,12 +143,14 @@ class TimeGapMonitorEnv(gym.Env):
     metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 10}
 
     def __init__(self, config: Mapping[str, Any] | None = None, render_mode: str | None = None,
-                 step_diagnostics: bool = True, version: int = 0, truth_info: bool = False) -> None:
+                 step_diagnostics: bool = True, task_id: str = DEFAULT_TASK, truth_info: bool = False) -> None:
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode = {render_mode!r}: must be None or one of {self.metadata['render_modes']}")
-        self.config = EnvConfig.from_dict(config, version)
+        record = get_task(task_id)
+        self.task_id = record.id
+        self.config = record.config(config)
         self.render_mode = render_mode
-        self.task = PlatoonTask(self.config, n_envs=1)
+        self.task = PlatoonTask(self.config, n_envs=1, info_layout=record.info_layout)
         if render_mode is not None:
             self.task.start_trace()
         self.observation_space = observation_space(self.config)
@@ -153,7 +159,7 @@ class TimeGapMonitorEnv(gym.Env):
         self._needs_reset = True  # step() before reset() or after the episode ended raises gymnasium's ResetNeeded
         self.step_diagnostics, self.truth_info = info_flags(step_diagnostics, truth_info)
         self._action = np.zeros((1, 1), dtype=np.int64)  # a Discrete action, as the task takes it
-        self._infos = EnvInfoPool(self.config.platoon.n_followers, self.config.info_keys)
+        self._infos = EnvInfoPool(self.config.platoon.n_followers, record.info_layout)
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict]:
         self._needs_reset = True  # stays so if the reset below raises (a bad seed too)

@@ -75,12 +75,12 @@ class Episodes:
     ticks in the episode; ``degradations`` (a tuple of :class:`~timegap_env.sim.degradation.Degradation`
     per env); ``dropout_probability`` (n_envs,) [-]; ``initial_setting`` (n_envs,) [s], the setting the episode
     starts at; ``noise_keys`` (n_envs,) uint64 of the sensor noise
-    and ``packet_loss_keys`` of the V2V losses; ``scenario`` (n_envs,), the leader's name; with ``info_keys`` "v1",
+    and ``packet_loss_keys`` of the V2V losses; ``scenario`` (n_envs,), the leader's name; with ``record_regime`` (info layout "v1"),
     ``regime`` (n_envs, max_ticks + 1) int16, the leader's regime at every tick (an index into
     :func:`~timegap_env.leaders.scenarios.regime_names`, held at its last value beyond the profile), else None.
     """
 
-    def __init__(self, config: EnvConfig, n_envs: int) -> None:
+    def __init__(self, config: EnvConfig, n_envs: int, record_regime: bool = True) -> None:
         unknown = sorted(set(config.scenario_weights) - set(SCENARIOS))
         if unknown:
             raise ValueError(f"EnvConfig.scenario_weights has unknown families {unknown}; known: {sorted(SCENARIOS)}")
@@ -95,7 +95,7 @@ class Episodes:
         self.initial_setting = np.full(n_envs, config.platoon.initial_setting)  # [s]
         self.noise_keys = np.zeros(n_envs, dtype=np.uint64)
         self.scenario = np.full(n_envs, "", dtype=object)
-        self.regime = np.zeros((n_envs, max_ticks + 1), dtype=np.int16) if config.info_keys != "v0" else None
+        self.regime = np.zeros((n_envs, max_ticks + 1), dtype=np.int16) if record_regime else None
         self._params = family_params(config.leader_params)  # leader family -> its parameter dataclass, as configured
         self._defaults: dict[str, tuple[LeaderFamily, Any]] = {}  # leader family -> (its record, its default parameters)
         self._families = list(config.scenario_weights)
@@ -201,7 +201,7 @@ class Episodes:
 
     def _load_regimes(self, envs: np.ndarray, scenario: str, profiles: LeaderProfiles,
                       seeds: Sequence[int | None]) -> None:
-        """Each env of ``envs``'s regime at every tick (with ``info_keys`` "v1"), cut and padded as
+        """Each env of ``envs``'s regime at every tick (with ``record_regime``), cut and padded as
         :meth:`_load_leaders` cuts and pads ``profiles``, its leaders (a row per env, or one row for all; after
         :meth:`_load_leaders`): the regimes ``profiles`` give, else its family's schedule for its leader's seed, or the
         family (USER: the user's leader) throughout."""

@@ -18,7 +18,7 @@ plain string key (no nested dicts, no strings), so that gymnasium's vector envs,
 
 ``step_diagnostics=False`` leaves every per-step key out (the summary stays).
 
-With ``EnvConfig.info_keys = "v1"`` (``TimeGapMonitor-v1``'s default) it also holds, the last step's (0 at reset):
+With the info layout "v1" (``TimeGapMonitor-v1``'s, ``timegap_env.tasks.Task.info_layout``) it also holds, the last step's (0 at reset):
 
 - ``vector_reward`` (n_terms,): the reward terms in REWARD_TERMS order, so that the reward is the weights
   (``RewardWeights``, in the same order) times it (MO-Gymnasium's ``LinearReward`` convention);
@@ -57,7 +57,7 @@ from timegap_env.sim.degradation import KINDS
 
 KIND_NAMES = np.array(KINDS, dtype=object)  # truth_kind -> the degradation's name ("none": not hit)
 REWARD_PREFIX, TRUTH_PREFIX, EPISODE_PREFIX = "reward_", "truth_", "episode_"
-VECTOR_REWARD, COST, OBJECTIVES_KEY = "vector_reward", "cost", "objectives"  # info_keys "v1"'s keys beside the terms
+VECTOR_REWARD, COST, OBJECTIVES_KEY = "vector_reward", "cost", "objectives"  # info layout "v1"'s keys beside the terms
 
 
 _REWARD_KEYS = tuple(REWARD_PREFIX + name for name in REWARD_TERMS)
@@ -73,16 +73,16 @@ class InfoBlock(NamedTuple):
     floats: np.ndarray  # (len(VIEW_FLOATS), n_envs, n_followers) estimate, estimate_std, setting, lcl, ucl [s]
     flags: np.ndarray  # (len(VIEW_FLAGS), n_envs, n_followers) bool alarm, v2v
     skipped: np.ndarray  # (n_envs, n_followers) int64 skipped measurements since reset [-]
-    scores: np.ndarray  # (n_scores, n_envs) the reward terms; with info_keys "v1" then the terms again (vector_reward),
+    scores: np.ndarray  # (n_scores, n_envs) the reward terms; with info layout "v1" then the terms again (vector_reward),
     #                     the objectives and the cost
 
     @classmethod
-    def empty(cls, n_envs: int, n_followers: int, info_keys: str) -> InfoBlock:
+    def empty(cls, n_envs: int, n_followers: int, info_layout: str) -> InfoBlock:
         n_terms = len(REWARD_TERMS)
         return cls(np.empty((len(VIEW_FLOATS), n_envs, n_followers)),
                    np.empty((len(VIEW_FLAGS), n_envs, n_followers), dtype=bool),
                    np.empty((n_envs, n_followers), dtype=np.int64),
-                   np.empty((n_terms if info_keys == "v0" else 3 * n_terms + 1, n_envs)))
+                   np.empty((n_terms if info_layout == "v0" else 3 * n_terms + 1, n_envs)))
 
 
 @numba.njit(**STAGE_KERNEL)
@@ -91,7 +91,7 @@ def write_info_env(mean_tau, var_tau, setting, center, half_width, side, v2v, sk
     """Env ``e``'s per-step info values into ``block`` (an :class:`InfoBlock`): the posterior mean ``mean_tau`` [s] and
     the square root of ``var_tau`` [s^2], the ``setting`` [s], the chart's limits, ``center`` [s] -/+ ``half_width``
     [s], whether the chart's ``side`` is not 0, the ``v2v`` flag, the ``skipped`` count, and the scores: the reward
-    terms (``term_rows`` (n_terms, n_envs)), then, if ``block.scores`` has more rows (``info_keys`` "v1"), the terms
+    terms (``term_rows`` (n_terms, n_envs)), then, if ``block.scores`` has more rows (info layout "v1"), the terms
     again, the ``objective_rows`` and the ``cost``. The fused step calls it for every env, :func:`write_info_envs` for
     the task's other paths."""
     floats, flags, skipped_out, scores = block
@@ -124,17 +124,17 @@ INFO_SETS = 2  # sets an EnvInfoPool reuses: the info being returned and the one
 
 class EnvInfoSet:
     """One :class:`InfoBlock` of a single env (n_envs 1, a plain tuple) and the info's values as views of it: the
-    monitor's view and the scores (the reward terms, 0-d views, and with ``info_keys`` "v1" ``vector_reward``,
+    monitor's view and the scores (the reward terms, 0-d views, and with info layout "v1" ``vector_reward``,
     ``objectives`` and ``cost``)."""
 
-    def __init__(self, n_followers: int, info_keys: str) -> None:
+    def __init__(self, n_followers: int, info_layout: str) -> None:
         n_terms = len(REWARD_TERMS)
-        self.block = tuple(InfoBlock.empty(1, n_followers, info_keys))  # as the step takes it
+        self.block = tuple(InfoBlock.empty(1, n_followers, info_layout))  # as the step takes it
         floats, flags, skipped, scores = self.block
         self.monitor = {**dict(zip(VIEW_FLOATS, floats[:, 0])), **dict(zip(VIEW_FLAGS, flags[:, 0])),
                         "skipped_measurements": skipped[0]}
         self.scored = {key: scores[i, 0, ...] for i, key in enumerate(_REWARD_KEYS)}
-        if info_keys != "v0":
+        if info_layout != "v0":
             self.scored[VECTOR_REWARD] = scores[n_terms : 2 * n_terms, 0]
             self.scored[OBJECTIVES_KEY] = scores[2 * n_terms : 3 * n_terms, 0]
             self.scored[COST] = scores[3 * n_terms, 0, ...]
@@ -165,8 +165,8 @@ class EnvInfoPool:
     Only references count: a weak reference to a value, or a raw address of its memory, may see later steps. A
     copy or pickle of the pool is an empty pool (a copied view would no longer be a view of the copied set)."""
 
-    def __init__(self, n_followers: int, info_keys: str) -> None:
-        self.n_followers, self.info_keys = n_followers, info_keys
+    def __init__(self, n_followers: int, info_layout: str) -> None:
+        self.n_followers, self.info_layout = n_followers, info_layout
         self._sets: deque[EnvInfoSet] = deque()
 
     def take(self) -> EnvInfoSet:
@@ -176,12 +176,12 @@ class EnvInfoPool:
             if oldest.unheld():
                 self._sets.append(oldest)
                 return oldest
-        fresh = EnvInfoSet(self.n_followers, self.info_keys)
+        fresh = EnvInfoSet(self.n_followers, self.info_layout)
         self._sets.append(fresh)
         return fresh
 
     def __getstate__(self) -> dict[str, object]:
-        return {"n_followers": self.n_followers, "info_keys": self.info_keys}
+        return {"n_followers": self.n_followers, "info_layout": self.info_layout}
 
     def __setstate__(self, state: dict[str, object]) -> None:
         self.__init__(**state)  # type: ignore[misc]
@@ -207,7 +207,7 @@ def prefixed(prefix: str, values: Mapping[str, np.ndarray]) -> dict[str, np.ndar
 
 def step_scores(term_rows: np.ndarray, objectives: tuple[np.ndarray, np.ndarray] | None) -> dict[str, np.ndarray]:
     """A step's scores as the info holds them, from its reward terms (n_terms, n_envs): ``reward_<term>``; with
-    ``objectives`` (given with ``info_keys`` "v1": the objectives (n_terms, n_envs) in natural units and the cost
+    ``objectives`` (given with info layout "v1": the objectives (n_terms, n_envs) in natural units and the cost
     (n_envs,)) also ``vector_reward`` (n_envs, n_terms), ``cost`` and ``objectives`` (n_envs, n_terms). The values
     are views of the arguments."""
     scores = {REWARD_PREFIX + name: row for name, row in zip(REWARD_TERMS, term_rows)}
@@ -216,10 +216,10 @@ def step_scores(term_rows: np.ndarray, objectives: tuple[np.ndarray, np.ndarray]
     return scores
 
 
-def no_scores(n_envs: int, info_keys: str) -> dict[str, np.ndarray]:
+def no_scores(n_envs: int, info_layout: str) -> dict[str, np.ndarray]:
     """:func:`step_scores` of no step, zeros: what reset's info holds, so that step's keys are there too."""
     zeros = np.zeros((len(REWARD_TERMS), n_envs))
-    return step_scores(zeros, None if info_keys == "v0" else (zeros.copy(), np.zeros(n_envs)))
+    return step_scores(zeros, None if info_layout == "v0" else (zeros.copy(), np.zeros(n_envs)))
 
 
 def with_masks(infos: Mapping[str, np.ndarray], mask: np.ndarray) -> dict[str, np.ndarray]:
@@ -269,7 +269,7 @@ def rewards_of(info: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
 
 
 def objectives_of(info: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
-    """The objectives in ``info`` (``info_keys`` "v1") as ``{name: value}`` in natural units (OBJECTIVES' names)."""
+    """The objectives in ``info`` (info layout "v1") as ``{name: value}`` in natural units (OBJECTIVES' names)."""
     values = np.asarray(info[OBJECTIVES_KEY])
     return {objective.name: values[..., i] for i, objective in enumerate(OBJECTIVES.values())}
 

@@ -18,6 +18,7 @@ import numpy as np
 from timegap_env.config import shown
 from timegap_env.envs.env import TimeGapMonitorEnv
 from timegap_env.envs.reward import OBJECTIVES, REWARD_TERMS, term_lows
+from timegap_env.tasks import DEFAULT_TASK
 
 def chosen_objectives(objectives: Sequence[str] | None) -> tuple[str, ...]:
     """``objectives`` checked, as reward terms: None (every term), or distinct names of REWARD_TERMS or of their
@@ -41,14 +42,14 @@ def chosen_objectives(objectives: Sequence[str] | None) -> tuple[str, ...]:
 class MOTimeGapMonitorEnv(TimeGapMonitorEnv):
     """``TimeGapMonitorEnv`` with a vector reward: ``gym.make("mo-TimeGapMonitor-v1", objectives=None | [terms],
     config=..., ...)`` (or ``mo_gymnasium.make``). ``objectives`` picks reward terms (by name, in the given order) for
-    the vector; the default is all of them. Everything else is ``TimeGapMonitor-v1``'s (``version=0`` gives v0's task).
+    the vector; the default is all of them. Everything else is ``TimeGapMonitor-v1``'s, the task it is registered for.
     """
 
     def __init__(self, config: Mapping[str, Any] | None = None, render_mode: str | None = None,
-                 step_diagnostics: bool = True, version: int = 1, objectives: Sequence[str] | None = None,
-                 truth_info: bool = False) -> None:
+                 step_diagnostics: bool = True, task_id: str = DEFAULT_TASK,
+                 objectives: Sequence[str] | None = None, truth_info: bool = False) -> None:
         self.objectives = chosen_objectives(objectives)
-        super().__init__(config, render_mode, step_diagnostics, version, truth_info)
+        super().__init__(config, render_mode, step_diagnostics, task_id, truth_info)
         self._rows = np.array([REWARD_TERMS.index(name) for name in self.objectives])
         self.reward_dim = len(self.objectives)
         lows = term_lows(self.config)

@@ -15,7 +15,7 @@ N Python envs in a ``DummyVecEnv``, and follows SB3's conventions:
   that loggers can write them). The native env's per-step diagnostics (reward terms, estimates,
   ...) are not passed on.
 
-Sub-env i seeded with ``s + i`` equals ``gym.make("TimeGapMonitor-v<version>")`` seeded
+Sub-env i seeded with ``s + i`` equals ``gym.make(task_id)`` seeded
 with ``s + i`` in a ``DummyVecEnv``, step by step.
 """
 
@@ -33,13 +33,13 @@ from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices,
 from timegap_env.envs.info import of_env
 from timegap_env.envs.observation import feature_columns, hidden
 from timegap_env.envs.vector_env import TimeGapMonitorVectorEnv
+from timegap_env.tasks import DEFAULT_TASK
 
 
 class TimeGapVecEnv(VecEnv):
-    """``n_envs`` platoons of ``TimeGapMonitor`` (v0 or v1) behind SB3's ``VecEnv`` API.
+    """``n_envs`` platoons of a ``TimeGapMonitor`` task behind SB3's ``VecEnv`` API.
 
-    ``config`` overrides the env's :class:`~timegap_env.config.EnvConfig` as in ``gym.make`` of env version
-    ``version`` (0: ``TimeGapMonitor-v0``'s defaults, 1: ``-v1``'s); ``hidden_features`` (names of the
+    ``config`` overrides the config of task ``task_id`` (default: ``DEFAULT_TASK``) as in ``gym.make(task_id)``; ``hidden_features`` (names of the
     observation's features) are read as 0 in every observation, an ablation of what a policy may see; a
     ``cost_weight`` (attribute, default 0) takes that many times the env's step cost (``venv.step_cost``) off every
     reward, for a Lagrangian learner;
@@ -54,11 +54,11 @@ class TimeGapVecEnv(VecEnv):
 
     def __init__(
         self, n_envs: int = 1, config: Mapping[str, Any] | None = None, max_episode_steps: int | None = None,
-        version: int = 0, hidden_features: tuple[str, ...] = (),
+        task_id: str = DEFAULT_TASK, hidden_features: tuple[str, ...] = (),
     ) -> None:
         feature_columns(hidden_features)  # checked before any work
         self.venv = TimeGapMonitorVectorEnv(num_envs=n_envs, config=config, max_episode_steps=max_episode_steps,
-                                            step_diagnostics=False, autoreset_mode="same_step", version=version)
+                                            step_diagnostics=False, autoreset_mode="same_step", task_id=task_id)
         super().__init__(n_envs, self.venv.single_observation_space, self.venv.single_action_space)
         self.config = self.venv.config
         self._actions: np.ndarray | None = None

@@ -115,13 +115,14 @@ class PlatoonTask:
     ``fused``: steps run as one compiled call (True) or stage by stage (False); see the module docstring.
     """
 
-    def __init__(self, config: EnvConfig, n_envs: int, fused: bool = True) -> None:
+    def __init__(self, config: EnvConfig, n_envs: int, fused: bool = True, info_layout: str = "v1") -> None:
         self.config = config
         self.n_envs = n_envs
         self.fused = bool(fused) and config.simulator == "native"  # SUMO's ticks run stage by stage
         self.n_followers = config.platoon.n_followers
         self.ticks_per_decision = config.ticks_per_decision
-        self.episodes = Episodes(config, n_envs)
+        self.info_layout = info_layout  # the task's (timegap_env.tasks.INFO_LAYOUTS): what write_info fills
+        self.episodes = Episodes(config, n_envs, record_regime=info_layout != "v0")
         self.ladder = SettingLadder(config, n_envs)
         self.loop = MonitoredPlatoon(config.platoon, config.monitor, config.chart, config.sensors, n_envs,
                                      physics=_physics(config, n_envs))
@@ -142,8 +143,8 @@ class PlatoonTask:
                            np.zeros_like(self._result.cost))  # a reset's info: no step's terms, objectives, cost
         self._changed = np.zeros((n_envs, self.n_followers), dtype=bool)
         self._observation = np.zeros((n_envs, self.n_followers, len(FEATURES)), dtype=np.float32)
-        self._info_block = tuple(InfoBlock.empty(n_envs, self.n_followers, config.info_keys))  # monitor_info's
-        self._no_info = tuple(InfoBlock.empty(0, self.n_followers, config.info_keys))  # a step writing no info
+        self._info_block = tuple(InfoBlock.empty(n_envs, self.n_followers, info_layout))  # monitor_info's
+        self._no_info = tuple(InfoBlock.empty(0, self.n_followers, info_layout))  # a step writing no info
         self._rules = tuple(StepRules.from_config(config, self.ladder.rule, self.loop.chart.rule,
                                                   tuple(self._reward_constants), np.array(self._weights),
                                                   tuple(self._scales)))
@@ -347,9 +348,9 @@ class PlatoonTask:
         }
 
     def objectives(self) -> tuple[np.ndarray, np.ndarray] | None:
-        """With ``info_keys`` "v1", the last step's objectives in natural units (n_terms, n_envs) and its cost
+        """With info layout "v1", the last step's objectives in natural units (n_terms, n_envs) and its cost
         (n_envs,) (the task's own arrays, see :class:`StepResult`); else None."""
-        return None if self.config.info_keys == "v0" else (self._result.objective_rows, self._result.cost)
+        return None if self.info_layout == "v0" else (self._result.objective_rows, self._result.cost)
 
     def step_info(self, truth: bool) -> dict[str, np.ndarray]:
         """Every env's info now, flat (:mod:`~timegap_env.envs.info`), arrays nothing else holds, with a leading
@@ -358,11 +359,11 @@ class PlatoonTask:
 
     def ground_truth(self) -> dict[str, np.ndarray]:
         """Each follower's degradation now, its true parameters and the smallest string-stable setting for them,
-        arrays (n_envs, n_followers), and with ``info_keys`` "v1" the leader's regime (n_envs,) (:meth:`~timegap_env.sim.degradation.DegradationTable.truth`): for
+        arrays (n_envs, n_followers), and with info layout "v1" the leader's regime (n_envs,) (:meth:`~timegap_env.sim.degradation.DegradationTable.truth`): for
         oracles and evaluation, never in the observation."""
         loop, regime = self.loop, self.episodes.regime
         truth = loop.degradation.truth(loop.ticks, self._v2v_during(loop.ticks))
-        if regime is not None:  # info_keys "v1": the leader's regime now, (n_envs,)
+        if regime is not None:  # info layout "v1": the leader's regime now, (n_envs,)
             truth["regime"] = regime[np.arange(self.n_envs), np.minimum(loop.ticks, self.episodes.episode_ticks)]
         return truth
 

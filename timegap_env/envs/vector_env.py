@@ -18,7 +18,7 @@ from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from timegap_env.config import EnvConfig, shown
+from timegap_env.config import shown
 from timegap_env.envs.action import action_space
 from timegap_env.envs.info import (
     EPISODE_PREFIX, TRUTH_PREFIX, info_flags, no_scores, prefixed, step_scores, truth_of, with_masks,
@@ -27,6 +27,7 @@ from timegap_env.envs.episodes import RESET_OPTIONS
 from timegap_env.envs.observation import observation_space
 from timegap_env.envs.task import PlatoonTask
 from timegap_env.generators import generators, unseeded_generators
+from timegap_env.tasks import DEFAULT_TASK, OneTask, get_task
 
 
 def available_memory() -> int | None:
@@ -66,8 +67,8 @@ def parse_autoreset_mode(mode: str | AutoresetMode) -> AutoresetMode:
     raise ValueError(f"autoreset_mode = {mode!r}: must be one of {[known.name.lower() for known in AutoresetMode]}")
 
 
-class TimeGapMonitorVectorEnv(VectorEnv):
-    """``num_envs`` copies of :class:`~timegap_env.envs.env.TimeGapMonitorEnv` in one batched task.
+class TimeGapMonitorVectorEnv(OneTask, VectorEnv):
+    """``num_envs`` copies of :class:`~timegap_env.envs.env.TimeGapMonitorEnv` of task ``task_id`` in one batched task.
 
     Its infos are what gymnasium's own vector envs make of the single env's flat info
     (:mod:`timegap_env.envs.info`): each key an array with a leading num_envs axis and a ``_<key>`` mask.
@@ -103,7 +104,7 @@ class TimeGapMonitorVectorEnv(VectorEnv):
         max_episode_steps: int | None = None,
         step_diagnostics: bool = True,
         autoreset_mode: str | AutoresetMode = AutoresetMode.NEXT_STEP,
-        version: int = 0,
+        task_id: str = DEFAULT_TASK,
         truth_info: bool = False,
     ) -> None:
         if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) or num_envs < 1:
@@ -111,10 +112,12 @@ class TimeGapMonitorVectorEnv(VectorEnv):
         self.autoreset_mode = parse_autoreset_mode(autoreset_mode)
         self.metadata = {**type(self).metadata, "autoreset_mode": self.autoreset_mode}
         self.num_envs = int(num_envs)
-        self.config = EnvConfig.from_dict(config, version)
+        record = get_task(task_id)
+        self.task_id, self.info_layout = record.id, record.info_layout
+        self.config = record.config(config)
         check_fits(self.num_envs, PlatoonTask.bytes_per_env(self.config), available_memory())
         self.max_episode_steps = max_episode_steps or self.config.max_episode_steps
-        self.task = PlatoonTask(self.config, self.num_envs)
+        self.task = PlatoonTask(self.config, self.num_envs, info_layout=self.info_layout)
         self.single_observation_space = observation_space(self.config)
         self.single_action_space = action_space(self.config)
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
@@ -163,7 +166,7 @@ class TimeGapMonitorVectorEnv(VectorEnv):
         self._ended[mask] = False
         if not self.step_diagnostics:
             return self._observations(), {}
-        infos = {**self.task.step_info(self.truth_info), **no_scores(self.num_envs, self.config.info_keys)}
+        infos = {**self.task.step_info(self.truth_info), **no_scores(self.num_envs, self.info_layout)}
         return self._observations(), with_masks(infos, mask)
 
     def ground_truth(self) -> dict[str, np.ndarray]:

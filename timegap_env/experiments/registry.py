@@ -4,9 +4,9 @@ Every script names policies through it (``train.evaluate --policies``, a sweep's
 references), so a new policy is one :func:`register` call::
 
     register("my_rule", MyRule, "platoon", "what it does", threshold=3)
-    policy = make("my_rule", {"preferred_setting": 1.0})   # MyRule(EnvConfig in platoon mode, threshold=3)
+    policy = make("my_rule", {"preferred_setting": 1.0})   # MyRule(the default task's config in platoon mode, threshold=3)
 
-``make(name, config)`` builds the policy for the env of ``config`` (an EnvConfig or gym.make's overrides) in the
+``make(name, config)`` builds the policy for the env of ``config`` (an EnvConfig, or overrides of the default task's config) in the
 policy's own action mode. Besides the registered names, ``fixed_<setting>`` holds one ladder level for the whole
 episode (``fixed_1.6``), ``oracle`` is *the* oracle of the study code's ``value`` module (measured on training
 and selection seeds: its ``make_oracle``) and ``ppo`` a trained run (:func:`load_learned`).
@@ -20,7 +20,7 @@ from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
-from timegap_env.agents.policies import ChartStepPolicy, FixedPolicy, PaperRulePolicy, V2VAwarePolicy, seconds
+from timegap_env.agents.policies import ChartStepPolicy, FixedPolicy, PaperRulePolicy, V2VAwarePolicy, as_config, seconds
 from timegap_env.agents.protocol import MODEL_FILE
 from timegap_env.config import EnvConfig
 
@@ -48,10 +48,9 @@ POLICIES: dict[str, PolicySpec] = {}
 
 
 def in_mode(config: EnvConfig | Mapping[str, Any] | None, action_mode: str) -> EnvConfig:
-    """``config`` (an EnvConfig, gym.make's overrides or None: the default) with ``action_mode``."""
-    if isinstance(config, EnvConfig):
-        return config.with_overrides({"action_mode": action_mode})
-    return EnvConfig.from_dict({**(config or {}), "action_mode": action_mode})
+    """``config`` (an EnvConfig, or overrides of the default task's config, or None: that config) with
+    ``action_mode``."""
+    return as_config(config).with_overrides({"action_mode": action_mode})
 
 
 def register(name: str, factory: Callable[..., Any], action_mode: str = "platoon", description: str = "",
@@ -79,7 +78,7 @@ def fixed_name(setting: float) -> str:
 
 def fixed_names(config: EnvConfig | None = None) -> list[str]:
     """A fixed policy's name per ladder level of ``config`` (default: the default ladder), smallest first."""
-    return [fixed_name(level) for level in (config or EnvConfig()).setting_levels]
+    return [fixed_name(level) for level in as_config(config).setting_levels]
 
 
 def is_known(name: str) -> bool:
@@ -156,7 +155,7 @@ def load_learned(model: Path, config: EnvConfig | None = None) -> Any:
             policy = LearnedPolicy.load(model)
     except (RunFileError, FileNotFoundError) as error:
         raise LearnedPolicyError(str(error)) from error
-    expected = observation_space(config or EnvConfig()).shape
+    expected = observation_space(as_config(config)).shape
     if policy.observation_shape != expected:
         raise LearnedPolicyError(f"--model {model}: takes observations of shape {policy.observation_shape}, the env "
                                  f"gives {expected}")

@@ -16,7 +16,8 @@ A policy with an ``action_mode`` attribute runs in an env of that action mode, o
 attribute (a learned policy trained on the raw-gap ablation's observations) in an env whose monitor reports that.
 
 :func:`rollout` plays one policy (or, :func:`rollout_side_by_side`, several in one vector env, each on its own
-copy of the seeds) and returns an :class:`EpisodeRecord` per episode: its return, the reward terms summed over the
+copy of the seeds) in the env of a config (an EnvConfig, e.g. a task's ``get_task(id).config(...)``, or
+overrides of the default task's config) and returns an :class:`EpisodeRecord` per episode: its return, the reward terms summed over the
 episode, the episode summary (``info["final_info"]``'s ``episode_*``), the ground truth at reset, the time spent
 below the smallest string-stable setting and the episode's fingerprint (what the reset drew, to check that two
 policies saw the same episodes). :func:`run_jobs` spreads :class:`Job` s (policy x config x seeds) over a
@@ -41,7 +42,7 @@ from timegap_env.experiments.backends import Backend
 NOMINAL = "none"  # the ground truth's kind of a follower no degradation hits
 STABLE_TOLERANCE = 1e-9  # a setting this close to the smallest string-stable one counts as stable [s]
 
-Config = EnvConfig | Mapping[str, Any] | None  # an EnvConfig, or gym.make's ``config`` overrides
+Config = EnvConfig | Mapping[str, Any] | None  # an EnvConfig, or overrides of the default task's config (None: it)
 
 
 @dataclasses.dataclass

@@ -35,6 +35,7 @@ from timegap_env.experiments.rollout import rollout
 from timegap_env.experiments.stats import bootstrap_mean, oracle_share, wilson_interval
 from train.studies.value import DEFAULT_TRAIN_EPISODES, make_oracle
 from timegap_env.leaders import default_ngsim_path, default_openacc_dir, openacc_paths
+from timegap_env.tasks import LARGER_DEGRADATIONS
 
 
 REPO = Path(__file__).resolve().parents[2]  # data paths in the table are written relative to it
@@ -55,12 +56,6 @@ class Group:
     data: str | None = None  # "ngsim" or "openacc": only run when that data is found
 
 
-LARGER_DEGRADATIONS = {  # every episode degraded, every size beyond the training range (DegradationConfig's)
-    "kind_weights": {"lag": 1.0, "gain": 1.0, "v2v_latency": 1.0, "packet_loss": 1.0, "radar_bias": 1.0,
-                     "radar_noise": 1.0},
-    "lag_factor_range": (2.5, 3.5), "gain_range": (0.45, 0.6), "v2v_latency_range": (0.6, 0.9),
-    "packet_loss_range": (0.9, 0.97), "radar_bias_range": (4.0, 6.0), "radar_noise_range": (1.0, 1.5),
-}
 GROUPS: dict[str, Group] = {
     "training_mix": Group("the training families and degradation mix on held-out seeds"),
     "larger_degradations": Group("every episode degraded, sizes beyond the training ranges (lag x2.5-3.5, gain "

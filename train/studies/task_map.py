@@ -32,12 +32,12 @@ import numpy as np
 
 from timegap_env.agents.oracles import LookupOracle, RegimeOracle, StabilityOracle, TruthPolicy
 from timegap_env.agents.protocol import EVAL_SEED_START
-from timegap_env.config import REWARD_PRESETS, TASK_VERSIONS, EnvConfig, RewardPreset
+from timegap_env.config import REWARD_PRESETS, EnvConfig, RewardPreset
 from timegap_env.envs.reward import REWARD_TERMS
 from timegap_env.leaders.scenarios import LEADER_FAMILIES, SCENARIOS, family_params
 from timegap_env.experiments.backends import Backend
-from train.studies.heldout import LARGER_DEGRADATIONS
 from timegap_env.experiments.rollout import rollout
+from timegap_env.tasks import LARGER_DEGRADATIONS, get_task
 from timegap_env.experiments.stats import bootstrap_mean
 from train.studies.value import (
     MARGINS, SELECTION_SEED_START, oracle_actions, pair_pieces, training_conditions,
@@ -98,7 +98,7 @@ def cell_config(severity: str, traffic: str) -> EnvConfig:
             raise ValueError(f"{name} = {value!r}: unknown; known: {list(known)}")
     default = EnvConfig()
     return default.with_overrides({"degradation": default.degradation.with_overrides(SEVERITIES[severity]),
-                                   "scenario_weights": TRAFFIC[traffic], "info_keys": "v1"})
+                                   "scenario_weights": TRAFFIC[traffic]})
 
 
 def regime_contexts(config: EnvConfig) -> dict[str, tuple[EnvConfig, dict[str, Any]]]:
@@ -275,7 +275,7 @@ def cell_rows(config: EnvConfig, cell: dict[str, Any], weightings: dict[str, Rew
     and per weighting and policy of ``policies`` (name -> any policy the rollout harness plays), a row of its gain
     over the best blind constant on the same held-out episodes, the share of the full oracle's gain it captures and
     its mean FRONT_OBJECTIVES (and, with ``baseline`` one of their names, its gain over that policy, paired).
-    ``config`` must put the regime in the info (``info_keys="v1"``)."""
+    the harness's env puts the regime in the info (info layout "v1")."""
     train, selection, held_out = plan.seeds()
     levels = config.setting_levels
     n_levels = len(levels)
@@ -358,8 +358,9 @@ def v1_headroom(plan: Plan = Plan(), backend: Backend | None = None, policies: M
     the map (:func:`cell_rows`); ``ValueError`` naming an unknown group."""
     if group not in V1_GROUPS:
         raise ValueError(f"group = {group!r}: unknown; known: {list(V1_GROUPS)}")
-    config = EnvConfig.from_dict(V1_GROUPS[group], version=1)
-    weighting = TASK_VERSIONS[1]["reward_weights"]
+    task = get_task("TimeGapMonitor-v1")
+    config = task.config(V1_GROUPS[group])
+    weighting = task.overrides["reward_weights"]
     assert WEIGHTINGS[weighting].weights == config.reward_weights
     cell = V1_CELL if group == "v1" else {**V1_CELL, "traffic": group}
     return cell_rows(config, cell, {weighting: WEIGHTINGS[weighting]}, plan, backend or Backend(), policies, baseline)

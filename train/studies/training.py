@@ -14,15 +14,14 @@ from typing import Any
 import yaml
 
 from timegap_env import DEFAULT_TASK
-
-EVAL_SEED = 9_000  # first seed of the end-of-training check, below EVAL_SEED_START [-]
-EVAL_EPISODES = 32  # episodes of the end-of-training check [-]
-LATER_CHECK_EPISODES = 100  # ... from TimeGapMonitor-v1 on, whose collision term (a rare 1000-point loss) needs more [-]
+from timegap_env.tasks import get_task
 
 
-def check_seeds(version: int) -> list[int]:
-    """The seeds of the end-of-training check (and the learning curve) of a run in env version ``version``."""
-    return list(range(EVAL_SEED, EVAL_SEED + (EVAL_EPISODES if version == 0 else LATER_CHECK_EPISODES)))
+
+def check_seeds(task_id: str) -> list[int]:
+    """The seeds of the end-of-training check (and the learning curve) of a run in task ``task_id`` (its record's
+    ``seeds.check``: 32 from 9000 in v0, 100 in v1, whose collision term, a rare 1000-point loss, needs more)."""
+    return get_task(task_id).seeds.check
 
 
 CURVE_FILE = "curve.csv"  # a run's learning curve (train_ppo writes it, compare_curves reads it)
@@ -68,5 +67,5 @@ def with_env_config(env_kwargs: dict[str, Any], overrides: dict[str, Any]) -> di
     return {**env_kwargs, "config": {**(env_kwargs.get("config") or {}), **overrides}} if overrides else env_kwargs
 
 
-__all__ = ["CURVE_COLUMNS", "CURVE_FILE", "EVAL_EPISODES", "EVAL_SEED", "LATER_CHECK_EPISODES", "RUN_KEYS",
+__all__ = ["CURVE_COLUMNS", "CURVE_FILE", "RUN_KEYS",
            "STRING_KWARGS", "check_seeds", "load_hyperparams", "with_env_config"]

@@ -30,11 +30,11 @@ from timegap_env.envs.info import truth_of
 from timegap_env.experiments.backends import Backend
 from timegap_env.experiments.rollout import rollout
 from timegap_env.sim.degradation import round_to_tick
+from timegap_env.tasks import SELECTION_SEED_START
 
 DEFAULT_TRAIN_EPISODES = 16
 MARGINS = (0.0, 0.1, 0.2)  # stability oracle margins above the smallest string-stable setting [s]
 BATCH = 1024  # envs per vector env when running many episodes [-]
-SELECTION_SEED_START = 5_000  # selection seeds, for choices made before the held-out episodes [-]
 SELECTION_EPISODES = 48  # the oracle is chosen on this many selection episodes of the default mix [-]
 TARGET_SHARE = 0.25  # the target: oracle - best blind constant >= this share of |best blind| [-]
 MONITOR_SIGNALS = ("time_out_of_control", "exceedances")  # episode summary read-outs of the monitor's chart
