@@ -947,7 +947,7 @@ def main(argv: Sequence[str] | None = None) -> None:
     print((out / "leaderboard.md").read_text(encoding="utf-8").split("\n## ", 2)[1].join(["## ", "\n"]))
     sizes = ", ".join(f"{name} {result.seeds[1]}" for name, result in benchmark.groups.items())
     print(f"wrote {out}/ (leaderboard.md, scores.csv, aggregates.csv, pairwise.csv, frontier.png, profile.png): "
-          f"episodes per group {sizes}; {time.perf_counter() - start:.0f} s ({backend.describe()})")
+          f"episodes per group {sizes}; {time.perf_counter() - start:.0f} s (the last piece of work: {backend.describe()})")
 
 
 if __name__ == "__main__":

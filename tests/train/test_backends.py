@@ -1,6 +1,7 @@
 """``train.backends`` and the scripts' pieces: order, errors, the description, pieces a Ray task can take."""
 
 import argparse
+import os
 import dataclasses
 import importlib.util
 import pickle
@@ -123,3 +124,16 @@ def test_worker_processes_give_the_serial_results_in_order():
         Backend("processes", workers=0)
     with pytest.raises(ValueError, match="workers = 2: an integer >= 1, only with the processes backend"):
         Backend("serial", workers=2)
+
+
+def test_the_worker_processes_serve_every_map_until_a_piece_fails():
+    """One pool for every map of a backend (what a worker builds once serves later pieces); a piece that raises
+    stops it, and the next map starts fresh workers."""
+    backend = Backend("processes", workers=2)
+    first = set(backend.map(os.getpid, [()] * 4))
+    assert set(backend.map(os.getpid, [()] * 4)) <= first and os.getpid() not in first
+    with pytest.raises(TypeError):
+        backend.map(power, [(2, "x")])
+    assert not set(backend.map(os.getpid, [()] * 4)) & first
+    backend.close()
+    backend.close()  # twice is harmless

@@ -4,7 +4,9 @@ A piece is a call ``function(*arguments)`` whose result depends on its arguments
 batch, say: the env seeds everything it draws), so every backend returns the same results, in order,
 bit for bit. ``--backend serial`` (the default) runs the pieces one after another here;
 ``--backend processes`` in a pool of worker processes on this machine (``--workers``, default one per CPU; each
-piece's function and arguments are pickled to a worker, as SUMO needs: libsumo runs one simulation per process);
+piece's function and arguments are pickled to a worker, as SUMO needs: libsumo runs one simulation per process;
+the pool starts at the first ``map`` and serves every later one, so what a worker builds once, compiled kernels
+and memoised leaders, serves many pieces; ``close`` or the end of the process stops it);
 ``--backend ray`` runs each as a Ray task (one CPU each): with no ``--address`` Ray starts on this
 machine and stops with the script, with ``--address`` (e.g. ``ray://head:10001`` or ``auto``) the
 script joins that cluster. Ray comes with the ``ray`` extra (``pip install -e '.[ray]'``).
@@ -20,6 +22,7 @@ import argparse
 import multiprocessing
 import os
 import time
+import weakref
 from concurrent.futures import ProcessPoolExecutor
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -66,6 +69,7 @@ class Backend:
             raise ValueError(f"workers = {workers!r}: an integer >= 1, only with the processes backend")
         self.name, self.address, self.workers = name, address, workers
         self._spread = "not used yet"
+        self._pool: ProcessPoolExecutor | None = None  # the processes backend's, from the first map on
 
     @classmethod
     def from_args(cls, args: argparse.Namespace) -> Backend:
@@ -80,13 +84,25 @@ class Backend:
             self._spread = f"serial: {len(pieces)} pieces one after another in this process"
         elif self.name == "processes":
             workers = self.workers or os.cpu_count() or 1
-            with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn")) as pool:
-                results = list(pool.map(call_piece, [(function, piece) for piece in pieces]))
+            if self._pool is None:
+                self._pool = ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"))
+                weakref.finalize(self, self._pool.shutdown)  # at the latest when the backend or the process ends
+            try:
+                results = list(self._pool.map(call_piece, [(function, piece) for piece in pieces]))
+            except BaseException:  # a piece that raised, a worker that died, an interrupt: no half-used pool kept
+                self.close()
+                raise
             self._spread = f"processes: {len(pieces)} pieces on {workers} worker processes"
         else:
             results = self._ray_map(function, pieces)
         self._spread += f", {time.perf_counter() - start:.1f} s wall"
         return results
+
+    def close(self) -> None:
+        """Stop the processes backend's worker processes (the next map starts new ones); nothing for the others."""
+        if self._pool is not None:
+            self._pool.shutdown(cancel_futures=True)
+            self._pool = None
 
     def describe(self) -> str:
         """How the last map spread its work, for a results table's header."""
