@@ -467,7 +467,7 @@ def run_group(group: HeldOutGroup, entries: Sequence[Entry], first_seed: int, ep
     played: dict[str, Played] = {}
     for entry in entries:
         if keys[entry.name] and (kept := cache.get(keys[entry.name])) is not None:
-            played[entry.name] = kept
+            played[entry.name] = Played(**kept)
             progress(f"{group.name}: {entry.name} (cached)")
     pending = [entry for entry in entries if entry.name not in played]
     for start in range(0, len(pending), ENTRIES_PER_MAP):  # a map of several policies: the workers stay busy
@@ -476,8 +476,8 @@ def run_group(group: HeldOutGroup, entries: Sequence[Entry], first_seed: int, ep
                                    for chunk in chunks])
         for i, entry in enumerate(batch):
             played[entry.name] = join(parts[i * len(chunks):(i + 1) * len(chunks)])
-            if keys[entry.name]:
-                cache.put(keys[entry.name], played[entry.name])
+            if keys[entry.name]:  # kept as plain arrays: `python -m` and an import name this class apart
+                cache.put(keys[entry.name], dataclasses.asdict(played[entry.name]))
             progress(f"{group.name}: {entry.name}")
     played = {entry.name: played[entry.name] for entry in entries}  # in the entries' order
     constants = [name for name in registry.fixed_names(config) if name in played]

@@ -4,6 +4,7 @@ the cache, the lock, and bad command lines as one line (short episodes, small gr
 from __future__ import annotations
 
 import os
+import pickle
 import subprocess
 import sys
 from pathlib import Path
@@ -106,6 +107,26 @@ def test_a_computed_group_plays_only_what_it_has_not_played(monkeypatch: pytest.
                       Cache(cache), benchmark.Backend())
     assert len(played) == 1 and played[0][0].__class__.__name__ == "HoldOne"  # the new policy alone
     assert [row for row in again.rows if row["policy"] != "HoldOne"] == first.rows
+
+
+class ScriptFreeUnpickler(pickle.Unpickler):
+    """Refuses a class defined in the script: ``python -m train.benchmark`` names it ``__main__``, an import
+    ``train.benchmark``, so a cache holding one could not be read by the other."""
+
+    def find_class(self, module: str, name: str) -> Any:
+        if module in ("__main__", "train.benchmark"):
+            raise pickle.UnpicklingError(f"{module}.{name} in the cache")
+        return super().find_class(module, name)
+
+
+def test_the_cache_holds_no_class_of_the_script_so_the_command_and_the_python_call_share_it(tmp_path: Path) -> None:
+    cache = tmp_path / "cache"
+    run_group(TINY, constants_and(), 10_000, TINY.episodes, Cache(cache), benchmark.Backend())
+    files = sorted(cache.glob("*.pkl"))
+    assert len(files) == len(constants_and()) + 1  # every policy's episodes and the constants' choice
+    for path in files:
+        with open(path, "rb") as file:
+            ScriptFreeUnpickler(file).load()
 
 
 def test_the_lock_refuses_a_second_writer_and_takes_over_a_dead_ones(tmp_path: Path) -> None:
