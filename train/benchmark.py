@@ -191,11 +191,14 @@ class Cache:
         return hashlib.sha256(json.dumps([self.code, *parts], sort_keys=True, default=str).encode()).hexdigest()[:24]
 
     def get(self, key: str) -> Any:
-        """What was put under ``key``, or None."""
+        """What was put under ``key``, or None (also for an entry this code cannot read: it is computed again)."""
         if self.root is None or not (self.root / f"{key}.pkl").is_file():
             return None
         with open(self.root / f"{key}.pkl", "rb") as file:
-            return pickle.load(file)
+            try:
+                return pickle.load(file)
+            except (pickle.UnpicklingError, AttributeError, ImportError, EOFError):
+                return None
 
     def put(self, key: str, value: Any) -> None:
         """Keep ``value`` under ``key`` (written whole, then renamed: a killed run leaves no half file)."""
@@ -466,7 +469,7 @@ def run_group(group: HeldOutGroup, entries: Sequence[Entry], first_seed: int, ep
             for entry in entries}
     played: dict[str, Played] = {}
     for entry in entries:
-        if keys[entry.name] and (kept := cache.get(keys[entry.name])) is not None:
+        if keys[entry.name] and isinstance(kept := cache.get(keys[entry.name]), dict):  # else not kept, or unreadable
             played[entry.name] = Played(**kept)
             progress(f"{group.name}: {entry.name} (cached)")
     pending = [entry for entry in entries if entry.name not in played]

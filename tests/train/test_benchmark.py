@@ -129,6 +129,18 @@ def test_the_cache_holds_no_class_of_the_script_so_the_command_and_the_python_ca
             ScriptFreeUnpickler(file).load()
 
 
+def test_an_unreadable_cache_entry_is_played_again(tmp_path: Path) -> None:
+    cache = tmp_path / "cache"
+    first = run_group(TINY, constants_and(), 10_000, TINY.episodes, Cache(cache), benchmark.Backend())
+    played = sorted(path for path in cache.glob("*.pkl") if isinstance(Cache(cache).get(path.stem), dict))
+    played[0].write_bytes(b"not a pickle")  # a torn or foreign file
+    with open(played[1], "wb") as file:
+        pickle.dump(("an", "object", "of", "another", "layout"), file)
+    again = run_group(TINY, constants_and(), 10_000, TINY.episodes, Cache(cache), benchmark.Backend())
+    assert again.rows == first.rows
+    assert all(isinstance(Cache(cache).get(path.stem), dict) for path in played[:2])  # written again
+
+
 def test_the_lock_refuses_a_second_writer_and_takes_over_a_dead_ones(tmp_path: Path) -> None:
     out = tmp_path / "bench"
     with benchmark.claimed(out):
