@@ -1,0 +1,33 @@
+"""train/choose_learner.py's rule and train/choose_recipe.py's recipes (their studies run in make reproduce)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from train import choose_learner, choose_recipe
+
+
+def test_the_learner_rule_takes_the_fastest_setting_not_shown_worse() -> None:
+    speed = {"base": 1.0, "fast": 5.0, "faster": 6.0, "slow": 0.5}
+    assert choose_learner.choose(speed, {"fast": 0.3, "faster": -0.1, "slow": 2.0}) == "fast"
+    assert choose_learner.choose(speed, {"fast": -1.0, "faster": -0.1, "slow": 2.0}) == "base"  # slower than base
+    assert choose_learner.choose(speed, {"fast": 0.0}) == "fast"  # an interval reaching 0 is not shown worse
+
+
+def test_a_candidate_is_train_ppo_set_arguments() -> None:
+    assert choose_learner.set_arguments({"n_envs": 256, "learning_rate": 0.003}) == [
+        "--set", "n_envs=256", "--set", "learning_rate=0.003"]
+    assert choose_learner.CANDIDATES["base"] == {}
+
+
+def test_a_recipe_names_its_runs_by_glob(tmp_path: Path) -> None:
+    for seed in (0, 1):
+        (tmp_path / f"seed{seed}").mkdir()
+    name, runs = choose_recipe.parse_recipe(f"real={tmp_path}/seed*")
+    assert name == "real" and runs == [tmp_path / "seed0", tmp_path / "seed1"]
+    with pytest.raises(ValueError, match="matches no run directory"):
+        choose_recipe.parse_recipe(f"real={tmp_path}/nothing*")
+    with pytest.raises(ValueError, match="NAME=RUN"):
+        choose_recipe.parse_recipe("real")
