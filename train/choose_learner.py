@@ -5,8 +5,9 @@ selection episodes; its learning throughput is measured in this process against 
     python -m train.choose_learner                        # the study: writes runs/learner/ (results/learner: --out)
     python -m train.choose_learner --seeds 1 --timesteps 200000 --episodes 100 --out /tmp/learner   # a quick look
 
-The candidates (``CANDIDATES``) are overrides of ``hyperparams/ppo.yml``'s default-task section, as
-``train_ppo --set`` takes them; ``base`` is that section unchanged. The rule, fixed before any candidate trained:
+The candidates (``CANDIDATES``) are overrides of ``hyperparams/ppo.yml``'s default-task section; each is written as
+a hyperparameter file of its own, ``<runs>/<candidate>/ppo.yml`` (``train_ppo --hyperparams`` reads it; the rest of
+``hyperparams/ppo.yml`` copied as it is), ``base`` that section unchanged. The rule, fixed before any candidate trained:
 **the chosen setting is the fastest candidate whose mean selection return is not shown worse than base's** (the
 95 % interval of candidate minus base, paired by episode and pooled over training seeds, reaches 0 or above); a
 candidate that is faster but shown worse is reported, not chosen.
@@ -14,8 +15,8 @@ candidate that is faster but shown worse is reported, not chosen.
 Seeds: training seeds 0 .. ``--seeds`` - 1 (``train_ppo --seed``; its sub-envs below 10,000), scored on the default
 task's selection episodes 5000 .. 5000 + ``--episodes`` - 1 (never held-out ones). Each run trains with
 ``python -m train.train_ppo`` in a child process into ``<runs>/<candidate>/seed<k>``; a run already there with its
-``training.md`` (a finished run) is scored again, not retrained. Throughput is ``train.speed.ppo.measure``'s
-(``make bench``'s PPO row): ``--rollouts`` timed rollouts with their updates, one torch thread.
+``training.md`` (a finished run) is scored again, not retrained. Throughput is ``train.speed.ppo.measure``'s on the
+candidate's file (``make bench``'s PPO row): ``--rollouts`` timed rollouts with their updates, one torch thread.
 
 Writes ``<out>/learner.csv`` (a row per candidate and seed) and ``<out>/README.md``; ``--out`` must not exist
 (``--force`` replaces it; a failed run leaves it as it was).
@@ -32,6 +33,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import yaml
 
 from timegap_env import DEFAULT_TASK, cli
 from timegap_env.experiments import registry
@@ -41,7 +43,8 @@ from timegap_env.tasks import SELECTION_SEED_START, get_task
 from train.speed import ppo as speed_ppo
 
 SMALL_RELU = "dict(net_arch=dict(pi=[32, 32], vf=[32, 32]), activation_fn=nn.ReLU)"
-CANDIDATES: dict[str, dict[str, Any]] = {  # name: train_ppo --set overrides of hyperparams/ppo.yml's section
+HYPERPARAMS = Path("hyperparams/ppo.yml")  # the file the candidates override
+CANDIDATES: dict[str, dict[str, Any]] = {  # name: overrides of HYPERPARAMS' default-task section
     "base": {},
     "wide_rollout": dict(n_envs=256, n_steps=64, batch_size=2048),
     "wide_4_epochs": dict(n_envs=256, n_steps=32, batch_size=2048, n_epochs=4),
@@ -90,9 +93,20 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     return parser.parse_args(argv)
 
 
-def set_arguments(overrides: dict[str, Any]) -> list[str]:
-    """``train_ppo``'s ``--set KEY=VALUE`` arguments for ``overrides``."""
-    return [argument for key, value in overrides.items() for argument in ("--set", f"{key}={value}")]
+def write_hyperparams(name: str, runs: Path) -> Path:
+    """``HYPERPARAMS`` with candidate ``name``'s overrides in the default task's section, as ``<runs>/<name>/ppo.yml``
+    (kept if it is there with the same content; a different one is refused: its runs were trained with it)."""
+    document = yaml.safe_load(HYPERPARAMS.read_text())
+    document[DEFAULT_TASK] = {**document[DEFAULT_TASK], **CANDIDATES[name]}
+    text = (f"# {HYPERPARAMS} with candidate {name!r} of train.choose_learner: {CANDIDATES[name] or 'unchanged'}\n"
+            + yaml.safe_dump(document, sort_keys=False))
+    path = runs / name / "ppo.yml"
+    if path.is_file() and path.read_text() != text:
+        raise FileExistsError(f"{path}: holds other hyperparameters than candidate {name!r}'s; its runs were trained "
+                              "with them: move them away")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(text)
+    return path
 
 
 def train(name: str, seed: int, timesteps: int | None, runs: Path) -> Path:
@@ -102,7 +116,7 @@ def train(name: str, seed: int, timesteps: int | None, runs: Path) -> Path:
         print(f"{run}: a finished run, scored again", flush=True)
         return run
     command = [sys.executable, "-m", "train.train_ppo", "--seed", str(seed), "--out", str(run), "--curve-freq", "0",
-               "--no-progress-bar", *set_arguments(CANDIDATES[name]),
+               "--no-progress-bar", "--hyperparams", str(runs / name / "ppo.yml"),
                *(["--timesteps", str(timesteps)] if timesteps else [])]
     print("$", " ".join(command), flush=True)
     subprocess.run(command, check=True, stdout=subprocess.DEVNULL)
@@ -138,7 +152,7 @@ def report(rows: list[dict[str, Any]], chosen: str, args: argparse.Namespace) ->
         "Rule, fixed before training: the fastest candidate whose return is not shown worse than base's (the 95 % "
         "interval of the difference, paired by episode and pooled over the training seeds, reaches 0).",
         "",
-        "| candidate | overrides of hyperparams/ppo.yml | env steps/s of learning (x base) | mean return per seed "
+        "| candidate | overrides of hyperparams/ppo.yml's section | env steps/s of learning (x base) | mean return per seed "
         "| collisions /100 | difference to base [95 % CI] |",
         "|---|---|---|---|---|---|",
     ]
@@ -161,7 +175,8 @@ def main(argv: list[str] | None = None) -> None:
     if args.out.exists() and (args.out.is_file() or any(args.out.iterdir())) and not args.force:
         raise FileExistsError(f"--out {args.out}: exists; --force replaces it (or give another --out)")
     names = ["base", *(name for name in args.candidates if name != "base")]
-    speed = {name: speed_ppo.measure(args.rollouts, CANDIDATES[name]).steps_per_second for name in names}
+    files = {name: write_hyperparams(name, args.runs) for name in names}
+    speed = {name: speed_ppo.measure(args.rollouts, hyperparams=files[name]).steps_per_second for name in names}
     for name in names:
         print(f"{name}: {speed[name]:,.0f} env steps/s of learning (x{speed[name] / speed['base']:.2f})", flush=True)
     scored = {name: [score(train(name, seed, args.timesteps, args.runs), args.episodes) for seed in range(args.seeds)]

@@ -94,7 +94,7 @@ from timegap_env.envs.info import summary_of, truth_of
 from timegap_env.envs.observation import MONITOR_FEATURES, feature_columns, observation_space
 from timegap_env.envs.sb3 import TimeGapVecEnv
 from train.studies.training import (
-    CURVE_COLUMNS, CURVE_FILE, check_seeds, load_hyperparams, parse_override, with_env_config,
+    CURVE_COLUMNS, CURVE_FILE, check_seeds, load_hyperparams, with_env_config,
 )
 from timegap_env.experiments.backends import Backend
 from timegap_env.experiments.stats import bootstrap_mean
@@ -137,10 +137,6 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                         help="observations the policy reads at once (default: frame_stack of the yml, else 1)")
     parser.add_argument("--hyperparams", type=Path, default=None,
                         help="rl-zoo3-style yml keyed by env id (default: hyperparams/<algo>.yml)")
-    parser.add_argument("--set", dest="overrides", type=parse_override, action="append", default=[],
-                        metavar="KEY=VALUE",
-                        help="a hyperparameter of --hyperparams' section replaced, the value read as YAML (repeatable), "
-                             "e.g. --set n_epochs=4 --set 'policy_kwargs=dict(net_arch=[32, 32])'")
     parser.add_argument("--warmup", type=Path, default=Path("hyperparams/ppo_warmup.yml"),
                         help="yml keyed by env id: the warm-up's n_timesteps and env_kwargs (default: %(default)s)")
     parser.add_argument("--no-warmup", dest="warmup", action="store_const", const=None,
@@ -421,8 +417,7 @@ def main(argv: list[str] | None = None) -> None:
                                           for feature in (MONITOR_FEATURES if name == "monitor" else (name,))))
     feature_columns(hidden_features)
     algorithm = algorithm_class(args.algo)
-    hyperparams = load_hyperparams(args.hyperparams, args.env_id, algorithm,  # what is left after the pops goes to it
-                                   dict(args.overrides))
+    hyperparams = load_hyperparams(args.hyperparams, args.env_id, algorithm)  # what is left after the pops goes to it
     n_envs = args.n_envs or int(hyperparams["n_envs"])
     total_timesteps = args.timesteps or int(hyperparams["n_timesteps"])
     del hyperparams["n_envs"], hyperparams["n_timesteps"]

@@ -5,8 +5,12 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
+import torch
 
 from train import choose_learner, choose_recipe
+from train.studies import training
+
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def test_the_learner_rule_takes_the_fastest_setting_not_shown_worse() -> None:
@@ -16,10 +20,17 @@ def test_the_learner_rule_takes_the_fastest_setting_not_shown_worse() -> None:
     assert choose_learner.choose(speed, {"fast": 0.0}) == "fast"  # an interval reaching 0 is not shown worse
 
 
-def test_a_candidate_is_train_ppo_set_arguments() -> None:
-    assert choose_learner.set_arguments({"n_envs": 256, "learning_rate": 0.003}) == [
-        "--set", "n_envs=256", "--set", "learning_rate=0.003"]
-    assert choose_learner.CANDIDATES["base"] == {}
+def test_a_candidate_is_a_hyperparameter_file_train_ppo_reads(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.chdir(ROOT)
+    path = choose_learner.write_hyperparams("small_relu_256", tmp_path)
+    loaded = training.load_hyperparams(path)
+    assert loaded["n_envs"] == 256 and loaded["policy_kwargs"]["activation_fn"] is torch.nn.ReLU
+    assert training.load_hyperparams(choose_learner.write_hyperparams("base", tmp_path)) == training.load_hyperparams(
+        ROOT / "hyperparams" / "ppo.yml")
+    assert choose_learner.write_hyperparams("small_relu_256", tmp_path) == path  # the same again: kept
+    path.write_text(path.read_text().replace("256", "512"))
+    with pytest.raises(FileExistsError, match="other hyperparameters"):
+        choose_learner.write_hyperparams("small_relu_256", tmp_path)
 
 
 def test_a_recipe_names_its_runs_by_glob(tmp_path: Path) -> None:

@@ -370,26 +370,3 @@ def test_the_shipped_recurrent_hyperparameters_load() -> None:
     loaded = training.load_hyperparams(ROOT / "hyperparams" / "ppo_lstm.yml", "TimeGapMonitor-v1", RecurrentPPO)
     assert loaded["policy"] == "MlpLstmPolicy" and loaded["policy_kwargs"]["lstm_hidden_size"] == 64
 
-
-def test_set_overrides_a_hyperparameter_as_the_yml_would_hold_it(tmp_path: Path) -> None:
-    assert training.parse_override("n_epochs=4") == ("n_epochs", 4)
-    assert training.parse_override("learning_rate=3e-3") == ("learning_rate", 0.003)
-    assert training.parse_override("policy_kwargs=dict(net_arch=[32, 32])") == ("policy_kwargs",
-                                                                                "dict(net_arch=[32, 32])")
-    with pytest.raises(ValueError, match="KEY=VALUE"):
-        training.parse_override("n_epochs")
-    loaded = training.load_hyperparams(ROOT / "hyperparams" / "ppo.yml", overrides={
-        "n_envs": 8, "policy_kwargs": "dict(net_arch=[8], activation_fn=nn.ReLU)"})
-    assert loaded["n_envs"] == 8 and loaded["policy_kwargs"] == {"net_arch": [8], "activation_fn": torch.nn.ReLU}
-    with pytest.raises(ValueError, match="n_epoch = 3: unknown"):
-        training.load_hyperparams(ROOT / "hyperparams" / "ppo.yml", overrides={"n_epoch": 3})
-    hyperparams = tmp_path / "ppo.yml"
-    hyperparams.write_text(yaml.safe_dump({DEFAULT_TASK: {
-        "n_envs": 4, "n_timesteps": 64, "policy": "MlpPolicy", "n_steps": 16, "batch_size": 32, "n_epochs": 1,
-        "env_kwargs": {"config": {"episode_duration": 10.0}}}}))
-    out = tmp_path / "run"
-    train_ppo.main(["--hyperparams", str(hyperparams), "--no-warmup", "--out", str(out), "--curve-freq", "0",
-                    "--no-progress-bar", "--set", "n_envs=2", "--set", "policy_kwargs=dict(net_arch=[8])"])
-    model = PPO.load(out / "model.zip", device="cpu")
-    assert model.n_envs == 2 and model.policy.net_arch == [8]
-    assert "--set n_envs=2" in (out / "training.md").read_text()  # the command says what was overridden

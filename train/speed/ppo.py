@@ -82,21 +82,27 @@ class PPOSplit:
         return 1.0 / (1.0 - self.env_share)
 
 
-def measure(rollouts: int, overrides: dict[str, Any] | None = None, hyperparams: Path = HYPERPARAMS) -> PPOSplit:
+def measure(rollouts: int, shrink: dict[str, int] | None = None, hyperparams: Path = HYPERPARAMS) -> PPOSplit:
     """Time ``rollouts`` rollouts and updates of PPO after one untimed rollout (torch's start-up).
 
-    ``overrides`` replace keys of the default task's section of ``hyperparams`` (as ``train_ppo --set`` does):
-    another setting to compare, or a smaller one for a smoke test.
+    ``shrink`` overrides n_envs, n_steps, batch_size or n_epochs (for a smoke test).
     """
     if rollouts < 1:
         raise ValueError(f"rollouts = {rollouts}: must be >= 1")
-    arguments = load_hyperparams(hyperparams, overrides=overrides)
+    arguments = load_hyperparams(hyperparams)
     n_envs = int(arguments.pop("n_envs"))
     policy = arguments.pop("policy")
     normalize = arguments.pop("normalize", False)
     env_kwargs = arguments.pop("env_kwargs", None) or {}
     for key in ("n_timesteps", "frame_stack"):
         arguments.pop(key, None)
+    for key, value in (shrink or {}).items():
+        if key == "n_envs":
+            n_envs = value
+        elif key in ("n_steps", "batch_size", "n_epochs"):
+            arguments[key] = value
+        else:
+            raise ValueError(f"shrink[{key!r}] = {value}: only n_envs, n_steps, batch_size and n_epochs")
     torch.set_num_threads(1)  # as train_ppo does
     env = Stopwatch(TimeGapVecEnv(n_envs, **env_kwargs))
     outer: Stopwatch = env
@@ -112,5 +118,4 @@ def measure(rollouts: int, overrides: dict[str, Any] | None = None, hyperparams:
     seconds = time.perf_counter() - start
     setting = {"n_envs": n_envs, "n_steps": model.n_steps, "batch_size": model.batch_size, "n_epochs": model.n_epochs}
     normalize_seconds = outer.seconds - env.seconds if outer is not env else 0.0
-    env.close()
     return PPOSplit(setting, model.num_timesteps - before, seconds, env.seconds, normalize_seconds)

@@ -30,11 +30,9 @@ RUN_KEYS = {"n_envs", "n_timesteps", "policy", "normalize", "frame_stack", "env_
 STRING_KWARGS = ("policy_kwargs", "normalize")  # may be Python expressions as in rl-zoo3: "dict(net_arch=[64])"
 
 
-def load_hyperparams(path: Path, env_id: str = DEFAULT_TASK, algorithm: Any = None,
-                     overrides: dict[str, Any] | None = None) -> dict[str, Any]:
-    """The ``env_id`` section of an rl-zoo3-style yml with ``overrides`` (key: value, as the yml would hold them)
-    put over it, expressions in ``STRING_KWARGS`` evaluated, its keys checked against ``algorithm``'s arguments
-    (default: stable-baselines3's PPO)."""
+def load_hyperparams(path: Path, env_id: str = DEFAULT_TASK, algorithm: Any = None) -> dict[str, Any]:
+    """The ``env_id`` section of an rl-zoo3-style yml, expressions in ``STRING_KWARGS`` evaluated, its keys checked
+    against ``algorithm``'s arguments (default: stable-baselines3's PPO)."""
     import torch  # only here: the library steps the env without torch
     from stable_baselines3 import PPO
 
@@ -44,7 +42,7 @@ def load_hyperparams(path: Path, env_id: str = DEFAULT_TASK, algorithm: Any = No
         document = yaml.safe_load(file)
     if not isinstance(document, dict) or env_id not in document:
         raise ValueError(f"hyperparams = {str(path)!r}: needs a top-level key {env_id!r}")
-    hyperparams = {**document[env_id], **(overrides or {})}
+    hyperparams = dict(document[env_id])
     allowed = RUN_KEYS | (set(inspect.signature(algorithm).parameters) - {"env", "seed", "tensorboard_log", "device"})
     for key, value in hyperparams.items():
         if key == "warmup":
@@ -63,21 +61,6 @@ def load_hyperparams(path: Path, env_id: str = DEFAULT_TASK, algorithm: Any = No
     return hyperparams
 
 
-def parse_override(text: str) -> tuple[str, Any]:
-    """``KEY=VALUE`` (``--set``'s form) as (key, value), the value read as YAML: ``n_epochs=4`` -> ("n_epochs", 4),
-    ``learning_rate=3e-3`` -> ("learning_rate", 0.003), ``policy_kwargs=dict(net_arch=[32])`` -> a string, evaluated
-    as the yml's would be."""
-    key, equals, value = text.partition("=")
-    if not equals or not key.strip():
-        raise ValueError(f"--set {text!r}: must be KEY=VALUE, such as n_epochs=4")
-    parsed = yaml.safe_load(value)
-    if isinstance(parsed, str) and "e" in parsed.lower():  # YAML 1.1 reads 3e-3 as a string; the yml writes !!float
-        try:
-            parsed = float(parsed)
-        except ValueError:
-            pass
-    return key.strip(), parsed
-
 
 def with_env_config(env_kwargs: dict[str, Any], overrides: dict[str, Any]) -> dict[str, Any]:
     """``env_kwargs`` (gym.make's) with ``overrides`` merged into its ``config``."""
@@ -85,4 +68,4 @@ def with_env_config(env_kwargs: dict[str, Any], overrides: dict[str, Any]) -> di
 
 
 __all__ = ["CURVE_COLUMNS", "CURVE_FILE", "RUN_KEYS",
-           "STRING_KWARGS", "check_seeds", "load_hyperparams", "parse_override", "with_env_config"]
+           "STRING_KWARGS", "check_seeds", "load_hyperparams", "with_env_config"]
