@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
 import pytest
 import torch
 
@@ -42,3 +43,17 @@ def test_a_recipe_names_its_runs_by_glob(tmp_path: Path) -> None:
         choose_recipe.parse_recipe(f"real={tmp_path}/nothing*")
     with pytest.raises(ValueError, match="NAME=RUN"):
         choose_recipe.parse_recipe("real")
+
+
+def test_the_answer_to_an_alarm_is_the_setting_change_after_its_onset() -> None:
+    from train.policy_behaviour import ANSWER_WINDOW, Episode, statistics
+
+    steps = 12
+    setting = np.full(steps, 1.6)
+    setting[4 + ANSWER_WINDOW - 1:] = 1.0  # down on the window's last decision
+    alarm = np.zeros(steps, dtype=bool)
+    alarm[[4, 5, 10]] = True  # two onsets: 4 (answered down) and 10 (not answered: nothing changes after it)
+    found = statistics([Episode(np.arange(1.0, steps + 1), setting, alarm)], preferred=1.6)
+    assert found["onsets"] == 2 and found["answered_down"] == 0.5 and found["answered_up"] == 0.0
+    assert found["changes"] == 1 and found["alarms"] == 3
+    assert found["at_preferred"] == (4 + ANSWER_WINDOW - 1) / steps
