@@ -107,6 +107,8 @@ RECIPES: dict[str, tuple[str, ...]] = {
     "ppo": ("results/ppo_v1", *(f"results/recipes/ppo_seed{seed}" for seed in range(1, 5))),
     "ppo_nomonitor": ("results/ppo_v1_nomonitor", *(f"results/recipes/ppo_nomonitor_seed{seed}" for seed in range(1, 5))),
     "ppo_rawgap": ("results/ppo_v1_rawgap", *(f"results/recipes/ppo_rawgap_seed{seed}" for seed in range(1, 5))),
+    # issue 39: the default mix plus the training part of the real drivers, real-car followers 4x as often
+    "ppo_real": tuple(f"results/recipes/ppo_real_seed{seed}" for seed in range(5)),
 }
 RULES = (RULE, "chart_step", "v2v_aware")  # the rules every benchmark plays
 REFERENCES = TASK_RECORD.references  # played; "hindsight" is derived
