@@ -68,14 +68,20 @@ train: $(STAMP)  # the committed models: PPO on the default task and its two mon
 	  $(PY) -m train.train_ppo --seed $$seed --hide-features monitor --out results/recipes/ppo_nomonitor_seed$$seed && \
 	  $(PY) -m train.train_ppo --seed $$seed --env-config '{"monitor": {"estimator": "raw_gap"}}' --out results/recipes/ppo_rawgap_seed$$seed || exit 1; \
 	done
+	for seed in 0 1 2 3 4; do \
+	  $(PY) -m train.train_ppo --seed $$seed --env-config "$$(cat hyperparams/real_traffic.json)" --curve-freq 0 --out results/recipes/ppo_real_seed$$seed || exit 1; \
+	done
 
-recipes: $(STAMP)  # the other recipes tried on the default task (issue 25), one seed each (~1 h)
+recipes: $(STAMP)  # the other recipes tried (issue 25), one seed each (~1 h); issue 39's learner and recipe choice (~1.5 h)
 	$(PY) -m train.train_ppo --timesteps 6000000 --out results/recipes/ppo_6m
 	$(PY) -m train.train_ppo --env-config '{"action_mode": "platoon"}' --out results/recipes/ppo_absolute
 	$(PY) -m train.train_ppo --frame-stack 4 --out results/recipes/ppo_stack4
 	$(PY) -m train.train_ppo --algo ppo_lstm --out results/recipes/ppo_lstm
 	$(PY) -m train.train_ppo --cost-budget 0.05 --out results/recipes/ppo_lagrange_0.05
 	$(PY) -m train.train_ppo --cost-budget 0.1 --out results/recipes/ppo_lagrange_0.1
+	$(RUN) train.choose_learner --out results/learner --force
+	$(RUN) train.choose_recipe --recipe ppo=results/ppo_v1,'results/recipes/ppo_seed?' --recipe ppo_real='results/recipes/ppo_real_seed?' --out results/recipe_choice --force
+	$(RUN) train.policy_behaviour --policy ppo_real=results/recipes/ppo_real_seed0 --policy ppo=results/ppo_v1 --out results/policy_behaviour --force
 
 bench: $(STAMP)  # speed, as ratios to references run in the same process
 	$(RUN) train.bench --out runs/bench.md

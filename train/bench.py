@@ -88,6 +88,7 @@ FULL = Sizes(12, 20000, 1000, 25, {1: 20000, 64: 5000, 1024: 1000}, (256, 1024, 
              (4096, 65536), 64, 100, 300, 3, 8, None)
 QUICK = Sizes(1, 20, 20, 3, {1: 20, 64: 10, 1024: 10}, (4, 8, 16), 0.0, 2, 2, (8, 16), 4, 5, 5, 1, 1,
               {"n_envs": 4, "n_steps": 8, "batch_size": 16, "n_epochs": 1})
+FAST_HYPERPARAMS = bench_ppo.HYPERPARAMS.parent / "ppo_fast.yml"  # train.choose_learner's choice (results/learner)
 TICKS_PER_BLOCK = 10  # the simulator advances a decision's ticks in one call, as the env does
 WARM_UP_STEPS = 20  # untimed steps first: numba kernels load (or compile) on their first call
 
@@ -332,6 +333,7 @@ def cold_start_rows(sizes: Sizes) -> list[Row]:
 def ppo_rows(sizes: Sizes) -> list[Row]:
     """Rows of measurement 5."""
     split = bench_ppo.measure(sizes.ppo_rollouts, sizes.ppo_shrink)
+    fast = bench_ppo.measure(sizes.ppo_rollouts, sizes.ppo_shrink, FAST_HYPERPARAMS)
     setting = ", ".join(f"{key} {value}" for key, value in split.setting.items())
     return [
         Row(f"PPO, make train's setting ({setting}): env's share of model.learn [%]", f"{split.env_share:.1%}",
@@ -340,6 +342,10 @@ def ppo_rows(sizes: Sizes) -> list[Row]:
         Row("PPO: the most its throughput could gain with a free env, 1 / (1 - env share)",
             f"{split.most_gain_if_env_free:.2f}x", "", "", "claim no more"),
         Row("PPO, make train's setting [env steps/s of learning]", f"{split.steps_per_second:,.0f}"),
+        Row("PPO, hyperparams/ppo_fast.yml (train.choose_learner's choice) [env steps/s of learning]",
+            f"{fast.steps_per_second:,.0f}", f"{split.steps_per_second:,.0f} (make train's setting)",
+            f"{fast.steps_per_second / split.steps_per_second:.2f}x",
+            "issue 39: >= 5x: " + ("met" if fast.steps_per_second >= 5 * split.steps_per_second else "NOT met")),
     ]
 
 

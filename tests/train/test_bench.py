@@ -47,6 +47,7 @@ def expected_measures(sizes: bench.Sizes) -> list[str]:
         "PPO, make train's setting (",
         "PPO: the most its throughput could gain",
         "PPO, make train's setting [env steps/s",
+        "PPO, hyperparams/ppo_fast.yml",
         *[f"simulator, {n} envs" for n in sizes.ticks],
         "monitor, 1024 x 5",
     ]
