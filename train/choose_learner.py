@@ -172,7 +172,8 @@ def report(rows: list[dict[str, Any]], chosen: str, args: argparse.Namespace) ->
 
 def main(argv: list[str] | None = None) -> None:
     args = parse_args(argv)
-    if args.out.exists() and (args.out.is_file() or any(args.out.iterdir())) and not args.force:
+    cli.output_dir(args.out)
+    if args.out.exists() and any(args.out.iterdir()) and not args.force:
         raise FileExistsError(f"--out {args.out}: exists; --force replaces it (or give another --out)")
     names = ["base", *(name for name in args.candidates if name != "base")]
     files = {name: write_hyperparams(name, args.runs) for name in names}

@@ -35,6 +35,7 @@ from timegap_env.tasks import SELECTION_SEED_START, get_task
 GROUPS = ("default", "ngsim", "openacc")  # the groups the recipes are chosen on, unless --groups
 REFERENCES = ("rule_platoon", "v2v_aware")  # the paper's rule and the V2V-aware heuristic
 RULE = "rule_platoon"
+DEFAULT_RECIPES = ("ppo=results/ppo_v1,results/recipes/ppo_seed?", "ppo_real=results/recipes/ppo_real_seed?")
 
 
 def parse_recipe(text: str) -> tuple[str, list[Path]]:
@@ -53,8 +54,8 @@ def parse_recipe(text: str) -> tuple[str, list[Path]]:
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(prog="python -m train.choose_recipe", description=__doc__.split("\n")[0])
-    parser.add_argument("--recipe", type=parse_recipe, action="append", required=True, metavar="NAME=RUNS",
-                        help="a recipe and its runs (repeatable)")
+    parser.add_argument("--recipe", type=parse_recipe, action="append", metavar="NAME=RUNS",
+                        help="a recipe and its runs (repeatable; default: " + " and ".join(DEFAULT_RECIPES) + ")")
     parser.add_argument("--groups", nargs="+", default=list(GROUPS),
                         help="groups of the default task to play (default: %(default)s)")
     parser.add_argument("--episodes", type=cli.count, default=1000,
@@ -62,7 +63,10 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--out", type=Path, default=Path("runs/recipe-choice"),
                         help="the report's directory (default: %(default)s)")
     parser.add_argument("--force", action="store_true", help="replace --out if it exists")
-    return parser.parse_args(argv)
+    args = parser.parse_args(argv)
+    if args.recipe is None:
+        args.recipe = [parse_recipe(recipe) for recipe in DEFAULT_RECIPES]
+    return args
 
 
 def returns_of(policy: Any, config: Any, seeds: range) -> tuple[np.ndarray, np.ndarray]:
@@ -74,7 +78,8 @@ def returns_of(policy: Any, config: Any, seeds: range) -> tuple[np.ndarray, np.n
 
 def main(argv: list[str] | None = None) -> None:
     args = parse_args(argv)
-    if args.out.exists() and (args.out.is_file() or any(args.out.iterdir())) and not args.force:
+    cli.output_dir(args.out)
+    if args.out.exists() and any(args.out.iterdir()) and not args.force:
         raise FileExistsError(f"--out {args.out}: exists; --force replaces it (or give another --out)")
     task = get_task(DEFAULT_TASK)
     groups = [task.group(name) for name in args.groups]

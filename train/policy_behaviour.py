@@ -39,6 +39,7 @@ from timegap_env.leaders.scenarios import missing_data
 from timegap_env.tasks import SELECTION_SEED_START, get_task
 
 RULE = "rule_platoon"
+DEFAULT_POLICIES = ("ppo_real=results/recipes/ppo_real_seed0", "ppo=results/ppo_v1")
 ANSWER_WINDOW = 5  # decisions after an alarm's onset in which a setting change counts as its answer [-]
 
 
@@ -109,18 +110,22 @@ def make_policy(spec: str, config: EnvConfig) -> Any:
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(prog="python -m train.policy_behaviour", description=__doc__.split("\n")[0])
-    parser.add_argument("--policy", action="append", required=True, metavar="NAME=RUN|NAME",
-                        help="a trained run or a registry name (repeatable); the paper's rule is always added")
+    parser.add_argument("--policy", action="append", metavar="NAME=RUN|NAME",
+                        help="a trained run or a registry name (repeatable; default: " + " and ".join(DEFAULT_POLICIES)
+                             + "); the paper's rule is always added")
     parser.add_argument("--episodes", type=cli.count, default=100,
                         help="selection episodes per kind of traffic, seeds from 5000 (default: %(default)s)")
     parser.add_argument("--out", type=Path, default=Path("runs/behaviour"), help="output directory (default: %(default)s)")
     parser.add_argument("--force", action="store_true", help="replace --out if it exists")
-    return parser.parse_args(argv)
+    args = parser.parse_args(argv)
+    args.policy = args.policy or list(DEFAULT_POLICIES)
+    return args
 
 
 def main(argv: list[str] | None = None) -> None:
     args = parse_args(argv)
-    if args.out.exists() and (args.out.is_file() or any(args.out.iterdir())) and not args.force:
+    cli.output_dir(args.out)
+    if args.out.exists() and any(args.out.iterdir()) and not args.force:
         raise FileExistsError(f"--out {args.out}: exists; --force replaces it (or give another --out)")
     specs = list(dict.fromkeys([*args.policy, RULE]))
     task = get_task(DEFAULT_TASK)

@@ -17,7 +17,7 @@ from timegap_env.leaders import default_openacc_dir
 
 ROOT = Path(__file__).resolve().parents[2]
 SCRIPTS = sorted(path.stem for path in (ROOT / "train").glob("*.py") if 'if __name__ == "__main__":' in path.read_text())
-DIRECTORY_OUT = ["calibrate_openacc", "choose_degradation_mix", "compare_curves", "demo", "detection_benchmark", "benchmark",
+DIRECTORY_OUT = ["calibrate_openacc", "choose_degradation_mix", "choose_learner", "choose_recipe", "policy_behaviour", "compare_curves", "demo", "detection_benchmark", "benchmark",
                  "field_validation", "reproduce_paper", "sumo_report", "sweep", "task_map", "train_morl", "train_ppo", "train_rllib", "tune_rule",
                  "value_of_information"]  # --out is a directory
 FILE_OUT = ["bench", "bench_ray", "choose_window", "record_behaviour", "render_frame", "results_index"]  # --out is a file
