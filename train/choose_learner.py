@@ -38,7 +38,7 @@ import yaml
 from timegap_env import DEFAULT_TASK, cli
 from timegap_env.experiments import registry
 from timegap_env.experiments.rollout import rollout
-from timegap_env.experiments.stats import bootstrap_mean
+from timegap_env.experiments.stats import bootstrap_mean, paired_mde
 from timegap_env.tasks import SELECTION_SEED_START, get_task
 from train.speed import ppo as speed_ppo
 
@@ -55,7 +55,7 @@ CANDIDATES: dict[str, dict[str, Any]] = {  # name: overrides of HYPERPARAMS' def
                                    learning_rate=3e-3),
 }
 COLUMNS = ("candidate", "seed", "overrides", "steps_per_second", "speed_ratio", "timesteps", "train_seconds",
-           "episodes", "mean_return", "collision_rate", "difference", "difference_low", "difference_high")
+           "episodes", "mean_return", "collision_rate", "difference", "difference_low", "difference_high", "mde")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -152,20 +152,24 @@ def report(rows: list[dict[str, Any]], chosen: str, args: argparse.Namespace) ->
         "Rule, fixed before training: the fastest candidate whose return is not shown worse than base's (the 95 % "
         "interval of the difference, paired by episode and pooled over the training seeds, reaches 0).",
         "",
+        f"n: {args.seeds} training seeds x {args.episodes} episodes per candidate; mde: the smallest difference to base "
+        "detectable at 80 % power (paired by episode, seeds pooled); collisions apart from the return.",
+        "",
         "| candidate | overrides of hyperparams/ppo.yml's section | env steps/s of learning (x base) | mean return per seed "
-        "| collisions /100 | difference to base [95 % CI] |",
-        "|---|---|---|---|---|---|",
+        "| collisions /100 | difference to base [95 % CI] | mde |",
+        "|---|---|---|---|---|---|---|",
     ]
     for name in dict.fromkeys(row["candidate"] for row in rows):
         mine = [row for row in rows if row["candidate"] == name]
         first = mine[0]
         returns = ", ".join(f"{row['mean_return']:.1f}" for row in mine)
         collisions = 100 * np.mean([row["collision_rate"] for row in mine])
+        mde = "" if name == "base" else f"{first['mde']:.1f}"
         difference = (f"{first['pooled_difference']:+.1f} [{first['pooled_low']:+.1f}, {first['pooled_high']:+.1f}]"
                       if name != "base" else "")
         lines.append(f"| {'**' + name + '**' if name == chosen else name} | `{first['overrides'] or '-'}` | "
                      f"{first['steps_per_second']:,.0f} (x{first['speed_ratio']:.2f}) | {returns} | {collisions:.2f} "
-                     f"| {difference} |")
+                     f"| {difference} | {mde} |")
     lines += ["", f"Chosen: **{chosen}**.", ""]
     return "\n".join(lines)
 
@@ -187,6 +191,7 @@ def main(argv: list[str] | None = None) -> None:
     for name in names:
         pooled = np.mean([run.returns for run in scored[name]], axis=0)
         difference, low, high = bootstrap_mean(pooled - base)
+        mde = paired_mde(pooled - base) if name != "base" else float("nan")
         for seed, run in enumerate(scored[name]):
             per_seed = bootstrap_mean(run.returns - scored["base"][seed].returns)
             rows.append({"candidate": name, "seed": seed, "overrides": CANDIDATES[name],
@@ -195,7 +200,7 @@ def main(argv: list[str] | None = None) -> None:
                          "episodes": args.episodes, "mean_return": float(run.returns.mean()),
                          "collision_rate": float(run.collided.mean()), "difference": per_seed[0],
                          "difference_low": per_seed[1], "difference_high": per_seed[2],
-                         "pooled_difference": difference, "pooled_low": low, "pooled_high": high})
+                         "pooled_difference": difference, "pooled_low": low, "pooled_high": high, "mde": mde})
     chosen = choose(speed, {row["candidate"]: row["pooled_high"] for row in rows if row["candidate"] != "base"})
     work = cli.work_directory(args.out)
     with open(work / "learner.csv", "w", newline="") as file:
