@@ -13,6 +13,10 @@ episodes apart, and the paired difference to the best constant of these same epi
 "loses at most 2 %" scale) and to the paper's rule. The best constant is chosen on the episodes it is compared on,
 so it is a generous reference.
 
+The rule, fixed before the recipes it chooses among were trained: the chosen recipe is the one whose worst group
+loses least to that group's best constant (the largest minimum over groups of "vs the best constant", in % of its
+|return|), the scale of the benchmark's "loses at most 2 %"; ties go to the recipe named first.
+
 Writes ``<out>/selection.csv`` and ``<out>/README.md`` (``--out`` must not exist; ``--force`` replaces it).
 """
 
@@ -77,6 +81,13 @@ def returns_of(policy: Any, config: Any, seeds: range) -> tuple[np.ndarray, np.n
             np.array([bool(record.summary["collision"]) for record in records]))
 
 
+def choose(rows: list[dict[str, Any]], recipes: list[str]) -> tuple[str, float]:
+    """The recipe of :data:`rows` (``main``'s) whose worst group's ``vs_best_percent`` is largest, and that value."""
+    worst = {recipe: min(row["vs_best_percent"] for row in rows if row["policy"] == recipe) for recipe in recipes}
+    chosen = max(recipes, key=lambda recipe: worst[recipe])  # max keeps the first of equals
+    return chosen, worst[chosen]
+
+
 def main(argv: list[str] | None = None) -> None:
     args = parse_args(argv)
     cli.output_dir(args.out)
@@ -131,6 +142,12 @@ def main(argv: list[str] | None = None) -> None:
               f"{row['vs_best_percent']:+.1f} [{row['vs_best_low']:+.1f}, {row['vs_best_high']:+.1f}] | "
               f"{row['vs_rule']:+.1f} [{row['vs_rule_low']:+.1f}, {row['vs_rule_high']:+.1f}] |"
               for row in rows if not row["policy"].startswith("fixed_") or row["policy"] == row["best_constant"]]
+    names = [name for name, _ in args.recipe]
+    chosen, worst = choose(rows, names)
+    lines += ["", f"Chosen: **{chosen}**, whose worst group loses {-worst:.1f} % of the best constant's |return| "
+              "(the rule: the largest worst-group share; " + ", ".join(
+                  f"{name} {min(row['vs_best_percent'] for row in rows if row['policy'] == name):+.1f} %"
+                  for name in names) + ")."]
     (work / "README.md").write_text("\n".join(lines) + "\n")
     cli.publish(work, args.out)
 

@@ -57,3 +57,11 @@ def test_the_answer_to_an_alarm_is_the_setting_change_after_its_onset() -> None:
     assert found["onsets"] == 2 and found["answered_down"] == 0.5 and found["answered_up"] == 0.0
     assert found["changes"] == 1 and found["alarms"] == 3
     assert found["at_preferred"] == (4 + ANSWER_WINDOW - 1) / steps
+
+
+def test_the_recipe_rule_takes_the_smallest_worst_group_loss() -> None:
+    rows = [{"policy": "a", "vs_best_percent": +6.0}, {"policy": "a", "vs_best_percent": -30.0},
+            {"policy": "b", "vs_best_percent": -1.0}, {"policy": "b", "vs_best_percent": -10.0},
+            {"policy": "fixed_1.6", "vs_best_percent": 0.0}]
+    assert choose_recipe.choose(rows, ["a", "b"]) == ("b", -10.0)
+    assert choose_recipe.choose(rows[:2] + [{"policy": "c", "vs_best_percent": -30.0}], ["a", "c"])[0] == "a"
