@@ -122,9 +122,10 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                         help="seed of PyTorch and the envs; phase k's sub-env i gets seed + k n_envs + i (default: 0)")
     parser.add_argument("--n-envs", type=cli.count, default=None,
                         help="platoons stepped together (default: n_envs of the yml)")
-    parser.add_argument("--env-config", type=cli.json_object, default={},
-                        help="EnvConfig overrides as JSON, merged into the config of env_kwargs and of the warm-up's "
-                             "(default: none), e.g. '{\"action_mode\": \"platoon\"}'")
+    parser.add_argument("--env-config", type=cli.json_object, action="append", default=[],
+                        help="EnvConfig overrides as JSON, merged into the config of env_kwargs and of the warm-up's; "
+                             "repeatable, later top-level fields replacing earlier ones (default: none), e.g. "
+                             "'{\"action_mode\": \"platoon\"}'")
     parser.add_argument("--hide-features", nargs="+", default=[], metavar="FEATURE",
                         help="observation features the policy never sees (read as 0; an ablation): names of "
                              "timegap_env.envs.observation.FEATURES, or 'monitor' for the monitor's six (default: none)")
@@ -155,6 +156,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--progress-bar", action=argparse.BooleanOptionalAction, default=True,
                         help="show SB3's progress bar (default: on)")
     args = parser.parse_args(argv)
+    args.env_config = {field: value for overrides in args.env_config for field, value in overrides.items()}
     if args.hyperparams is None:
         args.hyperparams = Path(f"hyperparams/{args.algo}.yml")
     return args

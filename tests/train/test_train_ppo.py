@@ -185,6 +185,13 @@ def test_env_config_overrides_merge_into_a_phase_config() -> None:
     assert train_ppo.with_env_config(kwargs, {}) is kwargs
 
 
+def test_env_config_repeats_merge_left_to_right() -> None:
+    args = train_ppo.parse_args(["--env-config", '{"monitor": {"estimator": "bayes"}, "n_followers": 3}',
+                                 "--env-config", '{"monitor": {"estimator": "raw_gap"}}'])
+    assert args.env_config == {"monitor": {"estimator": "raw_gap"}, "n_followers": 3}
+    assert train_ppo.parse_args([]).env_config == {}
+
+
 def test_training_seeds_stay_below_evaluation_seeds(tmp_path: Path) -> None:
     seed = EVAL_SEED_START - 10
     with pytest.raises(ValueError, match=f"seed = {seed}"):
