@@ -58,7 +58,7 @@ reproduce: $(SUMO_STAMP)  # every committed result of the core venv, then the be
 	$(MAKE) benchmark
 	$(RUN) train.bench --out results/bench.md
 
-train: $(STAMP)  # the committed models: PPO on the default task and its two monitor ablations, 5 training seeds each; v0's PPO
+train: $(STAMP)  # the committed models: PPO on the default task and its two monitor ablations, 5 training seeds each; v0's PPO; issue 39: ppo_real, its two ablations, ppo_real_fast and ppo_real_start, 5 seeds each
 	$(PY) -m train.train_ppo --env-id TimeGapMonitor-v0 --out results/v0/ppo
 	$(PY) -m train.train_ppo --out results/ppo_v1
 	$(PY) -m train.train_ppo --hide-features monitor --out results/ppo_v1_nomonitor
@@ -69,7 +69,11 @@ train: $(STAMP)  # the committed models: PPO on the default task and its two mon
 	  $(PY) -m train.train_ppo --seed $$seed --env-config '{"monitor": {"estimator": "raw_gap"}}' --out results/recipes/ppo_rawgap_seed$$seed || exit 1; \
 	done
 	for seed in 0 1 2 3 4; do \
-	  $(PY) -m train.train_ppo --seed $$seed --env-config "$$(cat hyperparams/real_traffic.json)" --curve-freq 0 --out results/recipes/ppo_real_seed$$seed || exit 1; \
+	  $(PY) -m train.train_ppo --seed $$seed --env-config "$$(cat hyperparams/real_traffic.json)" --curve-freq 0 --out results/recipes/ppo_real_seed$$seed && \
+	  $(PY) -m train.train_ppo --seed $$seed --env-config "$$(cat hyperparams/real_traffic.json)" --curve-freq 0 --hide-features monitor --out results/recipes/ppo_real_nomonitor_seed$$seed && \
+	  $(PY) -m train.train_ppo --seed $$seed --env-config "$$(cat hyperparams/real_traffic.json)" --curve-freq 0 --env-config '{"monitor": {"estimator": "raw_gap"}}' --out results/recipes/ppo_real_rawgap_seed$$seed && \
+	  $(PY) -m train.train_ppo --seed $$seed --env-config "$$(cat hyperparams/real_traffic.json)" --curve-freq 0 --hyperparams hyperparams/ppo_fast.yml --timesteps 8000000 --out results/recipes/ppo_real_fast_seed$$seed && \
+	  $(PY) -m train.train_ppo --seed $$seed --env-config "$$(cat hyperparams/real_traffic.json)" --curve-freq 0 --env-config '{"random_initial_setting": false}' --out results/recipes/ppo_real_start_seed$$seed || exit 1; \
 	done
 
 recipes: $(STAMP)  # the other recipes tried (issue 25), one seed each (~1 h); issue 39's learner and recipe choice (~1.5 h)
@@ -80,7 +84,7 @@ recipes: $(STAMP)  # the other recipes tried (issue 25), one seed each (~1 h); i
 	$(PY) -m train.train_ppo --cost-budget 0.05 --out results/recipes/ppo_lagrange_0.05
 	$(PY) -m train.train_ppo --cost-budget 0.1 --out results/recipes/ppo_lagrange_0.1
 	$(RUN) train.choose_learner --out results/learner --force
-	$(RUN) train.choose_recipe --recipe ppo=results/ppo_v1,'results/recipes/ppo_seed?' --recipe ppo_real='results/recipes/ppo_real_seed?' --out results/recipe_choice --force
+	$(RUN) train.choose_recipe --out results/recipe_choice --force  # the recipes: choose_recipe's DEFAULT_RECIPES
 	$(RUN) train.policy_behaviour --policy ppo_real=results/recipes/ppo_real_seed0 --policy ppo=results/ppo_v1 --out results/policy_behaviour --force
 
 bench: $(STAMP)  # speed, as ratios to references run in the same process

@@ -73,7 +73,8 @@ from timegap_env.experiments import registry
 from timegap_env.experiments.backends import Backend, add_arguments
 from timegap_env.experiments.rollout import rollout
 from timegap_env.experiments.stats import (
-    WILSON_Z, episodes_for, iqm, paired_mde, performance_profile, probability_of_improvement_interval,
+    WILSON_Z, episodes_for, iqm, paired_mde, performance_profile, probability_of_improvement,
+    probability_of_improvement_interval,
     stratified_bootstrap, wilson_interval,
 )
 from train.studies.task_map import Plan, References, choose_references
@@ -109,6 +110,13 @@ RECIPES: dict[str, tuple[str, ...]] = {
     "ppo_rawgap": ("results/ppo_v1_rawgap", *(f"results/recipes/ppo_rawgap_seed{seed}" for seed in range(1, 5))),
     # issue 39: the default mix plus the training part of the real drivers, real-car followers 4x as often
     "ppo_real": tuple(f"results/recipes/ppo_real_seed{seed}" for seed in range(5)),
+    # and its twins: the monitor's posterior replaced by the raw gap, the monitor's features hidden
+    "ppo_real_rawgap": tuple(f"results/recipes/ppo_real_rawgap_seed{seed}" for seed in range(5)),
+    "ppo_real_nomonitor": tuple(f"results/recipes/ppo_real_nomonitor_seed{seed}" for seed in range(5)),
+    # ppo_real with the fast learner (hyperparams/ppo_fast.yml) for 8 M steps; ppo_real starting at 1.6 s as every
+    # held-out episode does (training otherwise starts at a random setting)
+    "ppo_real_fast": tuple(f"results/recipes/ppo_real_fast_seed{seed}" for seed in range(5)),
+    "ppo_real_start": tuple(f"results/recipes/ppo_real_start_seed{seed}" for seed in range(5)),
 }
 RULES = (RULE, "chart_step", "v2v_aware")  # the rules every benchmark plays
 REFERENCES = TASK_RECORD.references  # played; "hindsight" is derived
@@ -634,6 +642,32 @@ def aggregate(results: Mapping[str, GroupResult]) -> list[dict[str, Any]]:
     return rows
 
 
+TWINS = {"rawgap": "the raw gap (s - s0)/v for the posterior", "nomonitor": "the monitor's features hidden"}
+
+
+def monitor_question(results: Mapping[str, GroupResult]) -> list[dict[str, Any]]:
+    """Issue 39's monitor question: per recipe with an ablated twin (recipe + ``_rawgap`` or ``_nomonitor``, its
+    own training seeds), per group and over all groups: the mean normalised score of each and the probability that
+    a seed of the recipe beats a seed of its twin (all groups: with its stratified bootstrap interval)."""
+    runs = recipe_runs(results)
+    rows: list[dict[str, Any]] = []
+    for recipe, names in runs.items():
+        for suffix, what in TWINS.items():
+            if (twin := f"{recipe}_{suffix}") not in runs:
+                continue
+            mine, theirs = score_matrix(results, names), score_matrix(results, runs[twin])
+            for column, group in enumerate(results):
+                rows.append({"recipe": recipe, "twin": twin, "ablation": what, "group": group,
+                             "score": float(mine[:, column].mean()), "twin_score": float(theirs[:, column].mean()),
+                             "poi": probability_of_improvement(mine[:, [column]], theirs[:, [column]]),
+                             "poi_low": math.nan, "poi_high": math.nan})
+            poi = probability_of_improvement_interval(mine, theirs)
+            rows.append({"recipe": recipe, "twin": twin, "ablation": what, "group": "all (IQM)",
+                         "score": iqm(mine.ravel()), "twin_score": iqm(theirs.ravel()),
+                         **dict(zip(("poi", "poi_low", "poi_high"), poi))})
+    return rows
+
+
 # --- writing ------------------------------------------------------------------------------------------------------------
 
 def fmt(value: float, digits: int = 1) -> str:
@@ -756,6 +790,16 @@ def markdown(benchmark: Benchmark, board: Sequence[Mapping[str, Any]]) -> str:
     for row in benchmark.aggregates:
         lines.append(f"| {row['policy']} | {row['runs']} | {row['groups']} | {ci(row, 'iqm')} | "
                      f"{ci(row, 'poi_over_rule', 2) if 'poi_over_rule' in row else 'n/a'} |")
+    if twins := monitor_question(benchmark.groups):
+        lines += ["", "## The monitor question: each recipe against its twins", "",
+                  "A twin is the recipe trained the same way on its own seeds with the monitor's posterior replaced by "
+                  "the raw gap, or with the monitor's features hidden. Scores in % over each group's best constant "
+                  "(seed means; all groups: the IQM over seeds x groups); P: the probability that a seed of the "
+                  "recipe beats a seed of the twin in that group (all groups: averaged, with its stratified bootstrap "
+                  "interval).", "",
+                  "| recipe | twin | group | recipe's score | twin's score | P(recipe beats twin) |", "|---|---|---|---|---|---|"]
+        lines += [f"| {row['recipe']} | {row['twin']} | {row['group']} | {row['score']:+.1f} | {row['twin_score']:+.1f} "
+                  f"| {ci(row, 'poi', 2) if not math.isnan(row['poi_low']) else fmt(row['poi'], 2)} |" for row in twins]
     lines += ["", *(f"- group {name} left out: {why}" for name, why in benchmark.left_out.items()), ""]
     return "\n".join(lines)
 

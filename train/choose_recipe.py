@@ -40,7 +40,8 @@ from timegap_env.tasks import SELECTION_SEED_START, get_task
 GROUPS = ("default", "ngsim", "openacc")  # the groups the recipes are chosen on, unless --groups
 REFERENCES = ("rule_platoon", "v2v_aware")  # the paper's rule and the V2V-aware heuristic
 RULE = "rule_platoon"
-DEFAULT_RECIPES = ("ppo=results/ppo_v1,results/recipes/ppo_seed?", "ppo_real=results/recipes/ppo_real_seed?")
+DEFAULT_RECIPES = ("ppo=results/ppo_v1,results/recipes/ppo_seed?", "ppo_real=results/recipes/ppo_real_seed?",
+                   "ppo_real_fast=results/recipes/ppo_real_fast_seed?", "ppo_real_start=results/recipes/ppo_real_start_seed?")
 
 
 def parse_recipe(text: str) -> tuple[str, list[Path]]:
@@ -60,7 +61,7 @@ def parse_recipe(text: str) -> tuple[str, list[Path]]:
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(prog="python -m train.choose_recipe", description=__doc__.split("\n")[0])
     parser.add_argument("--recipe", type=parse_recipe, action="append", metavar="NAME=RUNS",
-                        help="a recipe and its runs (repeatable; default: " + " and ".join(DEFAULT_RECIPES) + ")")
+                        help="a recipe and its runs (repeatable; default: " + ", ".join(DEFAULT_RECIPES) + ")")
     parser.add_argument("--groups", nargs="+", default=list(GROUPS),
                         help="groups of the default task to play (default: %(default)s)")
     parser.add_argument("--episodes", type=cli.count, default=1000,

@@ -3,6 +3,7 @@ the cache, the lock, and bad command lines as one line (short episodes, small gr
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import pickle
 import subprocess
@@ -193,3 +194,28 @@ def test_the_collision_rate_of_1_0_s_agrees_on_another_range_of_seeds() -> None:
     pooled = sum(counts) / (2 * n)
     z = (counts[0] - counts[1]) / n / np.sqrt(pooled * (1 - pooled) * 2 / n)
     assert 0.015 < pooled < 0.06 and abs(z) < 3.29, (counts, z)
+
+
+def test_the_monitor_question_sets_each_recipe_against_its_twins() -> None:
+    def played(mean: float) -> benchmark.Played:
+        n = 4
+        return benchmark.Played(np.full(n, mean), np.zeros(n), np.zeros(n, bool), np.zeros(n), np.ones(n),
+                                np.array(["x"] * n))
+
+    def group(name: str, means: dict[str, float]) -> benchmark.GroupResult:
+        entries = {policy: benchmark.Entry(policy, "constant" if policy == "fixed_1.0" else "learned",
+                                           lambda config, refs: None, "", policy.rsplit("@", 1)[0], 0)
+                   for policy in means}
+        return benchmark.GroupResult(dataclasses.replace(TINY, name=name), (10_000, 4), "fixed_1.0", "fixed_1.0", {},
+                                     {policy: played(mean) for policy, mean in means.items()}, entries, [])
+
+    results = {"a": group("a", {"fixed_1.0": -100.0, "r@0": -90.0, "r@1": -95.0, "r_rawgap@0": -99.0,
+                                "r_rawgap@1": -98.0}),
+               "b": group("b", {"fixed_1.0": -100.0, "r@0": -110.0, "r@1": -95.0, "r_rawgap@0": -100.0,
+                                "r_rawgap@1": -100.0})}
+    rows = benchmark.monitor_question(results)
+    assert [(row["twin"], row["group"]) for row in rows] == [("r_rawgap", "a"), ("r_rawgap", "b"),
+                                                              ("r_rawgap", "all (IQM)")]
+    assert rows[0]["score"] == pytest.approx(7.5) and rows[0]["twin_score"] == pytest.approx(1.5)
+    assert rows[0]["poi"] == 1.0 and rows[1]["poi"] == 0.5  # b: one seed ahead of both twins', one behind both
+    assert rows[2]["poi"] == 0.75 and rows[2]["poi_low"] <= 0.75 <= rows[2]["poi_high"]
