@@ -10,6 +10,9 @@ STAMP := $(VENV)/.installed
 SUMO_STAMP := $(VENV)/.sumo
 EXTRAS := dev,train,render,docs
 RUN := MPLBACKEND=Agg $(PY) -m
+TRAIN_BACKEND ?= --backend serial  # make train's seeds side by side: TRAIN_BACKEND="--backend ray --address auto"
+SEEDS := $(RUN) train.train_seeds --seeds 0 1 2 3 4 $(TRAIN_BACKEND)
+REAL := --env-config "$$(cat hyperparams/real_traffic.json)" --curve-freq 0  # issue 39's training traffic
 
 .PHONY: install demo test benchmark reproduce train recipes bench typecheck package clients sumo clean
 
@@ -68,13 +71,11 @@ train: $(STAMP)  # the committed models: PPO on the default task and its two mon
 	  $(PY) -m train.train_ppo --seed $$seed --hide-features monitor --out results/recipes/ppo_nomonitor_seed$$seed && \
 	  $(PY) -m train.train_ppo --seed $$seed --env-config '{"monitor": {"estimator": "raw_gap"}}' --out results/recipes/ppo_rawgap_seed$$seed || exit 1; \
 	done
-	for seed in 0 1 2 3 4; do \
-	  $(PY) -m train.train_ppo --seed $$seed --env-config "$$(cat hyperparams/real_traffic.json)" --curve-freq 0 --out results/recipes/ppo_real_seed$$seed && \
-	  $(PY) -m train.train_ppo --seed $$seed --env-config "$$(cat hyperparams/real_traffic.json)" --curve-freq 0 --hide-features monitor --out results/recipes/ppo_real_nomonitor_seed$$seed && \
-	  $(PY) -m train.train_ppo --seed $$seed --env-config "$$(cat hyperparams/real_traffic.json)" --curve-freq 0 --env-config '{"monitor": {"estimator": "raw_gap"}}' --out results/recipes/ppo_real_rawgap_seed$$seed && \
-	  $(PY) -m train.train_ppo --seed $$seed --env-config "$$(cat hyperparams/real_traffic.json)" --curve-freq 0 --hyperparams hyperparams/ppo_fast.yml --timesteps 8000000 --out results/recipes/ppo_real_fast_seed$$seed && \
-	  $(PY) -m train.train_ppo --seed $$seed --env-config "$$(cat hyperparams/real_traffic.json)" --curve-freq 0 --env-config '{"random_initial_setting": false}' --out results/recipes/ppo_real_start_seed$$seed || exit 1; \
-	done
+	$(SEEDS) --out 'results/recipes/ppo_real_seed{seed}' -- $(REAL)
+	$(SEEDS) --out 'results/recipes/ppo_real_nomonitor_seed{seed}' -- $(REAL) --hide-features monitor
+	$(SEEDS) --out 'results/recipes/ppo_real_rawgap_seed{seed}' -- $(REAL) --env-config '{"monitor": {"estimator": "raw_gap"}}'
+	$(SEEDS) --out 'results/recipes/ppo_real_fast_seed{seed}' -- $(REAL) --hyperparams hyperparams/ppo_fast.yml --timesteps 8000000
+	$(SEEDS) --out 'results/recipes/ppo_real_start_seed{seed}' -- $(REAL) --env-config '{"random_initial_setting": false}'
 
 recipes: $(STAMP)  # the other recipes tried (issue 25), one seed each (~1 h); issue 39's learner and recipe choice (~1.5 h)
 	$(PY) -m train.train_ppo --timesteps 6000000 --out results/recipes/ppo_6m
