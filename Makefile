@@ -61,7 +61,7 @@ reproduce: $(SUMO_STAMP)  # every committed result of the core venv, then the be
 	$(MAKE) benchmark
 	$(RUN) train.bench --out results/bench.md
 
-train: $(STAMP)  # the committed models: PPO on the default task and its two monitor ablations, 5 training seeds each; v0's PPO; issue 39: ppo_real, its two ablations, ppo_real_fast and ppo_real_start, 5 seeds each
+train: $(STAMP)  # the committed models: PPO on the default task and its two monitor ablations, 5 training seeds each; v0's PPO; issue 39: ppo_real, its two ablations, ppo_real_fast, ppo_real_start and ppo_real_safe, 5 seeds each
 	$(PY) -m train.train_ppo --env-id TimeGapMonitor-v0 --out results/v0/ppo
 	$(PY) -m train.train_ppo --out results/ppo_v1
 	$(PY) -m train.train_ppo --hide-features monitor --out results/ppo_v1_nomonitor
@@ -76,6 +76,7 @@ train: $(STAMP)  # the committed models: PPO on the default task and its two mon
 	$(SEEDS) --out 'results/recipes/ppo_real_rawgap_seed{seed}' -- $(REAL) --env-config '{"monitor": {"estimator": "raw_gap"}}'
 	$(SEEDS) --out 'results/recipes/ppo_real_fast_seed{seed}' -- $(REAL) --hyperparams hyperparams/ppo_fast.yml --timesteps 8000000
 	$(SEEDS) --out 'results/recipes/ppo_real_start_seed{seed}' -- $(REAL) --env-config '{"random_initial_setting": false}'
+	$(SEEDS) --out 'results/recipes/ppo_real_safe_seed{seed}' -- $(REAL) --collision-budget 0.005 --lagrange-rate 10
 
 recipes: $(STAMP)  # the other recipes tried (issue 25), one seed each (~1 h); issue 39's learner and recipe choice (~1.5 h)
 	$(PY) -m train.train_ppo --timesteps 6000000 --out results/recipes/ppo_6m

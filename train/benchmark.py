@@ -117,6 +117,9 @@ RECIPES: dict[str, tuple[str, ...]] = {
     # held-out episode does (training otherwise starts at a random setting)
     "ppo_real_fast": tuple(f"results/recipes/ppo_real_fast_seed{seed}" for seed in range(5)),
     "ppo_real_start": tuple(f"results/recipes/ppo_real_start_seed{seed}" for seed in range(5)),
+    # ppo_real with a budget on collisions (0.5 per 100 training episodes, half the V2V-aware heuristic's rate on the
+    # default mix's selection episodes; Lagrange rate 10), set before it trained: safety as a constraint (item 1)
+    "ppo_real_safe": tuple(f"results/recipes/ppo_real_safe_seed{seed}" for seed in range(5)),
 }
 RULES = (RULE, "chart_step", "v2v_aware")  # the rules every benchmark plays
 REFERENCES = TASK_RECORD.references  # played; "hindsight" is derived

@@ -41,7 +41,8 @@ GROUPS = ("default", "ngsim", "openacc")  # the groups the recipes are chosen on
 REFERENCES = ("rule_platoon", "v2v_aware")  # the paper's rule and the V2V-aware heuristic
 RULE = "rule_platoon"
 DEFAULT_RECIPES = ("ppo=results/ppo_v1,results/recipes/ppo_seed?", "ppo_real=results/recipes/ppo_real_seed?",
-                   "ppo_real_fast=results/recipes/ppo_real_fast_seed?", "ppo_real_start=results/recipes/ppo_real_start_seed?")
+                   "ppo_real_fast=results/recipes/ppo_real_fast_seed?", "ppo_real_start=results/recipes/ppo_real_start_seed?",
+                   "ppo_real_safe=results/recipes/ppo_real_safe_seed?")
 
 
 def parse_recipe(text: str) -> tuple[str, list[Path]]:

@@ -132,8 +132,13 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--cost-budget", type=float, default=None,
                         help="constrained PPO: the mean step cost (info['cost']) allowed; a Lagrange multiplier on the "
                              "cost, raised by dual ascent while the cost exceeds it (default: unconstrained)")
+    parser.add_argument("--collision-budget", type=float, default=None,
+                        help="constrained PPO on safety alone: the collisions per training episode allowed; a Lagrange "
+                             "multiplier taken off the reward of each step that ends an episode in a collision, raised "
+                             "by dual ascent while the rollout's collision rate exceeds it (default: unconstrained)")
     parser.add_argument("--lagrange-rate", type=float, default=1.0,
-                        help="the multiplier's step per unit of cost over the budget, per rollout (default: %(default)s)")
+                        help="the multipliers' step per unit of cost (or collision rate) over the budget, per rollout "
+                             "(default: %(default)s)")
     parser.add_argument("--frame-stack", type=cli.count, default=None,
                         help="observations the policy reads at once (default: frame_stack of the yml, else 1)")
     parser.add_argument("--hyperparams", type=Path, default=None,
@@ -253,6 +258,38 @@ class LagrangeMultiplier(BaseCallback):
         self.adapter().cost_weight = self.multiplier
         self.logger.record("lagrange/mean_cost", mean_cost)
         self.logger.record("lagrange/multiplier", self.multiplier)
+
+
+class CollisionBudget(BaseCallback):
+    """Constrained PPO by dual ascent on the collision rate: ``multiplier`` is taken off the reward PPO learns from
+    (after VecNormalize's scaling: in its units) on each step that ends an episode in a collision, and after every
+    rollout ``multiplier`` <- max(0, multiplier + ``rate`` (the rollout's collisions per ended episode - ``budget``));
+    the env's own collision term stays in the reward. Logged as ``collision_budget/*``."""
+
+    def __init__(self, budget: float, rate: float) -> None:
+        super().__init__()
+        self.budget, self.rate = budget, rate
+        self.multiplier = 0.0
+        self.collisions, self.episodes = 0, 0
+
+    def _on_rollout_start(self) -> None:
+        self.collisions, self.episodes = 0, 0
+
+    def _on_step(self) -> bool:
+        rewards, infos = self.locals["rewards"], self.locals["infos"]  # rewards: the array the rollout buffer stores
+        for i in np.flatnonzero(self.locals["dones"]):
+            self.episodes += 1
+            if summary_of(infos[i]).get("collision"):
+                self.collisions += 1
+                rewards[i] -= self.multiplier
+        return True
+
+    def _on_rollout_end(self) -> None:
+        if self.episodes:
+            rate = self.collisions / self.episodes
+            self.multiplier = max(0.0, self.multiplier + self.rate * (rate - self.budget))
+            self.logger.record("collision_budget/collision_rate", rate)
+        self.logger.record("collision_budget/multiplier", self.multiplier)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -414,7 +451,11 @@ def main(argv: list[str] | None = None) -> None:
         raise ValueError(f"cost_budget = {args.cost_budget}: must be a finite number >= 0")
     if not (math.isfinite(args.lagrange_rate) and args.lagrange_rate > 0):
         raise ValueError(f"lagrange_rate = {args.lagrange_rate}: must be a finite number > 0")
+    if args.collision_budget is not None and not (math.isfinite(args.collision_budget) and 0 <= args.collision_budget <= 1):
+        raise ValueError(f"collision_budget = {args.collision_budget}: must be a number in [0, 1] (collisions per episode)")
     lagrange = LagrangeMultiplier(args.cost_budget, args.lagrange_rate) if args.cost_budget is not None else None
+    collision_budget = (CollisionBudget(args.collision_budget, args.lagrange_rate)
+                        if args.collision_budget is not None else None)
     hidden_features = tuple(dict.fromkeys(feature for name in args.hide_features
                                           for feature in (MONITOR_FEATURES if name == "monitor" else (name,))))
     feature_columns(hidden_features)
@@ -469,9 +510,9 @@ def main(argv: list[str] | None = None) -> None:
     if args.resume:  # every file checked before anything is written
         if not model_path.is_file():
             raise FileNotFoundError(f"--resume: no checkpoint {model_path}")
-        if lagrange is not None:
-            raise ValueError("--resume with --cost-budget: the Lagrange multiplier is not saved with the checkpoint; "
-                             "train a constrained run in one go")
+        if lagrange is not None or collision_budget is not None:
+            raise ValueError("--resume with --cost-budget or --collision-budget: the Lagrange multiplier is not saved "
+                             "with the checkpoint; train a constrained run in one go")
         if normalize and not stats_path.is_file():
             raise FileNotFoundError(f"--resume with normalize = {normalize!r}: no statistics {stats_path}")
         if not normalize and stats_path.is_file():
@@ -549,7 +590,7 @@ def main(argv: list[str] | None = None) -> None:
             phase_start, clock = model.num_timesteps, time.perf_counter()
             callbacks = [checkpoint, EpisodeSummaries(),
                          LearningCurve(args.curve_freq, evaluated, reference, work, curve, frame_stack, hidden_features),
-                         *([lagrange] if lagrange else [])]
+                         *([lagrange] if lagrange else []), *([collision_budget] if collision_budget else [])]
             model.learn(
                 total_timesteps=phase_end - model.num_timesteps,
                 callback=callbacks,
@@ -578,6 +619,9 @@ def main(argv: list[str] | None = None) -> None:
         lagrange_row = "" if lagrange is None else (
             f"\n| constrained: mean step cost budget, rate; the multiplier at the end | {lagrange.budget:g}, "
             f"{lagrange.rate:g}; {lagrange.multiplier:.3f} |")
+        lagrange_row += "" if collision_budget is None else (
+            f"\n| constrained: collisions per episode budget, rate; the multiplier at the end | "
+            f"{collision_budget.budget:g}, {collision_budget.rate:g}; {collision_budget.multiplier:.3f} |")
         hidden_row = f"\n| hidden features (read as 0) | {', '.join(hidden_features)} |" if hidden_features else ""
         report = f"""# {type(model).__name__} on {args.env_id}
 

@@ -335,6 +335,24 @@ def test_a_cost_budget_trains_with_a_lagrange_multiplier(tmp_path: Path) -> None
         train_ppo.main(["--cost-budget", "-1", "--out", str(tmp_path / "other")])
 
 
+def test_a_collision_budget_penalises_the_collided_episodes_last_step_and_rises_with_the_rate() -> None:
+    model = PPO("MlpPolicy", TimeGapVecEnv(3, {"episode_duration": 3.0}), n_steps=8, batch_size=24, device="cpu")
+    model.set_logger(configure(None, []))
+    callback = train_ppo.CollisionBudget(budget=0.25, rate=4.0)
+    callback.init_callback(model)
+    callback.multiplier = 2.0
+    rewards = np.array([-1.0, -1.0, -1.0], dtype=np.float32)
+    infos = [{"episode_collision": np.True_}, {"episode_collision": np.False_}, {}]
+    callback.on_rollout_start()
+    callback.update_locals({"rewards": rewards, "dones": np.array([True, True, False]), "infos": infos})
+    callback.on_step()
+    assert rewards.tolist() == [-3.0, -1.0, -1.0]  # the collided episode's step alone
+    callback.on_rollout_end()
+    assert callback.multiplier == pytest.approx(2.0 + 4.0 * (1 / 2 - 0.25))
+    with pytest.raises(ValueError, match="collision_budget = 2.0"):
+        train_ppo.main(["--collision-budget", "2", "--out", "/nonexistent/run"])
+
+
 def test_the_adapter_takes_the_weighted_cost_off_its_rewards() -> None:
     envs = {weight: TimeGapVecEnv(2, config={"episode_duration": 10.0}, task_id="TimeGapMonitor-v1") for weight in (0.0, 3.0)}
     envs[3.0].cost_weight = 3.0
