@@ -72,3 +72,25 @@ def test_detection_benchmark_on_ray_equals_serial(tmp_path: Path, capsys: pytest
         runs[backend] = files(tmp_path / backend)
     assert runs["ray"] == runs["serial"]  # detection.md, detection.csv, detection.png
     assert f"calibration: {RAY_SPREAD}2 tasks" in capsys.readouterr().out
+
+
+def test_a_recipes_seeds_train_side_by_side_on_ray_as_one_after_another(tmp_path: Path) -> None:
+    """train_seeds: two seeds as Ray tasks give the runs the serial backend gives (SB3 on CPU: the same parameters)."""
+    import yaml
+
+    from timegap_env import DEFAULT_TASK
+    from train import train_seeds
+
+    hyperparams = tmp_path / "ppo.yml"
+    hyperparams.write_text(yaml.safe_dump({DEFAULT_TASK: {
+        "n_envs": 2, "n_timesteps": 64, "policy": "MlpPolicy", "normalize": True, "n_steps": 16, "batch_size": 32,
+        "n_epochs": 1, "policy_kwargs": "dict(net_arch=[8])", "env_kwargs": {"config": {"episode_duration": 10.0}}}}))
+    ppo = ["--", "--hyperparams", str(hyperparams), "--no-warmup", "--curve-freq", "0"]
+    train_seeds.main(["--seeds", "0", "1", "--out", f"{tmp_path}/ray{{seed}}", "--backend", "ray", *ppo])
+    train_seeds.main(["--seeds", "0", "1", "--out", f"{tmp_path}/serial{{seed}}", *ppo])
+    from stable_baselines3 import PPO
+
+    for seed in (0, 1):
+        ray_run, serial = (PPO.load(tmp_path / f"{where}{seed}" / "model.zip", device="cpu") for where in ("ray", "serial"))
+        assert all((a == b).all() for a, b in zip(ray_run.policy.state_dict().values(), serial.policy.state_dict().values()))
+    assert "--seed 1" in (tmp_path / "ray1" / "training.md").read_text()
