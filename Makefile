@@ -87,7 +87,7 @@ recipes: $(STAMP)  # the other recipes tried (issue 25), one seed each (~1 h); i
 	$(PY) -m train.train_ppo --cost-budget 0.1 --out results/recipes/ppo_lagrange_0.1
 	$(RUN) train.choose_learner --out results/learner --force
 	$(RUN) train.choose_recipe --out results/recipe_choice --force  # the recipes: choose_recipe's DEFAULT_RECIPES
-	$(RUN) train.policy_behaviour --policy ppo_real=results/recipes/ppo_real_seed0 --policy ppo=results/ppo_v1 --out results/policy_behaviour --force
+	$(RUN) train.policy_behaviour --out results/policy_behaviour --force
 
 bench: $(STAMP)  # speed, as ratios to references run in the same process
 	$(RUN) train.bench --out runs/bench.md

@@ -39,7 +39,8 @@ from timegap_env.leaders.scenarios import missing_data
 from timegap_env.tasks import SELECTION_SEED_START, get_task
 
 RULE = "rule_platoon"
-DEFAULT_POLICIES = ("ppo_real=results/recipes/ppo_real_seed0", "ppo=results/ppo_v1")
+DEFAULT_POLICIES = ("ppo_real_fast=results/recipes/ppo_real_fast_seed0", "ppo_real=results/recipes/ppo_real_seed0",
+                    "ppo=results/ppo_v1")
 ANSWER_WINDOW = 5  # decisions after an alarm's onset in which a setting change counts as its answer [-]
 
 
@@ -111,7 +112,7 @@ def make_policy(spec: str, config: EnvConfig) -> Any:
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(prog="python -m train.policy_behaviour", description=__doc__.split("\n")[0])
     parser.add_argument("--policy", action="append", metavar="NAME=RUN|NAME",
-                        help="a trained run or a registry name (repeatable; default: " + " and ".join(DEFAULT_POLICIES)
+                        help="a trained run or a registry name (repeatable; default: " + ", ".join(DEFAULT_POLICIES)
                              + "); the paper's rule is always added")
     parser.add_argument("--episodes", type=cli.count, default=100,
                         help="selection episodes per kind of traffic, seeds from 5000 (default: %(default)s)")
