@@ -78,7 +78,7 @@ train: $(STAMP)  # the committed models: PPO on the default task and its two mon
 	$(SEEDS) --out 'results/recipes/ppo_real_start_seed{seed}' -- $(REAL) --env-config '{"random_initial_setting": false}'
 	$(SEEDS) --out 'results/recipes/ppo_real_safe_seed{seed}' -- $(REAL) --collision-budget 0.005 --lagrange-rate 10
 
-recipes: $(STAMP)  # the other recipes tried (issue 25), one seed each (~1 h); issue 39's learner and recipe choice (~1.5 h)
+recipes: $(STAMP)  # the other recipes tried (issue 25), one seed each (~1 h); issue 39's learner choice (~1.5 h), recipe choice among 5 recipes and behaviour (~30 min)
 	$(PY) -m train.train_ppo --timesteps 6000000 --out results/recipes/ppo_6m
 	$(PY) -m train.train_ppo --env-config '{"action_mode": "platoon"}' --out results/recipes/ppo_absolute
 	$(PY) -m train.train_ppo --frame-stack 4 --out results/recipes/ppo_stack4

@@ -73,6 +73,10 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     args = parser.parse_args(argv)
     if args.recipe is None:
         args.recipe = [parse_recipe(recipe) for recipe in DEFAULT_RECIPES]
+    names = [name for name, _ in args.recipe]
+    if clash := sorted({name for name in names if names.count(name) > 1 or name.startswith("fixed_")
+                        or name in REFERENCES}):
+        parser.error(f"--recipe {clash}: each recipe's name once, and none a constant's or a reference's")
     return args
 
 

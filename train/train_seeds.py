@@ -46,8 +46,12 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                         help="each seed's run directory, with {seed} in it (relative: to the repository's root)")
     backends.add_arguments(parser)
     args = parser.parse_args(mine)
-    if "{seed}" not in args.out:
-        parser.error(f"--out {args.out!r}: must hold {{seed}}, e.g. 'runs/recipe/seed{{seed}}'")
+    if "{seed}" not in args.out or "{" in args.out.replace("{seed}", "") or "}" in args.out.replace("{seed}", ""):
+        parser.error(f"--out {args.out!r}: must hold {{seed}} and no other braces, e.g. 'runs/recipe/seed{{seed}}'")
+    if args.address is not None and Path(args.out).is_absolute():
+        parser.error(f"--out {args.out!r}: relative with --address (a node writes it inside its copy of the repository)")
+    if bad := [seed for seed in args.seeds if seed < 0]:
+        parser.error(f"--seeds {bad}: must be >= 0")
     if len(set(args.seeds)) != len(args.seeds):
         parser.error(f"--seeds {args.seeds}: each seed once")
     if given := [flag for flag in rest if flag.split("=")[0] in OWN_FLAGS]:
@@ -68,7 +72,7 @@ def train_one(arguments: list[str], seed: int, out: str) -> Trained:
     where = root()
     command = [sys.executable, "-m", "train.train_ppo", *arguments, "--seed", str(seed), "--out", out,
                "--no-progress-bar"]
-    done = subprocess.run(command, cwd=where, capture_output=True, text=True)
+    done = subprocess.run(command, cwd=where, stderr=subprocess.PIPE, text=True)  # its progress shown as it goes
     if done.returncode != 0:
         return Trained(f"{socket.gethostname()}:{where}", {}, f"train_ppo exited with {done.returncode}: "
                        + "\n".join(done.stderr.strip().splitlines()[-5:]))
@@ -89,7 +93,7 @@ def bring_back(run: Path, files: dict[str, bytes]) -> None:
 def main(argv: list[str] | None = None) -> None:
     args = parse_args(argv)
     backend = backends.Backend.from_args(args)
-    outs = [args.out.format(seed=seed) for seed in args.seeds]
+    outs = [args.out.replace("{seed}", str(seed)) for seed in args.seeds]
     for out in outs:
         cli.output_dir(root() / out)
     here = f"{socket.gethostname()}:{root()}"

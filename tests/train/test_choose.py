@@ -43,6 +43,9 @@ def test_a_recipe_names_its_runs_by_glob(tmp_path: Path) -> None:
         choose_recipe.parse_recipe(f"real={tmp_path}/nothing*")
     with pytest.raises(ValueError, match="NAME=RUN"):
         choose_recipe.parse_recipe("real")
+    for clash in ("real", "v2v_aware", "fixed_1.0"):
+        with pytest.raises(SystemExit):  # a name twice, or a name whose rows would merge with a reference's
+            choose_recipe.parse_args(["--recipe", f"real={tmp_path}/seed0", "--recipe", f"{clash}={tmp_path}/seed1"])
 
 
 def test_the_answer_to_an_alarm_is_the_setting_change_after_its_onset() -> None:

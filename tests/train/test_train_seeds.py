@@ -19,6 +19,9 @@ TINY = {"n_envs": 2, "n_timesteps": 64, "policy": "MlpPolicy", "normalize": True
     (["--seeds", "0", "--out", "runs/x"], "must hold {seed}"),
     (["--seeds", "1", "1", "--out", "runs/x{seed}"], "each seed once"),
     (["--seeds", "1", "--out", "runs/x{seed}", "--", "--seed", "3"], "set per seed"),
+    (["--seeds", "1", "--out", "runs/x{seed}{y}"], "no other braces"),
+    (["--seeds", "-1", "--out", "runs/x{seed}"], "must be >= 0"),
+    (["--seeds", "1", "--out", "/abs/x{seed}", "--backend", "ray", "--address", "auto"], "relative with --address"),
 ])
 def test_bad_command_lines_are_refused(arguments: list[str], says: str, capsys: pytest.CaptureFixture[str]) -> None:
     with pytest.raises(SystemExit):
@@ -30,13 +33,14 @@ def test_each_seed_is_a_train_ppo_run_and_a_failed_one_stops_no_other(tmp_path: 
     hyperparams = tmp_path / "ppo.yml"
     hyperparams.write_text(yaml.safe_dump({DEFAULT_TASK: TINY}))
     out = f"{tmp_path}/seed{{seed}}"
-    train_seeds.main(["--seeds", "3", "--out", out, "--", "--hyperparams", str(hyperparams), "--no-warmup",
-                      "--curve-freq", "0"])
-    report = (tmp_path / "seed3" / "training.md").read_text()
-    assert "--seed 3" in report and "| timesteps, this command / total | 64 / 64 |" in report
+    (tmp_path / "seed4").mkdir()
+    (tmp_path / "seed4" / "notes.txt").write_text("keep me")  # train_ppo refuses an --out holding other files
     with pytest.raises(RuntimeError, match=r"--seeds \[4\]"):
-        train_seeds.main(["--seeds", "4", "--out", out, "--", "--hyperparams", str(hyperparams), "--timesteps", "0"])
-    assert not (tmp_path / "seed4").exists() and (tmp_path / "seed3" / "model.zip").is_file()
+        train_seeds.main(["--seeds", "4", "3", "--out", out, "--", "--hyperparams", str(hyperparams), "--no-warmup",
+                          "--curve-freq", "0"])
+    report = (tmp_path / "seed3" / "training.md").read_text()  # seed 3 trained after seed 4 failed
+    assert "--seed 3" in report and "| timesteps, this command / total | 64 / 64 |" in report
+    assert [path.name for path in (tmp_path / "seed4").iterdir()] == ["notes.txt"]
 
 
 def test_a_run_trained_on_another_node_is_written_here(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
