@@ -225,15 +225,26 @@ class EpisodeSummaries(BaseCallback):
         return True
 
 
-class LagrangeMultiplier(BaseCallback):
-    """Constrained PPO by dual ascent on the env's step cost (``info["cost"]``'s, reward.COST_TERMS): the rewards PPO
-    learns from are the env's minus ``multiplier`` times the cost, and after every rollout ``multiplier`` <-
-    max(0, multiplier + ``rate`` (the rollout's mean cost per step - ``budget``)); logged as ``lagrange/*``."""
+class DualAscent(BaseCallback):
+    """A Lagrange multiplier raised by dual ascent: after every rollout :meth:`ascend` sets ``multiplier`` <-
+    max(0, multiplier + ``rate`` (what the rollout measured - ``budget``)); a subclass measures and applies it."""
 
     def __init__(self, budget: float, rate: float) -> None:
         super().__init__()
         self.budget, self.rate = budget, rate
         self.multiplier = 0.0
+
+    def ascend(self, measured: float) -> None:
+        self.multiplier = max(0.0, self.multiplier + self.rate * (measured - self.budget))
+
+
+class LagrangeMultiplier(DualAscent):
+    """Constrained PPO on the env's step cost (``info["cost"]``'s, reward.COST_TERMS): the rewards PPO learns from
+    are the env's minus ``multiplier`` times the cost, the multiplier ascending on the rollout's mean cost per step;
+    logged as ``lagrange/*``."""
+
+    def __init__(self, budget: float, rate: float) -> None:
+        super().__init__(budget, rate)
         self.cost_sum, self.steps = 0.0, 0
 
     def adapter(self) -> TimeGapVecEnv:
@@ -254,22 +265,20 @@ class LagrangeMultiplier(BaseCallback):
 
     def _on_rollout_end(self) -> None:
         mean_cost = self.cost_sum / max(self.steps, 1)
-        self.multiplier = max(0.0, self.multiplier + self.rate * (mean_cost - self.budget))
+        self.ascend(mean_cost)
         self.adapter().cost_weight = self.multiplier
         self.logger.record("lagrange/mean_cost", mean_cost)
         self.logger.record("lagrange/multiplier", self.multiplier)
 
 
-class CollisionBudget(BaseCallback):
-    """Constrained PPO by dual ascent on the collision rate: ``multiplier`` is taken off the reward PPO learns from
-    (after VecNormalize's scaling: in its units) on each step that ends an episode in a collision, and after every
-    rollout ``multiplier`` <- max(0, multiplier + ``rate`` (the rollout's collisions per ended episode - ``budget``));
-    the env's own collision term stays in the reward. Logged as ``collision_budget/*``."""
+class CollisionBudget(DualAscent):
+    """Constrained PPO on the collision rate: ``multiplier`` is taken off the reward PPO learns from (after
+    VecNormalize's scaling: in its units) on each step that ends an episode in a collision, the multiplier ascending
+    on the rollout's collisions per ended episode; the env's own collision term stays in the reward. Logged as
+    ``collision_budget/*``."""
 
     def __init__(self, budget: float, rate: float) -> None:
-        super().__init__()
-        self.budget, self.rate = budget, rate
-        self.multiplier = 0.0
+        super().__init__(budget, rate)
         self.collisions, self.episodes = 0, 0
 
     def _on_rollout_start(self) -> None:
@@ -287,7 +296,7 @@ class CollisionBudget(BaseCallback):
     def _on_rollout_end(self) -> None:
         if self.episodes:
             rate = self.collisions / self.episodes
-            self.multiplier = max(0.0, self.multiplier + self.rate * (rate - self.budget))
+            self.ascend(rate)
             self.logger.record("collision_budget/collision_rate", rate)
         self.logger.record("collision_budget/multiplier", self.multiplier)
 
