@@ -14,10 +14,9 @@ while inlining these three added no measurable compile time. ``_nrt`` is a priva
 0.60-0.68); the tests compile every kernel.
 
 A kernel called from Python pays for each array it is handed, at every call (numba unpacks them one by one):
-:class:`Stacked` hands the fused step a structure's arrays of one dtype and shape as the rows of one
-stack, which the structure's owner allocates as such. :func:`prefetch_env` and :func:`prefetch_rows` ask the CPU
-for an env's rows ahead of their use (each layout's ``prefetch`` for all of a structure's), :func:`prefetch_item`
-for one element where an env reads a row in the middle.
+the fused step is handed the env's state as a few blocks (:mod:`timegap_env.state`). :func:`prefetch_env` and
+:func:`prefetch_rows` ask the CPU for an env's rows ahead of their use (a layout's ``prefetch`` for all of a
+state's), :func:`prefetch_item` for one element where an env reads a row in the middle.
 """
 
 from __future__ import annotations
@@ -27,7 +26,7 @@ import gc
 import hashlib
 import pickle
 import sys
-from collections.abc import Callable, Iterable, Iterator, Mapping
+from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -44,81 +43,6 @@ STAGE_KERNEL: dict[str, Any] = {"cache": True, "error_model": "numpy", **NO_ALLO
 
 INLINED_STAGE_KERNEL: dict[str, Any] = {"cache": True, "error_model": "numpy", "inline": "always"}
 
-
-
-class Stacked:
-    """How a NamedTuple of arrays is handed to a kernel as a few arrays, its *form*, and made again inside.
-
-    Each group of ``groups`` names fields of one dtype and shape that its owner allocates as the rows, in the
-    group's order, of one C-contiguous stack (``np.zeros((len(group), *shape))[i]``); the form holds that stack at
-    the place of the group's first field, each other field as it is, and a field of ``nested`` in that
-    structure's own form. :attr:`unstack` (a kernel inlined into its caller) makes the plain tuple of the fields
-    again, views of the stacks, as the stage kernels take their structures (``tuple(value)``).
-    """
-
-    def __init__(self, cls: type, groups: tuple[tuple[str, ...], ...], nested: Mapping[str, Stacked] | None = None
-                 ) -> None:
-        self.cls, self.groups, self.nested = cls, groups, dict(nested or {})
-        STACKED[cls] = self
-        fields: tuple[str, ...] = cls._fields  # type: ignore[attr-defined]
-        named = [name for group in groups for name in group] + list(self.nested)
-        if sorted(set(named)) != sorted(named) or not set(named) <= set(fields):
-            raise ValueError(f"Stacked {cls.__name__}: groups {groups} and nested {list(self.nested)} must name "
-                             f"distinct fields of {fields}")
-        where = {name: (g, row) for g, group in enumerate(groups) for row, name in enumerate(group)}
-        self._places: list[tuple[str, Any]] = []  # what each place of the form holds: a group, a nested or a field
-        rows, hints = [], []  # each field's expression in unstack, each place's hint in prefetch
-        for name in fields:
-            if name in where:
-                group, row = where[name]
-                if ("group", group) not in self._places:
-                    self._places.append(("group", group))
-                    hints.append(f"prefetch_rows(form[{len(self._places) - 1}], e)")
-                rows.append(f"form[{self._places.index(('group', group))}][{row}]")
-            elif name in self.nested:
-                self._places.append(("nested", name))
-                rows.append(f"unstack_{name}(form[{len(self._places) - 1}])")
-                hints.append(f"prefetch_{name}(form[{len(self._places) - 1}], e)")
-            else:
-                self._places.append(("field", name))
-                rows.append(f"form[{len(self._places) - 1}]")
-                hints.append(f"prefetch_env(form[{len(self._places) - 1}], e)")
-        namespace: dict[str, Any] = {"prefetch_rows": prefetch_rows, "prefetch_env": prefetch_env}
-        for name, inner in self.nested.items():
-            namespace[f"unstack_{name}"], namespace[f"prefetch_{name}"] = inner.unstack, inner.prefetch
-        source = (f"def unstack(form):\n    return ({', '.join(rows)},)\n\n\ndef prefetch(form, e):\n"
-                  + "".join(f"    {hint}\n" for hint in hints))
-        exec(compile(source, f"<{cls.__name__}'s Stacked.unstack>", "exec"), namespace)  # noqa: S102
-        self.unstack: Callable[[tuple], tuple] = numba.njit(inline="always")(namespace["unstack"])
-        # hints env e's first cache line of every array of the form in (the envs' axis: a stack's second, a field's
-        # first): the fused step asks for the next env's while it works on one
-        self.prefetch: Callable[[tuple, int], None] = numba.njit(inline="always")(namespace["prefetch"])
-
-    def form(self, value: tuple) -> tuple:
-        """``value`` (a ``cls``) as its kernel takes it; ``ValueError`` if a group's fields are not the rows of one
-        stack."""
-        form: list[Any] = []
-        for kind, key in self._places:
-            if kind == "group":
-                form.append(self._stack(value, self.groups[key]))
-            elif kind == "nested":
-                form.append(self.nested[key].form(getattr(value, key)))
-            else:
-                form.append(getattr(value, key))
-        return tuple(form)
-
-    def _stack(self, value: tuple, group: tuple[str, ...]) -> np.ndarray:
-        """The stack whose rows are ``group``'s fields of ``value``, a view of their memory."""
-        rows = [getattr(value, name) for name in group]
-        first = rows[0]
-        stack = np.lib.stride_tricks.as_strided(first, (len(rows), *first.shape), (first.nbytes, *first.strides))
-        if not (stack.flags.c_contiguous and all(
-                row.dtype == first.dtype and row.shape == first.shape and row.flags.writeable
-                and row.__array_interface__["data"][0] == first.__array_interface__["data"][0] + i * first.nbytes
-                for i, row in enumerate(rows))):
-            raise ValueError(f"{self.cls.__name__} fields {group}: must be the rows, in this order, of one "
-                             "C-contiguous stack (allocate them as np.zeros((len(group), *shape)))")
-        return stack
 
 
 @intrinsic
@@ -212,82 +136,6 @@ def collection_paused() -> Iterator[None]:
             gc.enable()
 
 
-STACKED: dict[type, Stacked] = {}  # each Stacked structure's layout, by its class
-_PACKAGE = __name__.split(".")[0]
-
-
-def restack(root: Any) -> None:
-    """Make the groups of every :class:`Stacked` structure reachable from ``root`` (through tuples, lists, dicts and
-    the attributes of the package's objects) the rows of one stack again, copies of their values, and every reference
-    to a row in that graph the new row: what a copy or a pickle undoes, as it copies each row of a stack apart. For
-    ``__setstate__``."""
-    rows: dict[int, np.ndarray] = {}  # id of an old row -> its new row
-    for value in _reachable(root):
-        stacked = STACKED.get(type(value))
-        if stacked is None:
-            continue
-        for group in stacked.groups:
-            old = [getattr(value, name) for name in group]
-            if not all(isinstance(row, np.ndarray) for row in old) or len({(row.shape, row.dtype) for row in old}) != 1:
-                continue  # not arrays of one shape (e.g. a structure of scalars): nothing to stack
-            try:
-                stacked._stack(value, group)
-            except ValueError:
-                rows.update({id(row): new for row, new in zip(old, np.stack(old))})
-    if rows:
-        _replace_rows(root, rows, {})
-
-
-def _reachable(root: Any) -> Iterable[Any]:
-    """Every object reachable from ``root`` through attributes, tuples, lists and dicts, once each."""
-    seen: set[int] = set()
-    stack = [root]
-    while stack:
-        item = stack.pop()
-        if id(item) in seen or isinstance(item, (np.ndarray, str, bytes, int, float, type)):
-            continue
-        seen.add(id(item))
-        yield item
-        if isinstance(item, (list, tuple)):
-            stack.extend(item)
-        elif isinstance(item, dict):
-            stack.extend(item.values())
-        elif _ours(item):
-            stack.extend(vars(item).values())
-
-
-def _ours(item: Any) -> bool:
-    """``item`` is an object of one of the package's classes or of a subclass of one, with attributes."""
-    return hasattr(item, "__dict__") and any(
-        cls.__module__.split(".")[0] == _PACKAGE for cls in type(item).__mro__[:-1])
-
-
-def _replace_rows(item: Any, rows: dict[int, np.ndarray], done: dict[int, Any]) -> Any:
-    """``item`` with every array of ``rows`` replaced by its new row: tuples made anew, lists, dicts and attributes
-    changed in place."""
-    if isinstance(item, np.ndarray):
-        return rows.get(id(item), item)
-    if id(item) in done or isinstance(item, (str, bytes, int, float, type)):
-        return done.get(id(item), item)
-    done[id(item)] = item
-    if isinstance(item, tuple):
-        parts = [_replace_rows(part, rows, done) for part in item]
-        if any(new is not old for new, old in zip(parts, item)):
-            rebuilt = type(item)._make(parts) if hasattr(item, "_fields") else tuple(parts)  # type: ignore[attr-defined]
-            done[id(item)] = rebuilt
-    elif isinstance(item, list):
-        item[:] = [_replace_rows(part, rows, done) for part in item]
-    elif isinstance(item, dict):
-        for key, value in item.items():
-            item[key] = _replace_rows(value, rows, done)
-    elif _ours(item):
-        for key, value in vars(item).items():
-            new = _replace_rows(value, rows, done)
-            if new is not value:
-                object.__setattr__(item, key, new)
-    return done[id(item)]
-
-
 def follow_sources(modules: tuple[str, ...], reached: tuple[str, ...] = ()) -> None:
     """Make the numba cache of every kernel defined in ``modules`` (imported, by name) fresh exactly while the
     contents of ``modules``' and ``reached``'s files are unchanged; ``reached``: modules whose kernels or constants
@@ -349,5 +197,5 @@ def _kernels(modules: tuple[str, ...]) -> Iterable[Dispatcher]:
                 yield value
 
 
-__all__ = ["INLINED_STAGE_KERNEL", "NO_ALLOCATION", "STACKED", "STAGE_KERNEL", "Stacked", "collection_paused",
-           "compiled_entry", "follow_sources", "prefetch_env", "prefetch_item", "prefetch_rows", "restack"]
+__all__ = ["INLINED_STAGE_KERNEL", "NO_ALLOCATION", "STAGE_KERNEL", "collection_paused", "compiled_entry",
+           "follow_sources", "prefetch_env", "prefetch_item", "prefetch_rows"]

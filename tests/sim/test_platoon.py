@@ -16,7 +16,7 @@ def test_zoh_matches_closed_form_step_response(lag, gain):
     zoh = ZOHCoefficients.for_glvd(np.array([lag]), np.array([gain]), dt)
     x = v = a = np.zeros(1)
     for _ in range(n_ticks):
-        x, v, a = zoh.step(x, v, a, np.array([command]))
+        x, v, a = zoh.step(x, v, a, np.array([command]), dt)
     t = n_ticks * dt
     decay = np.exp(-t / lag)
     assert a[0] == pytest.approx(gain * command * (1 - decay), rel=1e-12)
@@ -27,7 +27,7 @@ def test_zoh_matches_closed_form_step_response(lag, gain):
 def test_zoh_is_not_euler():
     """One Euler tick would give a = K u dt / T; the exact lag gives K u (1 - exp(-dt/T)), which differs."""
     zoh = ZOHCoefficients.for_glvd(np.array([0.45]), np.array([1.0]), 0.1)
-    _, _, a = zoh.step(np.zeros(1), np.zeros(1), np.zeros(1), np.ones(1))
+    _, _, a = zoh.step(np.zeros(1), np.zeros(1), np.zeros(1), np.ones(1), 0.1)
     assert a[0] == pytest.approx(1 - np.exp(-0.1 / 0.45), rel=1e-12)
     assert abs(a[0] - 0.1 / 0.45) > 1e-2
 

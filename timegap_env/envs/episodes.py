@@ -13,7 +13,7 @@ from __future__ import annotations
 import hashlib
 import math
 from collections.abc import Mapping, Sequence
-from typing import Any
+from typing import Annotated, Any, NamedTuple
 
 import numpy as np
 
@@ -30,6 +30,7 @@ from timegap_env.leaders.scenarios import (
     regime_names,
 )
 from timegap_env.sim.degradation import Categorical, Degradation, DegradationDraw, parse_degradations
+from timegap_env.state import OnState, PerEnv, State
 
 RESET_OPTIONS = ("leader_speed", "scenario", "degradation")  # the keys reset(options=...) takes
 LEADER_BATCH = 256  # leaders built at once: a few MB of temporaries, reused rather than mapped afresh
@@ -67,7 +68,21 @@ def check_reset_options(options: Mapping[str, Any] | None) -> dict[str, Any]:
     return options
 
 
-class Episodes:
+class LeaderTrack(NamedTuple):
+    """The leader of each env's episode at every tick ("samples": max_ticks + 1), held at its last value beyond
+    the profile."""
+
+    speed: Annotated[np.ndarray, PerEnv(float, "samples")]  # [m/s]
+    accel: Annotated[np.ndarray, PerEnv(float, "samples")]  # [m/s^2]
+    episode_ticks: Annotated[np.ndarray, PerEnv(np.int64)]  # ticks in the episode [-]
+
+
+def episode_dims(config: EnvConfig) -> dict[str, int]:
+    """The size of :class:`LeaderTrack`'s dimension under ``config``."""
+    return {"samples": config.max_episode_steps * config.ticks_per_decision + 1}
+
+
+class Episodes(OnState):
     """The current episode of each of ``n_envs`` envs.
 
     Per env: ``leader_speed`` [m/s] and ``leader_accel`` [m/s^2] (n_envs, max_ticks + 1), the
@@ -78,18 +93,20 @@ class Episodes:
     and ``packet_loss_keys`` of the V2V losses; ``scenario`` (n_envs,), the leader's name; with ``record_regime`` (info layout "v1"),
     ``regime`` (n_envs, max_ticks + 1) int16, the leader's regime at every tick (an index into
     :func:`~timegap_env.leaders.scenarios.regime_names`, held at its last value beyond the profile), else None.
+    The leader's arrays are :attr:`parts` (:class:`LeaderTrack`), views of ``state`` at ``path`` (their own
+    state when None).
     """
 
-    def __init__(self, config: EnvConfig, n_envs: int, record_regime: bool = True) -> None:
+    def __init__(self, config: EnvConfig, n_envs: int, record_regime: bool = True, state: State | None = None,
+                 path: tuple[str, ...] = ()) -> None:
         unknown = sorted(set(config.scenario_weights) - set(SCENARIOS))
         if unknown:
             raise ValueError(f"EnvConfig.scenario_weights has unknown families {unknown}; known: {sorted(SCENARIOS)}")
         self.config = config
         self.ticks_per_decision = config.ticks_per_decision
         max_ticks = config.max_episode_steps * self.ticks_per_decision
-        self.leader_speed = np.zeros((n_envs, max_ticks + 1))  # [m/s]
-        self.leader_accel = np.zeros((n_envs, max_ticks + 1))  # [m/s^2]
-        self.episode_ticks = np.full(n_envs, max_ticks)
+        self._bind(State(LeaderTrack, episode_dims(config), n_envs) if state is None else state, path)
+        self.parts.episode_ticks[:] = max_ticks
         self.degradations: list[tuple[Degradation, ...]] = [() for _ in range(n_envs)]
         self.dropout_probability = np.zeros(n_envs)
         self.initial_setting = np.full(n_envs, config.platoon.initial_setting)  # [s]
@@ -101,6 +118,10 @@ class Episodes:
         self._families = list(config.scenario_weights)
         self._family_draw = Categorical([config.scenario_weights[f] for f in self._families])
         self._degradation_draw = DegradationDraw(config.degradation, config.platoon.n_followers, config.platoon.dt)
+
+    leader_speed = property(lambda self: self.parts.speed, doc="The leader's speed at every tick (n_envs, max_ticks + 1) [m/s].")
+    leader_accel = property(lambda self: self.parts.accel, doc="Its acceleration (n_envs, max_ticks + 1) [m/s^2].")
+    episode_ticks = property(lambda self: self.parts.episode_ticks, doc="Ticks in each env's episode (n_envs,) [-].")
 
     def draw(self, env: int, rng: np.random.Generator, options: Mapping[str, Any]) -> None:
         """A new episode for ``env`` from ``rng``; ``options`` as checked by :func:`check_reset_options`.

@@ -43,16 +43,16 @@ amplifies disturbances); switching and comfort keep the policy from chattering.
 
 from __future__ import annotations
 
-import collections
 import dataclasses
 import math
-from typing import TYPE_CHECKING, Any, NamedTuple
+from typing import TYPE_CHECKING, Annotated, Any, NamedTuple
 
 import numba
 import numpy as np
 
-from timegap_env.compiled import STAGE_KERNEL, Stacked
+from timegap_env.compiled import STAGE_KERNEL
 from timegap_env.config import TIME_GAP_MIN_SPEED, EnvConfig, RewardWeights
+from timegap_env.state import PerEnv, State
 
 if TYPE_CHECKING:  # mypy cannot see fields computed at import: a tuple of one term per field, read by name
 
@@ -63,8 +63,9 @@ if TYPE_CHECKING:  # mypy cannot see fields computed at import: a tuple of one t
 
         def __getattr__(self, name: str) -> Any: ...
 
-else:
-    RewardTerms = collections.namedtuple("RewardTerms", [field.name for field in dataclasses.fields(RewardWeights)])
+else:  # a float per env each, in a state
+    RewardTerms = NamedTuple("RewardTerms", [(field.name, Annotated[np.ndarray, PerEnv(float)])
+                                             for field in dataclasses.fields(RewardWeights)])
 RewardTerms.__doc__ = """The reward terms, one field per field of RewardWeights: (n_envs,) arrays, or the weights themselves."""
 REWARD_TERMS: tuple[str, ...] = RewardTerms._fields
 
@@ -86,28 +87,24 @@ class StepTicks(NamedTuple):
 
 
 class StepReadouts(NamedTuple):
-    """What a step's ticks come down to; per follower (n_envs, n_followers), per env (n_envs,)."""
+    """What a step's ticks come down to, per follower or per env; before any step: an infinite TTC, no jerk."""
 
-    min_ttc: np.ndarray  # per follower: smallest time-to-collision, inf if never closing in [s]
-    jerk_squared: np.ndarray  # per follower: sum over the ticks of jerk^2 [m^2/s^6]
-    final_speed: np.ndarray  # per follower: speed at the step's last tick [m/s]
-    accel_growth: np.ndarray  # per env: sum over vehicles of the envelope's rise over its predecessor's [m/s^2]
-    gap_deviation_sum: np.ndarray  # per env: sum over follower-ticks of the tracking term's capped deviation [s]
-    deviation_sum: np.ndarray  # per env: sum over follower-ticks of abs(estimate - centre line) [s]
-    max_deviation: np.ndarray  # per env: largest abs(estimate - centre line) [s]
-    alarm_ticks: np.ndarray  # per env: follower-ticks in alarm [-]
-    exceedances: np.ndarray  # per env: excursion starts [-]
-    collided: np.ndarray  # per env: a gap reached 0 [bool]
+    # smallest time-to-collision, inf if never closing in [s]
+    min_ttc: Annotated[np.ndarray, PerEnv(float, "followers", fill=np.inf)]
+    jerk_squared: Annotated[np.ndarray, PerEnv(float, "followers")]  # sum over the ticks of jerk^2 [m^2/s^6]
+    final_speed: Annotated[np.ndarray, PerEnv(float, "followers")]  # speed at the step's last tick [m/s]
+    accel_growth: Annotated[np.ndarray, PerEnv(float)]  # sum over vehicles of the envelope's rise over its predecessor's [m/s^2]
+    gap_deviation_sum: Annotated[np.ndarray, PerEnv(float)]  # sum over follower-ticks of the tracking term's capped deviation [s]
+    deviation_sum: Annotated[np.ndarray, PerEnv(float)]  # sum over follower-ticks of abs(estimate - centre line) [s]
+    max_deviation: Annotated[np.ndarray, PerEnv(float)]  # largest abs(estimate - centre line) [s]
+    alarm_ticks: Annotated[np.ndarray, PerEnv(float)]  # follower-ticks in alarm [-]
+    exceedances: Annotated[np.ndarray, PerEnv(float)]  # excursion starts [-]
+    collided: Annotated[np.ndarray, PerEnv(bool)]  # a gap reached 0
 
     @classmethod
     def empty(cls, n_envs: int, n_followers: int) -> StepReadouts:
-        """Uninitialised read-outs of ``n_envs`` envs of ``n_followers`` followers."""
-        per_follower, per_env = np.empty((3, n_envs, n_followers)), np.empty((6, n_envs))  # in field order
-        return cls(*(*per_follower, *per_env, np.empty(n_envs, dtype=bool)))  # collided last
-
-
-READOUT_STACKS = Stacked(StepReadouts, (StepReadouts._fields[:3], StepReadouts._fields[3:9]))  # per follower, per env
-TERM_STACKS = Stacked(RewardTerms, (REWARD_TERMS,))  # an owner's terms: the rows of one (n_terms, n_envs) array
+        """The read-outs of no step of ``n_envs`` envs of ``n_followers`` followers, in a state of their own."""
+        return State(cls, {"followers": n_followers}, n_envs).views
 
 
 class RewardConstants(NamedTuple):

@@ -23,21 +23,19 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from timegap_env.compiled import compiled_entry, restack
+from timegap_env.compiled import compiled_entry
 from timegap_env.config import TIME_GAP_MIN_SPEED, EnvConfig
 from timegap_env.envs.action import SettingLadder
 from timegap_env.envs.episodes import Episodes, check_reset_options
 from timegap_env.envs.info import TRUTH_PREFIX, VIEW_FLAGS, VIEW_FLOATS, InfoBlock, prefixed, write_info_envs
-from timegap_env.envs.observation import FEATURES, FollowerState, ObservationScales, observe_into
+from timegap_env.envs.observation import FollowerState, ObservationScales, observe_into
 from timegap_env.envs.rendering import DEFAULT_TIME_WINDOW, RenderFrame
-from timegap_env.envs.reward import (
-    READOUT_STACKS, REWARD_TERMS, TERM_STACKS, RewardConstants, RewardTerms, StepReadouts, StepTicks, score_step,
-    weights_of,
-)
-from timegap_env.envs.step_kernel import StepRules, StepScratch, StepState, fused_step
-from timegap_env.envs.totals import TOTAL_STACKS, EpisodeTotals
+from timegap_env.envs.reward import REWARD_TERMS, RewardConstants, StepReadouts, StepTicks, score_step, weights_of
+from timegap_env.envs.step_kernel import EnvState, StepRules, StepScratch, env_dims, fused_step
+from timegap_env.envs.totals import EpisodeTotals
 from timegap_env.monitoring.loop import MonitoredPlatoon
 from timegap_env.sim.platoon import Platoon
+from timegap_env.state import State
 
 
 @dataclasses.dataclass(frozen=True)
@@ -122,52 +120,41 @@ class PlatoonTask:
         self.n_followers = config.platoon.n_followers
         self.ticks_per_decision = config.ticks_per_decision
         self.info_layout = info_layout  # the task's (timegap_env.tasks.INFO_LAYOUTS): what write_info fills
-        self.episodes = Episodes(config, n_envs, record_regime=info_layout != "v0")
+        self.state = State(EnvState, env_dims(config), n_envs)  # every env's arrays; the components hold views
+        self.episodes = Episodes(config, n_envs, record_regime=info_layout != "v0", state=self.state, path=("leader",))
         self.ladder = SettingLadder(config, n_envs)
         self.loop = MonitoredPlatoon(config.platoon, config.monitor, config.chart, config.sensors, n_envs,
-                                     physics=_physics(config, n_envs))
-        self.totals = EpisodeTotals.zeros(n_envs)
-        self._previous_accel = np.zeros((n_envs, self.n_followers))  # before the next step's first tick [m/s^2]
-        self._accel_envelope = np.zeros((n_envs, self.n_followers + 1))  # decaying peak |acceleration|, leader first [m/s^2]
-        self._readouts = StepReadouts.empty(n_envs, self.n_followers)  # of the last step, refilled by every step
-        self._readouts.min_ttc[:], self._readouts.jerk_squared[:] = np.inf, 0.0
+                                     physics=_physics(config, n_envs, self.state), state=self.state, path=("loop",))
         self._scales = ObservationScales.from_config(config)
         self._reward_constants = RewardConstants.from_config(config)
         self._weights = weights_of(config)
         self.trace: Trace | None = None
-        # what a step writes, refilled by every step
-        self._result = StepResult(reward=np.zeros(n_envs), term_rows=np.zeros((len(REWARD_TERMS), n_envs)),
-                                  objective_rows=np.zeros((len(REWARD_TERMS), n_envs)), cost=np.zeros(n_envs),
-                                  terminated=np.zeros(n_envs, dtype=bool), truncated=np.zeros(n_envs, dtype=bool))
-        self._no_scores = (np.zeros_like(self._result.term_rows), np.zeros_like(self._result.objective_rows),
-                           np.zeros_like(self._result.cost))  # a reset's info: no step's terms, objectives, cost
-        self._changed = np.zeros((n_envs, self.n_followers), dtype=bool)
-        self._observation = np.zeros((n_envs, self.n_followers, len(FEATURES)), dtype=np.float32)
+        self._no_scores = (np.zeros((len(REWARD_TERMS), n_envs)), np.zeros((len(REWARD_TERMS), n_envs)),
+                           np.zeros(n_envs))  # a reset's info: no step's terms, objectives, cost
         self._info_block = tuple(InfoBlock.empty(n_envs, self.n_followers, info_layout))  # monitor_info's
         self._no_info = tuple(InfoBlock.empty(0, self.n_followers, info_layout))  # a step writing no info
-        self._rules = tuple(StepRules.from_config(config, self.ladder.rule, self.loop.chart.rule,
-                                                  tuple(self._reward_constants), np.array(self._weights),
-                                                  tuple(self._scales)))
+        monitor = self.loop.monitor
+        self._rules = tuple(StepRules.from_config(config, self.ladder.rule, self.loop.platoon.controller, monitor.rule,
+                                                  monitor.prior, self.loop.chart.rule, tuple(self._reward_constants),
+                                                  np.array(self._weights), tuple(self._scales)))
         self._scratch = tuple(StepScratch.empty(self.ticks_per_decision, self.n_followers))
-        self._state: tuple | None = None  # the fused step's StepState, built at the first reset (the objects' arrays
-        #                                    are changed in place, never replaced)
-        self._fused_step: Any = None  # fused_step compiled for the types of _state, _rules and a checked action, at
-        #                                the first fused step
-        self._write_info_envs: Any = None  # write_info_envs compiled for the types of the arguments write_info hands it
+        self._reset_once = False  # a step needs every env reset first
+        self._compiled: dict[str, Any] = {}  # fused_step and write_info_envs compiled for the types they are handed
 
     def __getstate__(self) -> dict[str, Any]:
-        """For copy and pickle: everything but the fused step's state, whose stacks of the task's arrays a copy
-        would detach from them, and the compiled entries; :meth:`__setstate__` builds the state again from the copy's
-        arrays, the next calls the entries."""
-        return {**self.__dict__, "_state": None, "_fused_step": None, "_write_info_envs": None,
-                "_state_built": self._state is not None}
+        """For copy and pickle: everything but the compiled entries (the next calls compile or load them again)."""
+        return {**self.__dict__, "_compiled": {}}
 
-    def __setstate__(self, state: dict[str, Any]) -> None:
-        built = state.pop("_state_built")
-        self.__dict__.update(state)
-        restack(self)  # a copy holds each row of the objects' stacks apart (see timegap_env.compiled.Stacked)
-        if built:
-            self._state = self._step_state()
+    @property
+    def _result(self) -> StepResult:
+        """What the last step wrote, views of the state."""
+        step = self.state.views.step
+        return StepResult(reward=step.reward, term_rows=self.state.rows(("terms",)),
+                          objective_rows=self.state.rows(("objectives",)), cost=step.cost,
+                          terminated=step.terminated, truncated=step.truncated)
+
+    totals = property(lambda self: self.state.views.totals, doc="Each env's :class:`EpisodeTotals` so far.")
+    _readouts = property(lambda self: self.state.views.readouts, doc="The last step's :class:`StepReadouts`.")
 
     @staticmethod
     def bytes_per_env(config: EnvConfig) -> int:
@@ -198,38 +185,19 @@ class PlatoonTask:
             episodes.scenario[envs] = ""
             raise
         loop.platoon.set_v2v(self._v2v_during(loop.ticks), mask=mask)  # the others keep their last tick's
-        self._previous_accel[mask] = loop.platoon.a[mask, 1:]
-        self._accel_envelope[mask] = np.abs(loop.platoon.a[mask])
-        self._readouts.min_ttc[mask] = np.inf
-        self._readouts.jerk_squared[mask] = 0.0
+        step, readouts = self.state.views.step, self.state.views.readouts
+        step.previous_accel[mask] = loop.platoon.a[mask, 1:]
+        step.envelope[mask] = np.abs(loop.platoon.a[mask])
+        readouts.min_ttc[mask] = np.inf
+        readouts.jerk_squared[mask] = 0.0
         self.totals.restart(mask)
-        observe_into(self._follower_state(), self._scales, self._observation, mask)
-        if self._state is None:
-            self._state = self._step_state()
+        observe_into(self._follower_state(), self._scales, step.observation, mask)
+        self._reset_once = True
 
     def _v2v_during(self, ticks: np.ndarray) -> np.ndarray:
         """Each follower's V2V flag during tick ``ticks`` (..., n_envs) since reset: down while a degradation takes it
         down, and always without V2V (``platoon.v2v`` False)."""
         return self.loop.degradation.v2v_up(ticks) & self.config.platoon.v2v
-
-    def _step_state(self) -> tuple:
-        """The fused step's :class:`~timegap_env.envs.step_kernel.StepState`: the objects' own arrays, in their kernel
-        forms."""
-        loop, episodes, result = self.loop, self.episodes, self._result
-        platoon_state, zoh, controller, faults = loop.platoon.kernel_form
-        noise, sensor_faults = loop.sensors.kernel_form
-        return tuple(StepState(
-            platoon=platoon_state, zoh=zoh, controller=controller, faults=faults, v2v_down=loop.degradation.v2v_down,
-            leader_speed=episodes.leader_speed, leader_accel=episodes.leader_accel,
-            episode_ticks=episodes.episode_ticks, noise=noise, sensor_faults=sensor_faults,
-            monitor=loop.monitor.kernel_form, chart=loop.chart.kernel_form,
-            readouts=READOUT_STACKS.form(self._readouts),
-            previous_accel=self._previous_accel, envelope=self._accel_envelope, totals=TOTAL_STACKS.form(self.totals),
-            changed=self._changed, terms=TERM_STACKS.form(RewardTerms(*result.term_rows)), reward=result.reward,
-            objectives=TERM_STACKS.form(RewardTerms(*result.objective_rows)), cost=result.cost,
-            terminated=result.terminated, truncated=result.truncated, observation=self._observation,
-            scratch=self._scratch,
-        ))
 
     def start_trace(self, keep: float | None = DEFAULT_TIME_WINDOW) -> Trace:
         """Record env 0 at every tick from now on, holding the last ``keep`` seconds [s] (None: every tick; see
@@ -246,17 +214,17 @@ class PlatoonTask:
         """:meth:`step` for an action that :meth:`SettingLadder.check` returned (the single env checks its own; the
         fused step checks nothing), writing each env's per-step info values into ``block`` (an
         :class:`~timegap_env.envs.info.InfoBlock` of every env as a plain tuple, or None: none written)."""
-        if self._state is None:
+        if not self._reset_once:
             raise RuntimeError("PlatoonTask.step() before reset(): reset every env first")
         block = self._no_info if block is None else block
         n_written = block[0].shape[1]  # InfoBlock.floats' n_envs
         if n_written not in (0, self.n_envs):  # the compiled step checks no bounds
             raise ValueError(f"an InfoBlock of {n_written} envs: must be of n_envs = {self.n_envs} or 0")
         if self.fused and self.trace is None:
-            if self._fused_step is None:  # compiled for these types (SettingLadder.check gives every action one type)
-                self._fused_step = compiled_entry(fused_step, self._state, self._rules, action, block)
-            self._fused_step(self._state, self._rules, action, block)
-            self.loop.monitor.posterior_written()
+            arguments = (self.state.blocks, self._scratch, self._rules, action, block)
+            if "step" not in self._compiled:  # for these types (SettingLadder.check gives every action one type)
+                self._compiled["step"] = compiled_entry(fused_step, *arguments)
+            self._compiled["step"](*arguments)
         else:
             self._staged_step(action)
             if n_written:
@@ -279,16 +247,17 @@ class PlatoonTask:
             exceedance=chart.exceedance, collisions=physics.collisions, leader_speed=leader_speed,
             leader_accel=leader_accel, speed=physics.speed, spacing=physics.spacing, accel=physics.accel,
         )
-        score = score_step(step, self._previous_accel, self._accel_envelope, platoon.setting, changed,
-                           self._reward_constants, self._weights, self._readouts)
-        self.totals.add_step(self._readouts, platoon.setting, changed, self._reward_constants.gap_per_vehicle)
-        self._previous_accel[:] = physics.accel[-1]
+        outputs, readouts = self.state.views.step, self.state.views.readouts
+        score = score_step(step, outputs.previous_accel, outputs.envelope, platoon.setting, changed,
+                           self._reward_constants, self._weights, readouts)
+        self.totals.add_step(readouts, platoon.setting, changed, self._reward_constants.gap_per_vehicle)
+        outputs.previous_accel[:] = physics.accel[-1]
         result = self._result
-        result.reward[:], result.term_rows[:], self._changed[:] = score.reward, score.terms, changed
+        result.reward[:], result.term_rows[:], outputs.changed[:] = score.reward, score.terms, changed
         result.objective_rows[:], result.cost[:] = score.objectives, score.cost
         np.any(platoon.collided, axis=1, out=result.terminated)
         result.truncated[:] = (loop.ticks >= self.episodes.episode_ticks) & ~result.terminated
-        observe_into(self._follower_state(), self._scales, self._observation, np.ones(self.n_envs, dtype=bool))
+        observe_into(self._follower_state(), self._scales, outputs.observation, np.ones(self.n_envs, dtype=bool))
 
     # ------------------------------------------------------------------ read-outs
     @property
@@ -298,7 +267,7 @@ class PlatoonTask:
 
     def observation(self) -> np.ndarray:
         """Observations (n_envs, n_followers, len(FEATURES)) float32, the features in FEATURES order (a copy)."""
-        return self._observation.copy()
+        return self.state.views.step.observation.copy()
 
     def _follower_state(self) -> FollowerState:
         """What the observation reads now (:mod:`~timegap_env.envs.observation`)."""
@@ -328,9 +297,9 @@ class PlatoonTask:
         scores = (result.term_rows, result.objective_rows, result.cost) if scored else self._no_scores
         arguments = (monitor.moments.mean_tau, monitor.moments.var_tau, platoon.setting, chart.center,
                      self._scales.half_width, chart.side, platoon.v2v, monitor.skipped, *scores, block)
-        if self._write_info_envs is None:  # the same types at every call
-            self._write_info_envs = compiled_entry(write_info_envs, *arguments)
-        self._write_info_envs(*arguments)
+        if "info" not in self._compiled:  # the same types at every call
+            self._compiled["info"] = compiled_entry(write_info_envs, *arguments)
+        self._compiled["info"](*arguments)
 
     def truth_info(self) -> dict[str, np.ndarray]:
         """What only the simulator knows, fresh arrays, each (n_envs, n_followers) unless noted: the platoon's true
@@ -408,8 +377,9 @@ class PlatoonTask:
         )
 
 
-def _physics(config: EnvConfig, n_envs: int) -> Platoon | None:
-    """The platoon of ``config.simulator`` for ``n_envs`` envs; None: the native one (MonitoredPlatoon's)."""
+def _physics(config: EnvConfig, n_envs: int, state: State) -> Platoon | None:
+    """The platoon of ``config.simulator`` for ``n_envs`` envs on ``state`` (an :class:`EnvState`'s); None: the
+    native one (MonitoredPlatoon's)."""
     if config.simulator == "native":
         return None
     if n_envs != 1:
@@ -417,7 +387,7 @@ def _physics(config: EnvConfig, n_envs: int) -> Platoon | None:
                          "per process (num_envs=1; the processes or Ray backend spread episodes over processes)")
     from timegap_env.sim.sumo import SumoPlatoon  # libsumo only when asked for
 
-    return SumoPlatoon(config.platoon, config.sumo, config.episode_duration)
+    return SumoPlatoon(config.platoon, config.sumo, config.episode_duration, state, ("loop", "platoon"))
 
 
 def _owned_bytes(root: Any) -> int:

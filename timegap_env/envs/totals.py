@@ -2,37 +2,38 @@
 
 from __future__ import annotations
 
-from typing import NamedTuple
+from typing import Annotated, NamedTuple
 
 import numba
 import numpy as np
 
-from timegap_env.compiled import STAGE_KERNEL, Stacked
+from timegap_env.compiled import STAGE_KERNEL
 from timegap_env.config import EnvConfig
 from timegap_env.envs.reward import StepReadouts
+from timegap_env.state import PerEnv, State
+
+TOTAL = Annotated[np.ndarray, PerEnv(float)]  # a float per env
 
 
 class EpisodeTotals(NamedTuple):
     """Sums (and extremes) over the steps of each env's episode so far, arrays (n_envs,)."""
 
-    steps: np.ndarray  # [-]
-    gap_deviation: np.ndarray  # follower-ticks' capped abs(actual time gap - applied setting), the tracking term's [s]
-    alarm_ticks: np.ndarray  # follower-ticks in alarm [-]
-    exceedances: np.ndarray  # excursion starts, all followers [-]
-    max_deviation: np.ndarray  # largest abs(estimate - the chart's centre line) [s]
-    jerk_squared: np.ndarray  # per step: sum over ticks of jerk^2, mean over followers [m^2/s^6]
-    switches: np.ndarray  # follower setting changes [-]
-    setting: np.ndarray  # per step: mean setting over followers [s]
-    capacity: np.ndarray  # per step: mean capacity implied by the settings at the speeds driven [veh/h]
-    collision: np.ndarray  # 1 once a collision happened [-]
-    min_ttc: np.ndarray  # smallest time-to-collision [s]
+    steps: TOTAL  # [-]
+    gap_deviation: TOTAL  # follower-ticks' capped abs(actual time gap - applied setting), the tracking term's [s]
+    alarm_ticks: TOTAL  # follower-ticks in alarm [-]
+    exceedances: TOTAL  # excursion starts, all followers [-]
+    max_deviation: TOTAL  # largest abs(estimate - the chart's centre line) [s]
+    jerk_squared: TOTAL  # per step: sum over ticks of jerk^2, mean over followers [m^2/s^6]
+    switches: TOTAL  # follower setting changes [-]
+    setting: TOTAL  # per step: mean setting over followers [s]
+    capacity: TOTAL  # per step: mean capacity implied by the settings at the speeds driven [veh/h]
+    collision: TOTAL  # 1 once a collision happened [-]
+    min_ttc: Annotated[np.ndarray, PerEnv(float, fill=np.inf)]  # smallest time-to-collision [s]
 
     @classmethod
     def zeros(cls, n_envs: int) -> EpisodeTotals:
-        """Totals of no step: zeros, and an infinite min TTC."""
-        totals = cls(*np.zeros((len(cls._fields), n_envs)))
-        totals.min_ttc[:] = np.inf
-        return totals
+        """Totals of no step (zeros, and an infinite min TTC) in a state of their own."""
+        return State(cls, {}, n_envs).views
 
     def restart(self, mask: np.ndarray) -> None:
         """Back to no step for the envs in ``mask`` (n_envs,) bool."""
@@ -67,7 +68,6 @@ class EpisodeTotals(NamedTuple):
         }
 
 
-TOTAL_STACKS = Stacked(EpisodeTotals, (EpisodeTotals._fields,))  # the totals: the rows of one stack
 
 
 @numba.njit(cache=True, error_model="numpy")

@@ -30,15 +30,16 @@ by simulation if false-alarm rates matter.
 
 from __future__ import annotations
 
-from typing import NamedTuple
+from typing import Annotated, NamedTuple
 
 import numba
 import numpy as np
 from numpy.typing import ArrayLike
 
-from timegap_env.compiled import STAGE_KERNEL, Stacked
+from timegap_env.compiled import STAGE_KERNEL
 from timegap_env.config import CHART_KINDS, ChartConfig
 from timegap_env.monitoring.batch import batch_array, batch_shape, check_finite, env_mask, setting_array, vehicle_mask
+from timegap_env.state import OnState, PerEnv, State
 
 __all__ = [
     "ChartRule", "ChartState", "ControlChart", "ShewhartChart", "EwmaChart", "CusumChart", "CHARTS", "make_chart", "switch_rule",
@@ -62,18 +63,32 @@ class ChartState(NamedTuple):
 
 
 class ChartMemory(NamedTuple):
-    """What every chart carries from tick to tick besides its statistic, arrays (n_envs, n_vehicles) unless noted."""
+    """What every chart carries from tick to tick besides its statistic, per vehicle ("followers")."""
 
-    side: np.ndarray  # int8, the charted side after the last tick [-]
-    exceedance: np.ndarray  # an excursion started at the last tick [bool]
-    exceedances_in_window: np.ndarray  # int64 [-]
-    run_length: np.ndarray  # int64 [ticks]
-    hold_off: np.ndarray  # int64 ticks left in which alarms are held off [ticks]
-    starts: np.ndarray  # (n_envs, n_vehicles, window ticks) int64 ring: chart tick of an excursion start, -1 none
-    restarted: np.ndarray  # int64 chart tick of each vehicle's last (re)start; older starts do not count
+    side: Annotated[np.ndarray, PerEnv(np.int8, "followers")]  # the charted side after the last tick [-]
+    exceedance: Annotated[np.ndarray, PerEnv(bool, "followers")]  # an excursion started at the last tick
+    exceedances_in_window: Annotated[np.ndarray, PerEnv(np.int64, "followers")]  # [-]
+    run_length: Annotated[np.ndarray, PerEnv(np.int64, "followers")]  # [ticks]
+    hold_off: Annotated[np.ndarray, PerEnv(np.int64, "followers")]  # ticks left in which alarms are held off
+    # ring over the exceedance window's ticks ("chart_window"): chart tick of an excursion start, -1 none
+    starts: Annotated[np.ndarray, PerEnv(np.int64, "followers", "chart_window", fill=-1)]
+    # chart tick of each vehicle's last (re)start; older starts do not count
+    restarted: Annotated[np.ndarray, PerEnv(np.int64, "followers")]
 
 
-CHART_MEMORY_STACKS = Stacked(ChartMemory, (("exceedances_in_window", "run_length", "hold_off", "restarted"),))
+class ChartParts(NamedTuple):
+    """Everything per env a :class:`ControlChart` holds."""
+
+    memory: ChartMemory
+    center: Annotated[np.ndarray, PerEnv(float, "followers")]  # the centre line, the applied setting tau* [s]
+    # the statistic of EWMA (z [s] in column 0) and CUSUM (C+, C- [sigma_desired]) charts, unused by Shewhart's
+    statistic: Annotated[np.ndarray, PerEnv(float, "followers", "statistic")]
+    tick: Annotated[np.ndarray, PerEnv(np.int64)]  # ticks charted so far (the same in every env); slot tick % window
+
+
+def chart_dims(config: ChartConfig, n_vehicles: int) -> dict[str, int]:
+    """The sizes of :class:`ChartParts`' dimensions for ``n_vehicles`` vehicles ("followers") under ``config``."""
+    return {"followers": n_vehicles, "chart_window": config.exceedance_window_ticks, "statistic": 2}
 
 EWMA, CUSUM = CHART_KINDS.index("ewma"), CHART_KINDS.index("cusum")  # ChartRule.kind; the third, Shewhart, the default
 if len(CHART_KINDS) != 3:  # chart_sides_env and restart_env handle these three; a new kind is a branch in each
@@ -91,7 +106,7 @@ class ChartRule(NamedTuple):
     cusum_h: float  # [sigma_desired]
 
 
-class ControlChart:
+class ControlChart(OnState):
     """What every chart shares: excursions, their windowed count, run length, re-centring.
 
     A subclass names its ``kind`` (its key in :data:`CHARTS`) and its limits' ``half_width``. How its statistic
@@ -99,56 +114,38 @@ class ControlChart:
     :func:`chart_sides_env` and :func:`restart_env`, the kernels both the chart and the fused step run. A
     statistic lives in ``statistic`` (n_envs, n_vehicles, 2), in place.
 
-    Public state, arrays (n_envs, n_vehicles): ``center`` [s], ``side``, ``alarm``,
+    Its arrays are :attr:`parts` (:class:`ChartParts`), views of ``state`` at ``path`` (its own state when None),
+    changed in place. Public state, arrays (n_envs, n_vehicles): ``center`` [s], ``side``, ``alarm``,
     ``exceedance``, ``exceedances_in_window``, ``run_length`` [ticks], ``hold_off`` [ticks].
     """
 
     kind = ""
 
-    def __init__(
-        self, n_envs: int, n_vehicles: int, center: ArrayLike, config: ChartConfig = ChartConfig()
-    ) -> None:
+    def __init__(self, n_envs: int, n_vehicles: int, center: ArrayLike, config: ChartConfig = ChartConfig(),
+                 state: State | None = None, path: tuple[str, ...] = ()) -> None:
         self.config = config
         self.shape = batch_shape(n_envs, n_vehicles)
-        self.center = np.empty(self.shape)  # the centre line, the applied setting tau* [s]
         # A start counts only if it is no older than the vehicle's last (re)start, so re-centring never clears the ring.
-        counts = np.zeros((4, *self.shape), dtype=np.int64)  # CHART_MEMORY_STACKS' group
-        self._memory = ChartMemory(
-            side=np.zeros(self.shape, dtype=np.int8),
-            exceedance=np.zeros(self.shape, dtype=bool),
-            exceedances_in_window=counts[0],
-            run_length=counts[1],
-            hold_off=counts[2],
-            starts=np.full(self.shape + (config.exceedance_window_ticks,), -1, dtype=np.int64),
-            restarted=counts[3],
-        )
-        self._memory_args = tuple(self._memory)  # the same arrays, as the kernel takes them
-        self._tick = np.zeros(1, dtype=np.int64)  # ticks charted so far; this tick's ring slot is _tick % window
-        # the statistic of EWMA (z [s] in column 0) and CUSUM (C+, C- [sigma_desired]) charts, unused by Shewhart's
-        self.statistic = np.zeros(self.shape + (2,))
+        self._bind(State(ChartParts, chart_dims(config, n_vehicles), n_envs) if state is None else state, path)
         self.rule = ChartRule(kind=CHART_KINDS.index(self.kind), half_width=float(self.half_width),
                               ewma_lambda=float(config.ewma_lambda), baseline_std=float(config.baseline_std),
                               cusum_k=float(config.cusum_k), cusum_h=float(config.cusum_h))
         self.reset(None, center)
 
-    side = property(lambda self: self._memory.side, doc="-1 below, +1 above the limits, 0 inside (n_envs, n_vehicles).")
-    exceedance = property(lambda self: self._memory.exceedance, doc="An excursion started at the last tick.")
+    center = property(lambda self: self.parts.center, doc="The centre line, the applied setting tau* [s].")
+    statistic = property(lambda self: self.parts.statistic, doc="The EWMA's or CUSUM's statistic (n_envs, n_vehicles, 2).")
+    side = property(lambda self: self.parts.memory.side, doc="-1 below, +1 above the limits, 0 inside (n_envs, n_vehicles).")
+    exceedance = property(lambda self: self.parts.memory.exceedance, doc="An excursion started at the last tick.")
     exceedances_in_window = property(
-        lambda self: self._memory.exceedances_in_window, doc="Excursions started within the trailing window [-]."
+        lambda self: self.parts.memory.exceedances_in_window, doc="Excursions started within the trailing window [-]."
     )
-    run_length = property(lambda self: self._memory.run_length, doc="Ticks since the last alarm or (re)start.")
-    hold_off = property(lambda self: self._memory.hold_off, doc="Ticks left in which alarms are held off.")
+    run_length = property(lambda self: self.parts.memory.run_length, doc="Ticks since the last alarm or (re)start.")
+    hold_off = property(lambda self: self.parts.memory.hold_off, doc="Ticks left in which alarms are held off.")
     @property
     def half_width(self) -> float:
         """Distance from the centre line to either limit of the charted statistic [s]: L sigma_desired (the
         EWMA chart's own; the CUSUM chart holds its sums against ``cusum_h`` instead)."""
         return self.config.half_width
-
-    kernel_args = property(lambda self: (self._memory_args, self.center, self.statistic, self._tick),
-                           doc="(memory, center, statistic, tick): the chart's own arrays, as a fused step takes them.")
-    kernel_form = property(lambda self: (CHART_MEMORY_STACKS.form(self._memory), self.center, self.statistic, self._tick),
-                           doc=":attr:`kernel_args` with the memory in its stacks (CHART_MEMORY_STACKS' form), as the "
-                               "fused step is handed them from Python.")
 
     @property
     def alarm(self) -> np.ndarray:
@@ -187,9 +184,10 @@ class ControlChart:
         flags, counts = np.empty((2, *estimates.shape), dtype=bool), np.empty((2, *estimates.shape), dtype=np.int64)
         block = ChartState(center=centers, alarm=flags[0], side=np.empty(estimates.shape, dtype=np.int8),
                            exceedance=flags[1], exceedances_in_window=counts[0], run_length=counts[1])
-        _chart_ticks(tuple(self.rule), self._memory_args, self._tick[0], estimates, self.statistic, tuple(block))
-        self._tick[0] += len(estimates)
-        self.center[:] = centers[-1]
+        parts = self.parts
+        _chart_ticks(tuple(self.rule), tuple(parts.memory), parts.tick, estimates, parts.statistic, tuple(block))
+        parts.tick[:] += len(estimates)
+        parts.center[:] = centers[-1]
         return block
 
     def recenter(self, center: ArrayLike, mask: ArrayLike | None = None) -> None:
@@ -200,7 +198,8 @@ class ControlChart:
         and ``run_length`` restarts at 0.
         """
         center, vehicles = setting_array(center, self.shape), vehicle_mask(mask, self.shape)
-        _restart(tuple(self.rule), self._memory_args, self.center, self.statistic, self._tick[0],
+        parts = self.parts
+        _restart(tuple(self.rule), tuple(parts.memory), parts.center, parts.statistic, parts.tick,
                  np.ascontiguousarray(center, dtype=float), np.ascontiguousarray(vehicles))
 
     def hold(self, ticks: ArrayLike, mask: ArrayLike | None = None) -> None:
@@ -210,7 +209,7 @@ class ControlChart:
         new centre line; alarms in that time would only report the change itself.
         The statistic keeps updating meanwhile.
         """
-        np.copyto(self._memory.hold_off, np.asarray(ticks, dtype=np.int64), where=vehicle_mask(mask, self.shape))
+        np.copyto(self.parts.memory.hold_off, np.asarray(ticks, dtype=np.int64), where=vehicle_mask(mask, self.shape))
 
     def reset(self, mask: ArrayLike | None, center: ArrayLike) -> None:
         """Restart the envs in ``mask`` ((n_envs,) bool, None = all), centred on ``center`` [s]."""
@@ -282,11 +281,12 @@ class CusumChart(ControlChart):
 
 @numba.njit(cache=True, error_model="numpy")
 def _restart(rule, memory, center, statistic, tick, centers, vehicles):  # noqa: ANN001, ANN202, PLR0913
-    """:func:`restart_env` for every vehicle of ``vehicles`` (n_envs, n_vehicles) bool, on ``centers`` [s]."""
+    """:func:`restart_env` for every vehicle of ``vehicles`` (n_envs, n_vehicles) bool, on ``centers`` [s], at each
+    env's chart tick ``tick`` (n_envs,)."""
     for e in range(vehicles.shape[0]):
         for f in range(vehicles.shape[1]):
             if vehicles[e, f]:
-                restart_env(rule, memory, center, statistic, tick, centers[e, f], e, f)
+                restart_env(rule, memory, center, statistic, tick[e], centers[e, f], e, f)
 
 
 @numba.njit(**STAGE_KERNEL)
@@ -308,13 +308,13 @@ def restart_env(rule, memory, center, statistic, tick, line, e, f):  # noqa: ANN
 
 @numba.njit(cache=True, error_model="numpy")
 def _chart_ticks(rule, memory, first_tick, estimates, statistic, block):  # noqa: ANN001, ANN202, PLR0913
-    """A block of ticks charted env by env: the statistic's sides (:func:`chart_sides_env`), then what every chart
-    does with them (:func:`count_excursions_env`), in place; ``block`` (:class:`ChartState`) comes in with its
-    centre lines and leaves filled."""
+    """A block of ticks charted env by env, env e's from chart tick ``first_tick[e]``: the statistic's sides
+    (:func:`chart_sides_env`), then what every chart does with them (:func:`count_excursions_env`), in place;
+    ``block`` (:class:`ChartState`) comes in with its centre lines and leaves filled."""
     centers, sides = block[0], block[2]
     for e in range(estimates.shape[1]):
         chart_sides_env(rule, estimates, centers, statistic, sides, e, e)
-        count_excursions_env(memory, first_tick, block, e, e)
+        count_excursions_env(memory, first_tick[e], block, e, e)
 
 
 @numba.njit(**STAGE_KERNEL)
@@ -388,9 +388,10 @@ if tuple(CHARTS) != CHART_KINDS:  # the config validates ChartConfig.kind agains
     raise ImportError(f"charts {tuple(CHARTS)} differ from timegap_env.config.CHART_KINDS {CHART_KINDS}")
 
 
-def make_chart(n_envs: int, n_vehicles: int, center: ArrayLike, config: ChartConfig = ChartConfig()) -> ControlChart:
-    """The chart of kind ``config.kind``, centred on ``center`` [s]."""
-    return CHARTS[config.kind](n_envs, n_vehicles, center, config)
+def make_chart(n_envs: int, n_vehicles: int, center: ArrayLike, config: ChartConfig = ChartConfig(),
+               state: State | None = None, path: tuple[str, ...] = ()) -> ControlChart:
+    """The chart of kind ``config.kind``, centred on ``center`` [s], on ``state`` at ``path`` (its own if None)."""
+    return CHARTS[config.kind](n_envs, n_vehicles, center, config, state, path)
 
 
 def switch_rule(exceedances_in_window: ArrayLike, setting: ArrayLike, config: ChartConfig = ChartConfig()) -> np.ndarray:

@@ -17,11 +17,12 @@ from typing import NamedTuple
 import numpy as np
 
 from timegap_env.config import ChartConfig, MonitorConfig, PlatoonConfig, SensorConfig
-from timegap_env.monitoring.charts import ChartState, make_chart
-from timegap_env.monitoring.monitor import TimeGapMonitor
-from timegap_env.monitoring.sensors import Readings, Sensors
+from timegap_env.monitoring.charts import ChartParts, ChartState, chart_dims, make_chart
+from timegap_env.monitoring.monitor import MonitorParts, TimeGapMonitor, monitor_dims
+from timegap_env.monitoring.sensors import Readings, SensorParts, Sensors
 from timegap_env.sim.degradation import Degradation, DegradationTable
-from timegap_env.sim.platoon import Platoon, PlatoonTicks, per_env
+from timegap_env.sim.platoon import Platoon, PlatoonParts, PlatoonTicks, per_env, platoon_dims
+from timegap_env.state import State
 
 SAME_SETTING = 1e-6  # settings closer than this are the same setting [s]
 
@@ -35,6 +36,21 @@ class MonitoredTicks(NamedTuple):
     chart: ChartState  # the chart after each tick
 
 
+class LoopParts(NamedTuple):
+    """Everything per env a :class:`MonitoredPlatoon` holds."""
+
+    platoon: PlatoonParts
+    sensors: SensorParts
+    monitor: MonitorParts
+    chart: ChartParts
+
+
+def loop_dims(platoon: PlatoonConfig, monitor: MonitorConfig, chart: ChartConfig) -> dict[str, int]:
+    """The sizes of :class:`LoopParts`' dimensions under these configs."""
+    return {**platoon_dims(platoon), **monitor_dims(monitor, platoon.n_followers),
+            **chart_dims(chart, platoon.n_followers)}
+
+
 class MonitoredPlatoon:
     """``n_envs`` platoons, each follower with its own sensors, monitor and chart.
 
@@ -43,8 +59,10 @@ class MonitoredPlatoon:
     (:class:`~timegap_env.monitoring.monitor.TimeGapMonitor`), ``chart`` (a chart from
     :func:`~timegap_env.monitoring.charts.make_chart`), ``degradation``
     (:class:`~timegap_env.sim.degradation.DegradationTable`, none until :meth:`degrade`);
-    ``ticks`` (n_envs,) since each env's reset. ``physics``: the platoon to monitor, built for ``platoon`` and
-    ``n_envs`` (another simulator's, such as :class:`~timegap_env.sim.sumo.SumoPlatoon`); None: the native one.
+    ``ticks`` (n_envs,) since each env's reset. Their arrays are views of ``state`` at ``path``, a
+    :class:`LoopParts` (their own state when None). ``physics``: the platoon to monitor, built for ``platoon`` and
+    ``n_envs`` on that state at ``path + ("platoon",)`` (another simulator's, such as
+    :class:`~timegap_env.sim.sumo.SumoPlatoon`); None: the native one.
     """
 
     def __init__(
@@ -56,14 +74,19 @@ class MonitoredPlatoon:
         n_envs: int = 1,
         seed: int | None = None,
         physics: Platoon | None = None,
+        state: State | None = None,
+        path: tuple[str, ...] = (),
     ) -> None:
         for name, config in (("monitor", monitor), ("chart", chart)):
             if not np.isclose(config.dt, platoon.dt):
                 raise ValueError(f"{name}.dt = {config.dt}: must equal PlatoonConfig.dt = {platoon.dt}")
-        self.platoon = Platoon(platoon, n_envs) if physics is None else physics
-        self.sensors = Sensors(sensors, n_envs, seed, platoon.n_followers)
-        self.monitor = TimeGapMonitor(n_envs, platoon.n_followers, platoon.initial_setting, monitor)
-        self.chart = make_chart(n_envs, platoon.n_followers, platoon.initial_setting, chart)
+        if state is None:
+            state = State(LoopParts, loop_dims(platoon, monitor, chart), n_envs)
+        self.platoon = Platoon(platoon, n_envs, state, (*path, "platoon")) if physics is None else physics
+        self.sensors = Sensors(sensors, n_envs, seed, platoon.n_followers, state, (*path, "sensors"))
+        self.monitor = TimeGapMonitor(n_envs, platoon.n_followers, platoon.initial_setting, monitor, state,
+                                      (*path, "monitor"))
+        self.chart = make_chart(n_envs, platoon.n_followers, platoon.initial_setting, chart, state, (*path, "chart"))
         self.degradation = DegradationTable(platoon, n_envs, sensors.spacing_noise_std)
 
     ticks = property(lambda self: self.platoon.ticks, doc="Ticks since each env's reset (n_envs,) [-].")

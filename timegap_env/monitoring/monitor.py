@@ -9,18 +9,17 @@ time gap setting; :meth:`TimeGapMonitor.recenter` moves it when the setting chan
 
 from __future__ import annotations
 
-from typing import NamedTuple
+from typing import Annotated, NamedTuple
 
 import numba
 import numpy as np
 from numpy.typing import ArrayLike
 
-from timegap_env.compiled import INLINED_STAGE_KERNEL, STAGE_KERNEL, Stacked
+from timegap_env.compiled import INLINED_STAGE_KERNEL, STAGE_KERNEL
 from timegap_env.config import MonitorConfig
 from timegap_env.monitoring.batch import batch_array, batch_shape, env_mask, setting_array, vehicle_mask
-from timegap_env.monitoring.posterior import (
-    MOMENT_STACKS, Moments, Prior, WindowSums, outside_probability, posterior_moments,
-)
+from timegap_env.monitoring.posterior import Moments, Prior, WindowSums, outside_probability, posterior_moments
+from timegap_env.state import OnState, PerEnv, State
 
 __all__ = ["MonitorTicks", "TimeGapMonitor"]
 
@@ -37,20 +36,34 @@ class MonitorTicks(NamedTuple):
 
 
 class WindowMemory(NamedTuple):
-    """What the monitor carries from tick to tick; each env's arrays together (env-major), sums with a last axis of
-    N_SUMS channels."""
+    """What the monitor carries from tick to tick per vehicle ("followers"), sums with a last axis of N_SUMS
+    channels ("sums")."""
 
-    slots: np.ndarray  # (n_envs, n_vehicles, W + 1, N_SUMS) ring of per-tick sums, slot W stays zero (drift guard)
-    block_sum: np.ndarray  # (n_envs, n_vehicles, N_SUMS) forgetting-weighted sum of the current block
-    window_sums: np.ndarray  # (n_envs, n_vehicles, N_SUMS) forgetting-weighted sum of the window
-    skipped: np.ndarray  # (n_envs, n_vehicles) int64 measurements skipped since reset [-]
-    prior_tau: np.ndarray  # (n_envs, n_vehicles) prior mean of tau, the setting tau* [s]
-    cleared_below: np.ndarray  # (n_envs, n_vehicles) int64: the window was cleared by a change of setting (or a
-    # reset) when the block had reached this slot: this block's slots below it, and the previous block's suffix
-    # sums, read as zeros until the block is full; -1: nothing cleared since
+    # ring of per-tick sums, W + 1 slots ("window_slots"); slot W stays zero (drift guard)
+    slots: Annotated[np.ndarray, PerEnv(float, "followers", "window_slots", "sums")]
+    block_sum: Annotated[np.ndarray, PerEnv(float, "followers", "sums")]  # forgetting-weighted sum of the block
+    window_sums: Annotated[np.ndarray, PerEnv(float, "followers", "sums")]  # forgetting-weighted sum of the window
+    skipped: Annotated[np.ndarray, PerEnv(np.int64, "followers")]  # measurements skipped since reset [-]
+    prior_tau: Annotated[np.ndarray, PerEnv(float, "followers")]  # prior mean of tau, the setting tau* [s]
+    # the window was cleared by a change of setting (or a reset) when the block had reached this slot: this
+    # block's slots below it, and the previous block's suffix sums, read as zeros until the block is full; -1:
+    # nothing cleared since
+    cleared_below: Annotated[np.ndarray, PerEnv(np.int64, "followers", fill=-1)]
 
 
-WINDOW_STACKS = Stacked(WindowMemory, (("block_sum", "window_sums"),))
+class MonitorParts(NamedTuple):
+    """Everything per env a :class:`TimeGapMonitor` holds."""
+
+    memory: WindowMemory
+    # the ring slot of the env's next measurement, p, counted from its reset (so an env's sums do not depend on
+    # when other envs reset, nor on earlier episodes); -1: no window
+    slot: Annotated[np.ndarray, PerEnv(np.int64)]
+    posterior: Moments  # after the last tick (or change of setting)
+
+
+def monitor_dims(config: MonitorConfig, n_vehicles: int) -> dict[str, int]:
+    """The sizes of :class:`MonitorParts`' dimensions for ``n_vehicles`` vehicles ("followers") under ``config``."""
+    return {"followers": n_vehicles, "window_slots": (config.window_ticks or 0) + 1, "sums": N_SUMS}
 
 
 class WindowRule(NamedTuple):
@@ -65,7 +78,7 @@ class WindowRule(NamedTuple):
     raw_gap: bool  # MonitorConfig.estimator == "raw_gap": report each tick's (s - s0) / v instead of the posterior
 
 
-class TimeGapMonitor:
+class TimeGapMonitor(OnState):
     """Streaming posterior of [s0, tau] for every vehicle of every env, O(1) work per measurement.
 
     Arrays are shaped (n_envs, n_vehicles); one tick (``config.dt``) brings one measurement
@@ -113,22 +126,15 @@ class TimeGapMonitor:
     previous block's suffix sums read as zeros, the numbers a written clearing would give.
     """
 
-    def __init__(
-        self, n_envs: int, n_vehicles: int, setting: ArrayLike, config: MonitorConfig = MonitorConfig()
-    ) -> None:
+    def __init__(self, n_envs: int, n_vehicles: int, setting: ArrayLike, config: MonitorConfig = MonitorConfig(),
+                 state: State | None = None, path: tuple[str, ...] = ()) -> None:
         self.config = config
         self.shape = batch_shape(n_envs, n_vehicles)
-        sums_shape = self.shape + (N_SUMS,)
         W, decay = config.window_ticks or 0, float(config.forgetting)  # W = 0: no window
-        sums = np.zeros((2, *sums_shape))  # WINDOW_STACKS' group
-        self._memory = WindowMemory(
-            slots=np.zeros(self.shape + (W + 1, N_SUMS)),
-            block_sum=sums[0],
-            window_sums=sums[1],
-            skipped=np.zeros(self.shape, dtype=np.int64),
-            prior_tau=np.empty(self.shape),
-            cleared_below=np.full(self.shape, -1, dtype=np.int64),
-        )
+        if state is None:
+            state = State(MonitorParts, monitor_dims(config, n_vehicles), n_envs)
+        self._bind(state, path)  # parts: its arrays (MonitorParts)
+        self.parts.slot[:] = 0 if W else -1
         self._rule = WindowRule(
             max_speed=float(config.max_speed),
             max_spacing=float(config.max_spacing),
@@ -139,12 +145,6 @@ class TimeGapMonitor:
             raw_gap=config.estimator == "raw_gap",
         )
         self._prior = Prior.from_cov(config.prior_standstill_spacing, config.prior_cov, config.noise_variance)
-        self._kernel_args = (tuple(self._memory), tuple(self._rule), tuple(self._prior))  # as the kernel takes them
-        # each env's slot of its next measurement, p, counted from its reset (so an env's sums do not depend on
-        # when other envs reset, nor on earlier episodes); -1: no window
-        self._slot = np.full(n_envs, 0 if W else -1, dtype=np.int64)
-        self._posterior = Moments(*np.zeros((len(Moments._fields),) + self.shape))  # written by every block of ticks
-        self._moments: Moments | None = None  # the posterior after the last tick; None: recompute when read
         self.reset(None, setting)
 
     # ---- streaming ------------------------------------------------------------------------
@@ -168,28 +168,13 @@ class TimeGapMonitor:
             )
         ticks = MonitorTicks(used=np.empty(speed.shape, dtype=bool), tau_mean=np.empty(speed.shape),
                              tau_var=np.empty(speed.shape))
-        memory, rule, prior = self._kernel_args
-        _update_kernel(speed, spacing, memory, self._slot, rule, prior, tuple(ticks), tuple(self._posterior))
-        self._moments = self._posterior
+        parts = self.parts
+        _update_kernel(speed, spacing, tuple(parts.memory), parts.slot, tuple(self._rule), tuple(self._prior),
+                       tuple(ticks), tuple(parts.posterior))
         return ticks
 
-    @property
-    def kernel_args(self) -> tuple[tuple, np.ndarray, tuple, tuple, tuple]:
-        """(memory, slot, rule, prior, posterior): the monitor's own arrays as :func:`update_env` takes them. A caller
-        that runs ``update_env`` itself then calls :meth:`posterior_written`."""
-        memory, rule, prior = self._kernel_args
-        return memory, self._slot, rule, prior, tuple(self._posterior)
-
-    @property
-    def kernel_form(self) -> tuple[tuple, np.ndarray, tuple, tuple, tuple]:
-        """:attr:`kernel_args` with the memory and the posterior in their stacks (WINDOW_STACKS' and MOMENT_STACKS'
-        forms), as the fused step is handed them from Python."""
-        _, rule, prior = self._kernel_args
-        return WINDOW_STACKS.form(self._memory), self._slot, rule, prior, MOMENT_STACKS.form(self._posterior)
-
-    def posterior_written(self) -> None:
-        """Every env's posterior after its last tick is in the arrays of :attr:`kernel_args` (see there)."""
-        self._moments = self._posterior
+    rule = property(lambda self: self._rule, doc="How measurements are screened and weighted (:class:`WindowRule`).")
+    prior = property(lambda self: self._prior, doc="The prior's constants (:class:`Prior`).")
 
     # ---- changes of setting ------------------------------------------------------------------
 
@@ -199,9 +184,9 @@ class TimeGapMonitor:
         Their prior mean of tau becomes ``setting`` [s] (broadcastable to (n_envs, n_vehicles)),
         their window is emptied and restarts at ring slot 0, and their ``skipped`` counters are zeroed.
         """
-        envs = env_mask(mask, self.shape[0])
-        self._memory.skipped[envs] = 0
-        self._slot[envs & (self._slot >= 0)] = 0
+        envs, slot = env_mask(mask, self.shape[0]), self.parts.slot
+        self.parts.memory.skipped[envs] = 0
+        slot[envs & (slot >= 0)] = 0
         self.recenter(setting, np.broadcast_to(envs[:, None], self.shape))
 
     def recenter(self, setting: ArrayLike, mask: ArrayLike | None = None) -> None:
@@ -217,24 +202,15 @@ class TimeGapMonitor:
         towards the next switch. ``skipped`` is sensor health and is kept.
         """
         setting, vehicles = setting_array(setting, self.shape), vehicle_mask(mask, self.shape)
-        memory = self._memory
-        _recenter(self._kernel_args[0], self._slot, np.ascontiguousarray(setting, dtype=float),
-                  np.ascontiguousarray(vehicles))
-        if self._rule.raw_gap and self._moments is not None:  # the others keep their last tick's raw gap
-            fresh = Moments(*np.zeros((len(Moments._fields),) + self.shape))
-            _posterior_of_window(memory.window_sums, memory.prior_tau, tuple(self._prior), tuple(fresh))
-            for target, value in zip(self._posterior, fresh):
-                np.copyto(target, value, where=vehicles)  # the recentred ones: their prior
-            return
-        self._moments = None  # the prior, recomputed when first read
+        vehicles = np.ascontiguousarray(vehicles)
+        memory = tuple(self.parts.memory)
+        _recenter(memory, self.parts.slot, np.ascontiguousarray(setting, dtype=float), vehicles)
+        # their posterior is the prior now (the others keep their last tick's)
+        _posterior_of_window(memory, tuple(self._prior), vehicles, tuple(self.parts.posterior))
 
     def _latest(self) -> Moments:
         """The posterior after the last tick (or change of setting)."""
-        if self._moments is None:
-            memory = self._memory
-            _posterior_of_window(memory.window_sums, memory.prior_tau, tuple(self._prior), tuple(self._posterior))
-            self._moments = self._posterior
-        return self._moments
+        return self.parts.posterior
 
     # ---- read-outs ----------------------------------------------------------------------------
 
@@ -251,12 +227,13 @@ class TimeGapMonitor:
     @property
     def prior_mean(self) -> np.ndarray:
         """Prior mean of [s0 [m], tau [s]] (n_envs, n_vehicles, 2); tau's is the setting tau*."""
-        return np.stack([np.full(self.shape, self.config.prior_standstill_spacing), self._memory.prior_tau], axis=-1)
+        return np.stack([np.full(self.shape, self.config.prior_standstill_spacing), self.parts.memory.prior_tau],
+                        axis=-1)
 
     @property
     def skipped(self) -> np.ndarray:
         """Measurements skipped since reset (n_envs, n_vehicles) [-] (the monitor's own array: read, do not write)."""
-        return self._memory.skipped
+        return self.parts.memory.skipped
 
     @property
     def tau_mean(self) -> np.ndarray:
@@ -276,18 +253,18 @@ class TimeGapMonitor:
     @property
     def n_measurements(self) -> np.ndarray:
         """Forgetting-weighted number of measurements in the window (n_envs, n_vehicles) [-]."""
-        return self._memory.window_sums[..., 0].copy()
+        return self.parts.memory.window_sums[..., 0].copy()
 
     @property
     def ztz(self) -> np.ndarray:
         """The window's forgetting-weighted Z^T Z (n_envs, n_vehicles, 2, 2)."""
-        n, sum_v, sum_vv = np.moveaxis(self._memory.window_sums[..., :3], -1, 0)
+        n, sum_v, sum_vv = np.moveaxis(self.parts.memory.window_sums[..., :3], -1, 0)
         return np.stack([np.stack([n, sum_v], axis=-1), np.stack([sum_v, sum_vv], axis=-1)], axis=-2)
 
     @property
     def zts(self) -> np.ndarray:
         """The window's forgetting-weighted Z^T S (n_envs, n_vehicles, 2)."""
-        return self._memory.window_sums[..., 3:5].copy()
+        return self.parts.memory.window_sums[..., 3:5].copy()
 
     def prob_outside(self, lcl: ArrayLike, ucl: ArrayLike) -> np.ndarray:
         """Posterior P(tau < lcl or tau > ucl) (n_envs, n_vehicles) under tau's normal marginal.
@@ -444,13 +421,17 @@ def _raw_gap(speed, spacing, used, setting, prior):  # noqa: ANN001, ANN202
 
 
 @numba.njit(cache=True, error_model="numpy")
-def _posterior_of_window(window_sums, prior_tau, prior, out):  # noqa: ANN001, ANN202
-    """Every vehicle's posterior (into ``out``, :class:`Moments` of (n_envs, n_vehicles) arrays) from its window sums
-    (n_envs, n_vehicles, N_SUMS) and prior mean of tau [s] under ``prior`` (:class:`Prior`), both plain tuples."""
-    prior, out = Prior(*prior), Moments(*out)
+def _posterior_of_window(memory, prior, vehicles, out):  # noqa: ANN001, ANN202
+    """The posterior of every vehicle of ``vehicles`` (n_envs, n_vehicles) bool (into ``out``, :class:`Moments`)
+    from its window sums and prior mean of tau [s] (``memory``, :class:`WindowMemory`) under ``prior``
+    (:class:`Prior`), each a plain tuple."""
+    memory, prior, out = WindowMemory(*memory), Prior(*prior), Moments(*out)
+    window_sums, prior_tau = memory.window_sums, memory.prior_tau
     n_envs, n_vehicles = prior_tau.shape
     for e in range(n_envs):
         for i in range(n_vehicles):
+            if not vehicles[e, i]:
+                continue
             sums = WindowSums(window_sums[e, i, 0], window_sums[e, i, 1], window_sums[e, i, 2], window_sums[e, i, 3],
                               window_sums[e, i, 4])
             moments = posterior_moments(sums, prior_tau[e, i], prior)

@@ -26,15 +26,15 @@ computed as a correction of the prior mean, mu* = mu_b + Sigma* Z^T (S - Z mu_b)
 from __future__ import annotations
 
 import math
-from typing import NamedTuple, cast
+from typing import Annotated, NamedTuple, cast
 
 import numba
 import numpy as np
 from numpy.typing import ArrayLike
 
-from timegap_env.compiled import Stacked
+from timegap_env.state import PerEnv
 
-__all__ = ["MOMENT_STACKS", "Moments", "Prior", "WindowSums", "outside_probability", "posterior", "posterior_moments",
+__all__ = ["Moments", "Prior", "WindowSums", "outside_probability", "posterior", "posterior_moments",
            "prior_precision"]
 
 
@@ -65,13 +65,13 @@ class Prior(NamedTuple):
 
 
 class Moments(NamedTuple):
-    """Posterior of [s0, tau], five scalars or arrays of one shape (one value per vehicle)."""
+    """Posterior of [s0, tau], five scalars or arrays of one shape (per vehicle, "followers", in a state)."""
 
-    mean_s0: np.ndarray  # [m]
-    mean_tau: np.ndarray  # [s]
-    var_s0: np.ndarray  # [m^2]
-    cov_s0_tau: np.ndarray  # [m s]
-    var_tau: np.ndarray  # [s^2]
+    mean_s0: Annotated[np.ndarray, PerEnv(float, "followers")]  # [m]
+    mean_tau: Annotated[np.ndarray, PerEnv(float, "followers")]  # [s]
+    var_s0: Annotated[np.ndarray, PerEnv(float, "followers")]  # [m^2]
+    cov_s0_tau: Annotated[np.ndarray, PerEnv(float, "followers")]  # [m s]
+    var_tau: Annotated[np.ndarray, PerEnv(float, "followers")]  # [s^2]
 
     def mean(self) -> np.ndarray:
         """Mean of [s0, tau], shape (..., 2)."""
@@ -82,9 +82,6 @@ class Moments(NamedTuple):
         row_s0 = np.stack([self.var_s0, self.cov_s0_tau], axis=-1)
         row_tau = np.stack([self.cov_s0_tau, self.var_tau], axis=-1)
         return np.stack([row_s0, row_tau], axis=-2)
-
-
-MOMENT_STACKS = Stacked(Moments, (Moments._fields,))  # an owner's moments: the rows of one stack
 
 
 def posterior(

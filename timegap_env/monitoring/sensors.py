@@ -15,14 +15,15 @@ bias [m] to the spacing reading and more spacing noise [m].
 
 from __future__ import annotations
 
-from typing import NamedTuple, cast
+from typing import Annotated, NamedTuple, cast
 
 import numba
 import numpy as np
 
-from timegap_env.compiled import INLINED_STAGE_KERNEL, Stacked
+from timegap_env.compiled import INLINED_STAGE_KERNEL
 from timegap_env.config import SensorConfig
 from timegap_env.sim.counter_noise import counter_uniform
+from timegap_env.state import OnState, PerEnv, State
 
 UNIFORM_STREAMS = 3  # per follower and tick: two for the Gaussian pair, one for the dropout
 
@@ -35,82 +36,71 @@ class Readings(NamedTuple):
 
 
 class NoiseModel(NamedTuple):
-    """What a reading's noise depends on besides the tick."""
+    """What a reading's noise depends on besides the tick, per env."""
 
-    keys: np.ndarray  # (n_envs,) uint64 noise key of each env
-    dropout_probability: np.ndarray  # (n_envs,) chance per tick that a follower's reading is missing [-]
-    spacing_noise_std: float  # [m]
-    speed_noise_std: float  # [m/s]
+    keys: Annotated[np.ndarray, PerEnv(np.uint64)]  # noise key of each env
+    dropout_probability: Annotated[np.ndarray, PerEnv(float)]  # chance per tick that a reading is missing [-]
+    spacing_noise_std: Annotated[np.ndarray, PerEnv(float)]  # [m]
+    speed_noise_std: Annotated[np.ndarray, PerEnv(float)]  # [m/s]
 
 
 class SensorFaults(NamedTuple):
-    """A degraded radar per follower, arrays (n_envs, n_followers): it acts in ticks [start, end) since reset."""
+    """A degraded radar per follower: it acts in ticks [start, end) since reset."""
 
-    start: np.ndarray  # int64 first tick it acts [ticks]
-    end: np.ndarray  # int64 first tick it no longer acts; start == end: never [ticks]
-    spacing_bias: np.ndarray  # added to the spacing reading [m]
-    spacing_noise_std: np.ndarray  # the spacing noise's std while it acts, replacing the config's [m]
-
-    @classmethod
-    def none(cls, n_envs: int, n_followers: int, spacing_noise_std: float) -> SensorFaults:
-        """No degradation: empty windows, no bias, the config's noise."""
-        shape = (n_envs, n_followers)
-        window, radar = np.zeros((2, *shape), dtype=np.int64), np.zeros((2, *shape))  # SENSOR_FAULT_STACKS' groups
-        radar[1] = float(spacing_noise_std)
-        return cls(*window, *radar)
+    start: Annotated[np.ndarray, PerEnv(np.int64, "followers")]  # first tick it acts [ticks]
+    end: Annotated[np.ndarray, PerEnv(np.int64, "followers")]  # first tick it no longer acts; start == end: never
+    spacing_bias: Annotated[np.ndarray, PerEnv(float, "followers")]  # added to the spacing reading [m]
+    # the spacing noise's std while it acts, replacing the config's [m]
+    spacing_noise_std: Annotated[np.ndarray, PerEnv(float, "followers")]
 
 
-SENSOR_FAULT_STACKS = Stacked(SensorFaults, (("start", "end"), ("spacing_bias", "spacing_noise_std")))
+class SensorParts(NamedTuple):
+    """Everything per env :class:`Sensors` hold."""
+
+    noise: NoiseModel
+    faults: SensorFaults
 
 
-class Sensors:
+class Sensors(OnState):
     """The spacing and speed sensors of every follower of ``n_envs`` platoons.
 
-    ``noise`` (:class:`NoiseModel`) holds, per env, shaped (n_envs,): ``keys`` (uint64) of the
-    noise, drawn from ``seed`` and replaced at each episode by the env; ``dropout_probability``
-    [-], ``config.dropout_probability`` until the env draws its own. Both are also attributes of
-    the sensors; change them in place. ``faults`` (:class:`SensorFaults`, (n_envs, n_followers)
-    arrays, none at first) is the degraded radar of each follower; change it in place too.
+    Their arrays are :attr:`parts` (:class:`SensorParts`), views of ``state`` at ``path`` (their own state when
+    None), changed in place. ``noise`` (:class:`NoiseModel`) holds, per env: ``keys`` (uint64) of the noise, drawn
+    from ``seed`` and replaced at each episode by the env; ``dropout_probability`` [-],
+    ``config.dropout_probability`` until the env draws its own (both also attributes of the sensors); the config's
+    noise. ``faults`` (:class:`SensorFaults`, none at first) is the degraded radar of each follower.
     """
 
-    def __init__(
-        self, config: SensorConfig = SensorConfig(), n_envs: int = 1, seed: int | None = None, n_followers: int = 1
-    ) -> None:  # n_followers sizes ``faults``; readings of another width are measured without faults
+    def __init__(self, config: SensorConfig = SensorConfig(), n_envs: int = 1, seed: int | None = None,
+                 n_followers: int = 1, state: State | None = None, path: tuple[str, ...] = ()) -> None:
+        # n_followers sizes ``faults``; readings of another width are measured without faults
         self.config = config
-        self._noise = NoiseModel(
-            keys=np.random.default_rng(seed).integers(0, 2**63, size=n_envs, dtype=np.uint64),
-            dropout_probability=np.full(n_envs, config.dropout_probability),
-            spacing_noise_std=float(config.spacing_noise_std),
-            speed_noise_std=float(config.speed_noise_std),
-        )
-        self._noise_args = tuple(self._noise)  # the same arrays, as the kernel takes them
-        self._faults = SensorFaults.none(n_envs, n_followers, config.spacing_noise_std)
-        self._fault_args = tuple(self._faults)
+        self._bind(State(SensorParts, {"followers": n_followers}, n_envs) if state is None else state, path)
+        noise = self.parts.noise
+        noise.keys[:] = np.random.default_rng(seed).integers(0, 2**63, size=n_envs, dtype=np.uint64)
+        noise.dropout_probability[:] = config.dropout_probability
+        noise.spacing_noise_std[:], noise.speed_noise_std[:] = config.spacing_noise_std, config.speed_noise_std
+        self.parts.faults.spacing_noise_std[:] = config.spacing_noise_std
 
-    noise = property(lambda self: self._noise, doc="The :class:`NoiseModel` (its arrays change in place).")
-    faults = property(lambda self: self._faults, doc="The :class:`SensorFaults` (its arrays change in place).")
-    keys = property(lambda self: self.noise.keys, doc="Noise key of each env (n_envs,) uint64; write in place.")
+    noise = property(lambda self: self.parts.noise, doc="The :class:`NoiseModel` (changed in place).")
+    faults = property(lambda self: self.parts.faults, doc="The :class:`SensorFaults` (changed in place).")
+    keys = property(lambda self: self.parts.noise.keys, doc="Noise key of each env (n_envs,) uint64; write in place.")
     dropout_probability = property(
-        lambda self: self.noise.dropout_probability, doc="Each env's dropout probability (n_envs,); write in place."
+        lambda self: self.parts.noise.dropout_probability, doc="Each env's dropout probability (n_envs,); write in place."
     )
-    kernel_args = property(lambda self: (self._noise_args, self._fault_args),
-                           doc="(noise, faults): the sensors' own arrays as :func:`measure_env` takes them.")
-    kernel_form = property(lambda self: (self._noise_args, SENSOR_FAULT_STACKS.form(self._faults)),
-                           doc=":attr:`kernel_args` with the faults in their stacks (SENSOR_FAULT_STACKS' form), as the "
-                               "fused step is handed them from Python.")
 
     def measure(self, true: Readings, ticks_before: np.ndarray) -> Readings:
         """Readings of the ``true`` spacings and speeds of a block of ticks; env e's block starts after
         ``ticks_before[e]`` ticks since its reset (its first reading is tick ``ticks_before[e] + 1``)."""
-        faults = self._fault_args
-        if true.spacing.shape[1:] != self._faults.start.shape:
-            if np.any(self._faults.start < self._faults.end):
+        faults = tuple(self.faults)
+        if true.spacing.shape[1:] != self.faults.start.shape:
+            if np.any(self.faults.start < self.faults.end):
                 raise ValueError(f"readings of shape {true.spacing.shape}: the sensors' faults are set for "
-                                 f"{self._faults.start.shape} (n_envs, n_followers)")
-            n_envs_followers = cast(tuple[int, int], true.spacing.shape[1:])  # (n_envs, n_followers)
-            faults = tuple(SensorFaults.none(*n_envs_followers, self.config.spacing_noise_std))
+                                 f"{self.faults.start.shape} (n_envs, n_followers)")
+            n_envs, n_followers = cast(tuple[int, int], true.spacing.shape[1:])
+            faults = tuple(State(SensorParts, {"followers": n_followers}, n_envs).views.faults)  # none: never acts
         measured = Readings(np.empty_like(true.spacing), np.empty_like(true.speed))
-        _measure(tuple(true), ticks_before, self._noise_args, faults, tuple(measured))
+        _measure(tuple(true), ticks_before, tuple(self.noise), faults, tuple(measured))
         return measured
 
 
@@ -153,5 +143,5 @@ def measure_env(true, ticks_before, noise, faults, out, e, column, uniforms):  #
                 out.spacing[k, c, f] = (true.spacing[k, c, f] + faults.spacing_bias[e, f]
                                         + faults.spacing_noise_std[e, f] * radius * np.cos(angle))
             else:
-                out.spacing[k, c, f] = true.spacing[k, c, f] + noise.spacing_noise_std * radius * np.cos(angle)
-            out.speed[k, c, f] = true.speed[k, c, f] + noise.speed_noise_std * radius * np.sin(angle)
+                out.spacing[k, c, f] = true.spacing[k, c, f] + noise.spacing_noise_std[e] * radius * np.cos(angle)
+            out.speed[k, c, f] = true.speed[k, c, f] + noise.speed_noise_std[e] * radius * np.sin(angle)

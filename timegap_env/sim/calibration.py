@@ -155,14 +155,14 @@ def _follow(predecessor_position, predecessor_speed, speed0, accel0, zoh, contro
     (:class:`Controller`) come as plain tuples, as in every kernel of the package."""
     zoh, controller = ZOHCoefficients(*zoh), Controller(*controller)
     coefficients = ZOHCoefficients(zoh.a_from_a[0], zoh.a_from_u[0], zoh.v_from_a[0], zoh.v_from_u[0],
-                                   zoh.x_from_a[0], zoh.x_from_u[0], zoh.dt)
+                                   zoh.x_from_a[0], zoh.x_from_u[0])
     x, v, a = 0.0, speed0, accel0
     no_feedforward = (0.0, 0.0)
     for k in range(predecessor_position.size):
         spacing = predecessor_position[k] - x
         out_spacing[k], out_speed[k] = spacing, v
         command = cth_command(spacing, v, predecessor_speed[k], a, no_feedforward, setting, controller)
-        x, v, a = follower_tick(x, v, a, command, coefficients)
+        x, v, a = follower_tick(x, v, a, command, coefficients, controller.dt)
 
 
 def simulate_constant_time_gap(

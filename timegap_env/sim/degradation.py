@@ -376,11 +376,12 @@ class DegradationTable:
         faults = platoon.faults
         faults.start[envs], faults.end[envs] = self.start[envs], self.end[envs]
         degraded = ZOHCoefficients.for_glvd(self.lag[envs], self.gain[envs], self.config.dt)
-        for target, values in zip(faults.dynamics[:-1], degraded[:-1]):
+        for target, values in zip(faults.dynamics, degraded):
             target[envs] = values
         faults.k_s[envs], faults.k_v[envs], faults.accel_max[envs] = self.k_s[envs], self.k_v[envs], self.accel_max[envs]
         faults.extra_delay[envs], faults.packet_loss[envs] = self.extra_delay[envs], self.packet_loss[envs]
         faults.spacing_bias[envs], faults.keys[envs] = self.radar_bias[envs], np.asarray(keys, dtype=np.uint64)
+        faults.v2v_down[envs] = self.v2v_down[envs]
 
     def active(self, ticks: np.ndarray) -> np.ndarray:
         """Which degradations act during tick ``ticks`` since reset, (..., n_envs) -> (..., n_envs, n_followers)."""

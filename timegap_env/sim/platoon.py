@@ -37,18 +37,21 @@ than a plain tuple, and a step makes a dozen such calls.
 
 from __future__ import annotations
 
-from typing import NamedTuple
+from typing import Annotated, NamedTuple
 
 import numba
 import numpy as np
 
-from timegap_env.compiled import INLINED_STAGE_KERNEL, Stacked
+from timegap_env.compiled import INLINED_STAGE_KERNEL
 from timegap_env.config import PlatoonConfig
 from timegap_env.sim.counter_noise import counter_uniform
+from timegap_env.state import OnState, PerEnv, State
+
+FOLLOWERS = Annotated[np.ndarray, PerEnv(float, "followers")]  # a float per follower
 
 
 class ZOHCoefficients(NamedTuple):
-    """Exact one-tick transition of GLVD under a held command u; arrays broadcast per vehicle.
+    """Exact one-tick transition of GLVD under a held command u, per follower (or scalars, one follower's).
 
     With e = exp(-dt/T), over one tick of length dt:
         a' = e a + (1 - e) K u
@@ -56,13 +59,12 @@ class ZOHCoefficients(NamedTuple):
         x' = x + dt v + T (dt - T (1 - e)) a + (dt^2/2 - T dt + T^2 (1 - e)) K u
     """
 
-    a_from_a: np.ndarray  # [-]
-    a_from_u: np.ndarray  # [-]
-    v_from_a: np.ndarray  # [s]
-    v_from_u: np.ndarray  # [s]
-    x_from_a: np.ndarray  # [s^2]
-    x_from_u: np.ndarray  # [s^2]
-    dt: float  # [s]
+    a_from_a: FOLLOWERS  # [-]
+    a_from_u: FOLLOWERS  # [-]
+    v_from_a: FOLLOWERS  # [s]
+    v_from_u: FOLLOWERS  # [s]
+    x_from_a: FOLLOWERS  # [s^2]
+    x_from_u: FOLLOWERS  # [s^2]
 
     @classmethod
     def for_glvd(cls, lag: np.ndarray, gain: np.ndarray, dt: float) -> ZOHCoefficients:
@@ -70,26 +72,22 @@ class ZOHCoefficients(NamedTuple):
         lag = np.asarray(lag, dtype=float)
         gain = np.asarray(gain, dtype=float)
         decayed = -np.expm1(-dt / lag)  # 1 - e, accurate for small dt/T
-        rows = np.empty((len(ZOH_STACKS.groups[0]), *np.broadcast_shapes(lag.shape, gain.shape)))  # ZOH_STACKS'
-        rows[0], rows[1] = 1.0 - decayed, decayed * gain  # a_from_a, a_from_u
-        rows[2], rows[3] = lag * decayed, (dt - lag * decayed) * gain  # v_from_a, v_from_u
-        rows[4], rows[5] = lag * (dt - lag * decayed), (0.5 * dt**2 - lag * dt + lag**2 * decayed) * gain  # x_from_*
-        return cls(rows[0], rows[1], rows[2], rows[3], rows[4], rows[5], float(dt))
+        return cls(1.0 - decayed, decayed * gain, lag * decayed, (dt - lag * decayed) * gain,
+                   lag * (dt - lag * decayed), (0.5 * dt**2 - lag * dt + lag**2 * decayed) * gain)
 
     def step(
-        self, x: np.ndarray, v: np.ndarray, a: np.ndarray, u: np.ndarray
+        self, x: np.ndarray, v: np.ndarray, a: np.ndarray, u: np.ndarray, dt: float
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Position [m], speed [m/s] and acceleration [m/s^2] one tick later under held command u [m/s^2]."""
-        return glvd_tick(x, v, a, u, self)
-
-
-ZOH_STACKS = Stacked(ZOHCoefficients, (ZOHCoefficients._fields[:-1],))  # the coefficients, rows of one stack
+        """Position [m], speed [m/s] and acceleration [m/s^2] one tick of ``dt`` [s] (the coefficients') later
+        under held command u [m/s^2]."""
+        return glvd_tick(x, v, a, u, self, dt)
 
 
 @numba.njit(cache=True, error_model="numpy")
-def glvd_tick(x, v, a, u, zoh):  # noqa: ANN001, ANN201
-    """The transition of :class:`ZOHCoefficients` ``zoh``, for scalars (inside the kernel) or arrays."""
-    x_next = x + zoh.dt * v + zoh.x_from_a * a + zoh.x_from_u * u
+def glvd_tick(x, v, a, u, zoh, dt):  # noqa: ANN001, ANN201
+    """The transition of :class:`ZOHCoefficients` ``zoh`` over a tick ``dt`` [s], for scalars (inside the kernel) or
+    arrays."""
+    x_next = x + dt * v + zoh.x_from_a * a + zoh.x_from_u * u
     v_next = v + zoh.v_from_a * a + zoh.v_from_u * u
     a_next = zoh.a_from_a * a + zoh.a_from_u * u
     return x_next, v_next, a_next
@@ -118,9 +116,9 @@ def cth_command(spacing, speed, predecessor_speed, accel, feedforward, setting, 
 
 
 @numba.njit(cache=True, error_model="numpy")
-def follower_tick(x, v, a, command, zoh):  # noqa: ANN001, ANN201
+def follower_tick(x, v, a, command, zoh, dt):  # noqa: ANN001, ANN201
     """:func:`glvd_tick` of one follower (scalars), which does not reverse: below 0 m/s it stays at standstill."""
-    x_next, v_next, a_next = glvd_tick(x, v, a, command, zoh)
+    x_next, v_next, a_next = glvd_tick(x, v, a, command, zoh, dt)
     if v_next < 0.0:
         v_next, a_next = 0.0, max(a_next, 0.0)
     return x_next, v_next, a_next
@@ -136,22 +134,18 @@ class PlatoonState(NamedTuple):
     """The state of ``n_envs`` platoons; vehicle arrays (n_envs, 1 + n_followers) with the leader first,
     follower arrays (n_envs, n_followers)."""
 
-    x: np.ndarray  # front-bumper position [m]
-    v: np.ndarray  # speed [m/s]
-    a: np.ndarray  # acceleration [m/s^2]
-    u: np.ndarray  # last command [m/s^2]; the leader's is its acceleration
-    setting: np.ndarray  # per follower: the time gap setting asked for [s]
-    applied_setting: np.ndarray  # per follower: the tau* the controller uses, ramped towards the setting [s]
-    v2v: np.ndarray  # per follower: CACC on (V2V feed-forward) [bool]
-    collided: np.ndarray  # per follower: gap <= 0 was reached; sticky [bool]
-    predecessor_accel: np.ndarray  # (n_envs, v2v_delay_ticks + max_v2v_latency_ticks + 1, n_followers) ring of
-    # recent predecessor accelerations [m/s^2], each env's together
-    received_accel: np.ndarray  # per follower: the last predecessor acceleration a V2V message delivered [m/s^2]
-    ticks: np.ndarray  # (n_envs,) int64 ticks since each env's reset [-]
-
-
-PLATOON_STACKS = Stacked(PlatoonState, (("x", "v", "a", "u"), ("setting", "applied_setting", "received_accel"),
-                                         ("v2v", "collided")))
+    x: Annotated[np.ndarray, PerEnv(float, "vehicles")]  # front-bumper position [m]
+    v: Annotated[np.ndarray, PerEnv(float, "vehicles")]  # speed [m/s]
+    a: Annotated[np.ndarray, PerEnv(float, "vehicles")]  # acceleration [m/s^2]
+    u: Annotated[np.ndarray, PerEnv(float, "vehicles")]  # last command [m/s^2]; the leader's is its acceleration
+    setting: FOLLOWERS  # the time gap setting asked for [s]
+    applied_setting: FOLLOWERS  # the tau* the controller uses, ramped towards the setting [s]
+    v2v: Annotated[np.ndarray, PerEnv(bool, "followers")]  # CACC on (V2V feed-forward) [bool]
+    collided: Annotated[np.ndarray, PerEnv(bool, "followers")]  # gap <= 0 was reached; sticky [bool]
+    # ring of recent predecessor accelerations, v2v_delay_ticks + max_v2v_latency_ticks + 1 slots [m/s^2]
+    predecessor_accel: Annotated[np.ndarray, PerEnv(float, "v2v_ring", "followers")]
+    received_accel: FOLLOWERS  # the last predecessor acceleration a V2V message delivered [m/s^2]
+    ticks: Annotated[np.ndarray, PerEnv(np.int64)]  # ticks since each env's reset [-]
 
 
 class Controller(NamedTuple):
@@ -180,41 +174,34 @@ class Controller(NamedTuple):
 
 
 class FollowerFaults(NamedTuple):
-    """Each follower's degradation as the physics sees it, arrays (n_envs, n_followers) unless noted. It acts in
-    ticks [start, end) since the env's reset; outside that window the follower is nominal."""
+    """Each follower's degradation as the physics sees it. It acts in ticks [start, end) since the env's reset;
+    outside that window the follower is nominal."""
 
-    start: np.ndarray  # int64 first tick it acts [ticks]
-    end: np.ndarray  # int64 first tick it no longer acts; start == end: never [ticks]
+    start: Annotated[np.ndarray, PerEnv(np.int64, "followers")]  # first tick it acts [ticks]
+    end: Annotated[np.ndarray, PerEnv(np.int64, "followers")]  # first tick it no longer acts; start == end: never
     dynamics: ZOHCoefficients  # the GLVD transition while it acts (its lag and gain)
-    k_s: np.ndarray  # controller gain on the spacing error while it acts [1/s^2]
-    k_v: np.ndarray  # controller gain on the speed difference while it acts [1/s]
-    accel_max: np.ndarray  # highest command while it acts [m/s^2]
-    extra_delay: np.ndarray  # int64 V2V delay added while it acts [ticks]
-    packet_loss: np.ndarray  # chance per tick that a V2V message is lost while it acts [-]
-    spacing_bias: np.ndarray  # added by the radar to the spacing the controller sees while it acts [m]
-    keys: np.ndarray  # (n_envs,) uint64 keys of the packet-loss draws (counter-based, as the sensors')
-
-    @classmethod
-    def none(cls, config: PlatoonConfig, nominal: ZOHCoefficients, n_envs: int) -> FollowerFaults:
-        """No degradation: empty windows, nominal parameters (copies), no delay, loss or bias."""
-        shape = (n_envs, config.n_followers)
-        windows = np.zeros((3, *shape), dtype=np.int64)  # start, end, extra_delay (FAULT_STACKS' groups)
-        dynamics = np.empty((len(nominal) - 1, *shape))
-        dynamics[:] = np.stack(nominal[:-1])
-        gains = np.zeros((5, *shape))  # k_s, k_v, accel_max, packet_loss, spacing_bias
-        gains[0], gains[1], gains[2] = float(config.k_s), float(config.k_v), float(config.accel_max)
-        return cls(start=windows[0], end=windows[1], dynamics=ZOHCoefficients._make((*dynamics, nominal.dt)),
-                   k_s=gains[0], k_v=gains[1], accel_max=gains[2], extra_delay=windows[2], packet_loss=gains[3],
-                   spacing_bias=gains[4], keys=np.zeros(n_envs, dtype=np.uint64))
-
-    def as_kernel_tuple(self) -> tuple:
-        """The plain nested tuple the kernel takes (see the module docstring)."""
-        return (*self[:2], tuple(self.dynamics), *self[3:])
+    k_s: FOLLOWERS  # controller gain on the spacing error while it acts [1/s^2]
+    k_v: FOLLOWERS  # controller gain on the speed difference while it acts [1/s]
+    accel_max: FOLLOWERS  # highest command while it acts [m/s^2]
+    extra_delay: Annotated[np.ndarray, PerEnv(np.int64, "followers")]  # V2V delay added while it acts [ticks]
+    packet_loss: FOLLOWERS  # chance per tick that a V2V message is lost while it acts [-]
+    spacing_bias: FOLLOWERS  # added by the radar to the spacing the controller sees while it acts [m]
+    v2v_down: Annotated[np.ndarray, PerEnv(bool, "followers")]  # V2V is down while it acts (the flag shows it)
+    keys: Annotated[np.ndarray, PerEnv(np.uint64)]  # keys of the packet-loss draws (counter-based, as the sensors')
 
 
-FAULT_STACKS = Stacked(FollowerFaults, (("start", "end", "extra_delay"),
-                                         ("k_s", "k_v", "accel_max", "packet_loss", "spacing_bias")),
-                       nested={"dynamics": ZOH_STACKS})
+class PlatoonParts(NamedTuple):
+    """Everything per env a :class:`Platoon` holds."""
+
+    state: PlatoonState
+    nominal: ZOHCoefficients  # each follower's GLVD transition when nominal
+    faults: FollowerFaults
+
+
+def platoon_dims(config: PlatoonConfig) -> dict[str, int]:
+    """The sizes of :class:`PlatoonParts`' dimensions under ``config``."""
+    return {"vehicles": config.n_followers + 1, "followers": config.n_followers,
+            "v2v_ring": config.v2v_delay_ticks + config.max_v2v_latency_ticks + 1}
 
 
 class LeaderTicks(NamedTuple):
@@ -240,75 +227,48 @@ class PlatoonTicks(NamedTuple):
         return cls(*(*np.empty((len(cls._fields) - 1, *shape)), np.empty(shape, dtype=bool)))  # collisions last
 
 
-class Platoon:
+class Platoon(OnState):
     """``n_envs`` platoons of one leader and ``config.n_followers`` followers, stepped together.
 
-    The state is :attr:`state`, a :class:`PlatoonState`; its arrays are also attributes of the
-    platoon (``x``, ``v``, ``a``, ``u``, ``setting``, ``applied_setting``, ``v2v``, ``collided``,
-    ``ticks``), changed in place, never replaced. :attr:`faults` (:class:`FollowerFaults`, none at
-    first) holds each follower's degradation; change its arrays in place too.
+    Its arrays are :attr:`parts` (:class:`PlatoonParts`), views of ``state`` at ``path`` (its own state when
+    None), changed in place: the platoons' :attr:`state` (:class:`PlatoonState`, its fields also attributes of
+    the platoon: ``x``, ``v``, ``a``, ``u``, ``setting``, ``applied_setting``, ``v2v``, ``collided``, ``ticks``),
+    the nominal GLVD transition and :attr:`faults` (:class:`FollowerFaults`, none at first), each follower's
+    degradation.
     """
 
-    def __init__(self, config: PlatoonConfig = PlatoonConfig(), n_envs: int = 1) -> None:
+    def __init__(self, config: PlatoonConfig = PlatoonConfig(), n_envs: int = 1, state: State | None = None,
+                 path: tuple[str, ...] = ()) -> None:
         if isinstance(n_envs, bool) or not isinstance(n_envs, (int, np.integer)) or n_envs < 1:
             raise ValueError(f"n_envs = {n_envs!r}: must be an integer >= 1")
         self.config = config
         self.n_envs = int(n_envs)
         self.n_followers = config.n_followers
-        vehicles, followers = (self.n_envs, self.n_followers + 1), (self.n_envs, self.n_followers)
-        motion, settings = np.zeros((4, *vehicles)), np.zeros((3, *followers))  # PLATOON_STACKS' groups
-        settings[:2] = config.initial_setting
-        flags = np.zeros((2, *followers), dtype=bool)
-        flags[0] = bool(config.v2v)
-        self._state = PlatoonState(
-            x=motion[0],
-            v=motion[1],
-            a=motion[2],
-            u=motion[3],
-            setting=settings[0],
-            applied_setting=settings[1],
-            v2v=flags[0],
-            collided=flags[1],
-            predecessor_accel=np.zeros((self.n_envs, config.v2v_delay_ticks + config.max_v2v_latency_ticks + 1, self.n_followers)),
-            received_accel=settings[2],
-            ticks=np.zeros(self.n_envs, dtype=np.int64),
-        )
+        self._bind(State(PlatoonParts, platoon_dims(config), self.n_envs) if state is None else state, path)
+        platoon, faults = self.parts.state, self.parts.faults
+        platoon.setting[:] = platoon.applied_setting[:] = config.initial_setting
+        platoon.v2v[:] = bool(config.v2v)
         self._controller = Controller.from_config(config)
-        self._zoh = ZOHCoefficients._make((*np.zeros((len(ZOH_STACKS.groups[0]), *followers)), float(config.dt)))
-        self._zoh_args = tuple(self._zoh)
         self.set_dynamics(config.per_follower("actuation_lag"), config.per_follower("actuation_gain"))
-        self._faults = FollowerFaults.none(config, self._zoh, self.n_envs)
-        self._kernel_args = (tuple(self._state), tuple(self._controller))  # the same arrays, as the kernel takes them
-        self._fault_args = self._faults.as_kernel_tuple()
+        for degraded, nominal in zip(faults.dynamics, self.parts.nominal):  # no degradation: nominal parameters
+            degraded[:] = nominal
+        faults.k_s[:], faults.k_v[:], faults.accel_max[:] = config.k_s, config.k_v, config.accel_max
 
     # ----------------------------------------------------------------- state
-    state = property(lambda self: self._state, doc="The platoons' :class:`PlatoonState` (its arrays change in place).")
+    state = property(lambda self: self.parts.state, doc="The platoons' :class:`PlatoonState` (changed in place).")
     controller = property(lambda self: self._controller, doc="The controller's :class:`Controller` constants.")
-    x = property(lambda self: self._state.x, doc="Front-bumper positions (n_envs, n_vehicles) [m].")
-    v = property(lambda self: self._state.v, doc="Speeds (n_envs, n_vehicles) [m/s].")
-    a = property(lambda self: self._state.a, doc="Accelerations (n_envs, n_vehicles) [m/s^2].")
-    u = property(lambda self: self._state.u, doc="Last commands (n_envs, n_vehicles) [m/s^2].")
-    setting = property(lambda self: self._state.setting, doc="Settings asked for (n_envs, n_followers) [s].")
+    x = property(lambda self: self.parts.state.x, doc="Front-bumper positions (n_envs, n_vehicles) [m].")
+    v = property(lambda self: self.parts.state.v, doc="Speeds (n_envs, n_vehicles) [m/s].")
+    a = property(lambda self: self.parts.state.a, doc="Accelerations (n_envs, n_vehicles) [m/s^2].")
+    u = property(lambda self: self.parts.state.u, doc="Last commands (n_envs, n_vehicles) [m/s^2].")
+    setting = property(lambda self: self.parts.state.setting, doc="Settings asked for (n_envs, n_followers) [s].")
     applied_setting = property(
-        lambda self: self._state.applied_setting, doc="Settings the controller uses (n_envs, n_followers) [s]."
+        lambda self: self.parts.state.applied_setting, doc="Settings the controller uses (n_envs, n_followers) [s]."
     )
-    v2v = property(lambda self: self._state.v2v, doc="CACC on (n_envs, n_followers) [bool].")
-    collided = property(lambda self: self._state.collided, doc="Gap <= 0 was reached (n_envs, n_followers) [bool].")
-    ticks = property(lambda self: self._state.ticks, doc="Ticks since each env's reset (n_envs,) [-].")
-    faults = property(lambda self: self._faults, doc="Each follower's :class:`FollowerFaults` (arrays change in place).")
-
-    @property
-    def kernel_args(self) -> tuple[tuple, tuple, tuple, tuple]:
-        """(state, zoh, controller, faults): the platoon's own arrays and constants as :func:`advance_env` takes them."""
-        state, controller = self._kernel_args
-        return state, self._zoh_args, controller, self._fault_args
-
-    @property
-    def kernel_form(self) -> tuple[tuple, tuple, tuple, tuple]:
-        """:attr:`kernel_args` with the state, the dynamics and the faults in their stacks (PLATOON_STACKS',
-        ZOH_STACKS' and FAULT_STACKS' forms), as the fused step is handed them from Python."""
-        return (PLATOON_STACKS.form(self._state), ZOH_STACKS.form(self._zoh), self._kernel_args[1],
-                FAULT_STACKS.form(self._faults))
+    v2v = property(lambda self: self.parts.state.v2v, doc="CACC on (n_envs, n_followers) [bool].")
+    collided = property(lambda self: self.parts.state.collided, doc="Gap <= 0 was reached (n_envs, n_followers).")
+    ticks = property(lambda self: self.parts.state.ticks, doc="Ticks since each env's reset (n_envs,) [-].")
+    faults = property(lambda self: self.parts.faults, doc="Each follower's :class:`FollowerFaults` (changed in place).")
 
     @property
     def spacing(self) -> np.ndarray:
@@ -336,7 +296,7 @@ class Platoon:
         zoh = ZOHCoefficients.for_glvd(
             np.broadcast_to(lag, follower_shape), np.broadcast_to(gain, follower_shape), self.config.dt
         )
-        for target, values in zip(self._zoh[:-1], zoh[:-1]):
+        for target, values in zip(self.parts.nominal, zoh):
             target[...] = values
 
     def reset(
@@ -353,7 +313,7 @@ class Platoon:
         setting, applied at once, becomes ``setting`` [s] (default ``config.initial_setting``,
         broadcast to (n_envs, n_followers)) and V2V returns to ``config.v2v``.
         """
-        cfg, state = self.config, self._state
+        cfg, state = self.config, self.parts.state
         mask = np.ones(self.n_envs, dtype=bool) if mask is None else np.asarray(mask, dtype=bool)
         speed = per_env("leader_speed", leader_speed, self.n_envs)[mask]
         accel = per_env("leader_accel", leader_accel, self.n_envs)[mask]
@@ -378,7 +338,7 @@ class Platoon:
 
     def request_setting(self, setting: np.ndarray | float, mask: np.ndarray | None = None) -> None:
         """Ask for a new time gap setting [s] (broadcast to (n_envs, n_followers)); the controller ramps to it."""
-        current = self._state.setting
+        current = self.parts.state.setting
         setting = np.asarray(setting, dtype=float)
         if setting.shape != current.shape:
             setting = np.broadcast_to(setting, current.shape)
@@ -388,13 +348,13 @@ class Platoon:
 
     def ramp_ticks(self, setting: np.ndarray) -> np.ndarray:
         """Ticks the applied setting needs to reach ``setting`` [s] (n_envs, n_followers) from where it is now."""
-        return np.ceil(np.abs(setting - self._state.applied_setting) / self._controller.max_setting_change)
+        return np.ceil(np.abs(setting - self.parts.state.applied_setting) / self._controller.max_setting_change)
 
     def set_v2v(self, enabled: np.ndarray | bool, mask: np.ndarray | None = None) -> None:
         """Switch CACC (True) or ACC (False) per follower, broadcast to (n_envs, n_followers), for the envs
         in ``mask`` ((n_envs,) bool, None = all)."""
-        enabled = np.broadcast_to(np.asarray(enabled, dtype=bool), self._state.v2v.shape)
-        np.copyto(self._state.v2v, enabled, where=True if mask is None else np.asarray(mask, dtype=bool)[:, None])
+        enabled = np.broadcast_to(np.asarray(enabled, dtype=bool), self.parts.state.v2v.shape)
+        np.copyto(self.parts.state.v2v, enabled, where=True if mask is None else np.asarray(mask, dtype=bool)[:, None])
 
     # ----------------------------------------------------------------- physics
     def step(self, leader_speed: np.ndarray | float, leader_accel: np.ndarray | float) -> np.ndarray:
@@ -420,14 +380,15 @@ class Platoon:
         leader_accel = self._per_tick("leader_accel", leader_accel, n_ticks)
         follower_shape = (n_ticks, self.n_envs, self.n_followers)
         if v2v is None:
-            v2v = np.broadcast_to(self._state.v2v, follower_shape)
+            v2v = np.broadcast_to(self.parts.state.v2v, follower_shape)
         elif np.shape(v2v) != follower_shape:
             raise ValueError(f"v2v has shape {np.shape(v2v)}: expected {follower_shape} (n_ticks, n_envs, n_followers)")
         ticks = PlatoonTicks.empty(follower_shape)
         inputs = tuple(LeaderTicks(speed=leader_speed, accel=leader_accel, v2v=np.ascontiguousarray(v2v, dtype=bool)))
-        state, controller = self._kernel_args
-        _advance(state, inputs, self._zoh_args, controller, self._fault_args, tuple(ticks))
-        self._state.v2v[:] = v2v[-1]
+        parts = self.parts
+        _advance(tuple(parts.state), inputs, tuple(parts.nominal), tuple(self._controller), _plain(parts.faults),
+                 tuple(ticks))
+        parts.state.v2v[:] = v2v[-1]
         return ticks
 
     def _per_tick(self, name: str, value: np.ndarray, n_ticks: int | None = None) -> np.ndarray:
@@ -439,6 +400,11 @@ class Platoon:
         if not np.isfinite(array).all():
             raise ValueError(f"{name} = {array}: must be finite")
         return array
+
+
+def _plain(faults: FollowerFaults) -> tuple:
+    """``faults`` as the plain nested tuple a kernel is handed from Python (numba types a NamedTuple slowly)."""
+    return (*faults[:2], tuple(faults.dynamics), *faults[3:])
 
 
 def per_env(name: str, value: np.ndarray | float, n_envs: int) -> np.ndarray:
@@ -483,8 +449,8 @@ def advance_env(state, leader, zoh, controller, faults, out, e, column):  # noqa
     block (``column`` 0), :meth:`Platoon.advance` for every env."""
     state, leader, zoh = PlatoonState(*state), LeaderTicks(*leader), ZOHCoefficients(*zoh)
     controller, out = Controller(*controller), PlatoonTicks(*out)
-    start, end, degraded_zoh = faults[0], faults[1], ZOHCoefficients(*faults[2])
-    faults = FollowerFaults(start, end, degraded_zoh, *faults[3:])
+    faults = FollowerFaults(*faults)
+    degraded_zoh = ZOHCoefficients(*faults.dynamics)
     x, v, a, u = state.x, state.v, state.a, state.u
     n_ticks, n_followers = leader.v2v.shape[0], leader.v2v.shape[2]
     ring = state.predecessor_accel[e]  # (ring length, n_followers)
@@ -525,11 +491,11 @@ def advance_env(state, leader, zoh, controller, faults, out, e, column):  # noqa
             command = cth_command(seen_spacing, v[e, i], v[e, i - 1], a[e, i], feedforward, applied, follower_controller)
             coefficients = ZOHCoefficients(
                 dynamics.a_from_a[e, f], dynamics.a_from_u[e, f], dynamics.v_from_a[e, f], dynamics.v_from_u[e, f],
-                dynamics.x_from_a[e, f], dynamics.x_from_u[e, f], dynamics.dt,
+                dynamics.x_from_a[e, f], dynamics.x_from_u[e, f],
             )
-            x_next, v_next, a_next = follower_tick(x[e, i], v[e, i], a[e, i], command, coefficients)
+            x_next, v_next, a_next = follower_tick(x[e, i], v[e, i], a[e, i], command, coefficients, controller.dt)
             x[e, i], v[e, i], a[e, i], u[e, i] = x_next, v_next, a_next, command
-        x[e, 0] += 0.5 * (v[e, 0] + leader.speed[k, c]) * zoh.dt
+        x[e, 0] += 0.5 * (v[e, 0] + leader.speed[k, c]) * controller.dt
         v[e, 0] = leader.speed[k, c]
         a[e, 0] = u[e, 0] = leader.accel[k, c]
         for f in range(n_followers):

@@ -44,6 +44,7 @@ import numpy as np
 
 from timegap_env.config import MAX_TIME_GAP, PlatoonConfig, SumoConfig
 from timegap_env.sim.platoon import Platoon, PlatoonTicks
+from timegap_env.state import State
 
 SUMO_EXTRA = "pip install 'timegap-env[sumo]'"  # what installs libsumo
 TOP_SPEED = 60.0  # the road's speed limit and every vType's top speed, above any leader profile [m/s]
@@ -105,12 +106,13 @@ class SumoPlatoon(Platoon):
     position at reset). :meth:`reset` (re)starts SUMO with the platoon in equilibrium; :meth:`close` ends it.
     """
 
-    def __init__(self, config: PlatoonConfig, sumo_config: SumoConfig, episode_duration: float) -> None:
+    def __init__(self, config: PlatoonConfig, sumo_config: SumoConfig, episode_duration: float,
+                 state: State | None = None, path: tuple[str, ...] = ()) -> None:
         if sumo_config.model == "cc" and config.standstill_spacing < PLEXE_STANDSTILL_GAP:
             raise ValueError(f"platoon.standstill_spacing = {config.standstill_spacing}: Plexe's CC model holds at "
                              f"least {PLEXE_STANDSTILL_GAP} m at a standstill; use >= {PLEXE_STANDSTILL_GAP} m or "
                              "sumo.model = 'cacc'")
-        super().__init__(config, 1)
+        super().__init__(config, 1, state, path)
         self.sumo_config = sumo_config
         self._libsumo = import_libsumo()
         platoon_length = config.n_followers * (config.vehicle_length + config.standstill_spacing
@@ -291,7 +293,7 @@ class SumoPlatoon(Platoon):
         api, state, pushed, cfg = self._libsumo, self.state, self._pushed, self.config
         faults = self.faults
         acting = (faults.start[0] <= tick) & (tick < faults.end[0])
-        decay = np.where(acting, faults.dynamics.a_from_a[0], self._zoh.a_from_a[0])  # exp(-dt/T)
+        decay = np.where(acting, faults.dynamics.a_from_a[0], self.parts.nominal.a_from_a[0])  # exp(-dt/T)
         lag = -cfg.dt / np.log(decay)  # T [s]
         for f, vid in enumerate(self._ids[1:]):
             headway = state.applied_setting[0, f]
