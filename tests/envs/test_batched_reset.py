@@ -151,7 +151,7 @@ def arrays(episodes: Episodes, loop: MonitoredPlatoon, rngs: list) -> list:
         repr(list(episodes.scenario)), repr(episodes.degradations),
         *(getattr(table, name) for name in TABLE_FIELDS), repr(table.descriptions),
         *(table._reported[name] for name in ("size", "onset", "end")), table._while_active, table._otherwise,
-        *(getattr(faults, name) for name in FAULT_FIELDS), *faults.dynamics[:-1], *loop.sensors.faults,
+        *(getattr(faults, name) for name in FAULT_FIELDS), *faults.dynamics, *loop.sensors.faults,
         *(repr(rng.bit_generator.state) for rng in rngs),  # an unseeded reset carries on from there
     ]
 

@@ -237,8 +237,8 @@ def test_a_marked_clearing_gives_the_bits_of_a_written_one(window_ticks, forgett
             else:
                 monitor.recenter(setting, switched)
         cleared = np.broadcast_to(switched[:, :1], (2, 3)) if reset else switched
-        written._memory.slots[cleared] = 0.0  # what a clearing wrote before the mark, and no mark:
-        written._memory.cleared_below[cleared] = -1  # the ring read as it is
+        written.parts.memory.slots[cleared] = 0.0  # what a clearing wrote before the mark, and no mark:
+        written.parts.memory.cleared_below[cleared] = -1  # the ring read as it is
         np.testing.assert_array_equal(marked.mean, written.mean)
         np.testing.assert_array_equal(marked.cov, written.cov)
 

@@ -5,9 +5,9 @@ vector env's.
 
 Both kernels are called as the task calls the fused step, through their compiled entry for the arguments' types
 (``timegap_env.compiled.compiled_entry``, without numba's dispatcher). The unpacking is timed with a kernel that
-takes the same arguments and only reads one value: what numba does to turn the state's arrays (about 50, its
-structures in their stacks: ``timegap_env.compiled.Stacked``) and the rules' constants into native values at every
-call, whatever the kernel then computes.
+takes the same arguments and only reads one value: what numba does to turn the state's blocks (a few arrays:
+``timegap_env.state``), the scratch and the rules' constants into native values at every call, whatever the kernel
+then computes.
 """
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ import numba
 import numpy as np
 
 from timegap_env.compiled import NO_ALLOCATION, compiled_entry, follow_sources
-from timegap_env.envs.step_kernel import StepState, fused_step
+from timegap_env.envs.step_kernel import fused_step
 from timegap_env.envs.vector_env import TimeGapMonitorVectorEnv
 
 
@@ -37,10 +37,10 @@ ARITHMETIC_ENVS = 256
 
 
 @numba.njit(cache=True, **NO_ALLOCATION)
-def _unpack_only(state, rules, action, info):  # noqa: ANN001, ANN202
+def _unpack_only(blocks, scratch, rules, action, info):  # noqa: ANN001, ANN202
     """Reads one value of what fused_step takes, compiled as fused_step is; its cost is numba's unpacking of the
     arguments."""
-    return StepState(*state).reward[0]
+    return blocks[0][0, 0, 0]
 
 
 def microseconds(call: Callable[[], object], calls: int) -> float:
@@ -64,11 +64,12 @@ def measure(calls: int) -> SingleEnvSplit:
         task = env.task
         action = task.ladder.check(np.full(task.ladder.shape, 5))
         info = task._info_block if n_envs == 1 else task._no_info  # the single env writes its info values
-        step = compiled_entry(fused_step, task._state, task._rules, action, info)
-        times[n_envs] = microseconds(lambda: step(task._state, task._rules, action, info), max(calls // n_envs, 2))
+        arguments = (task.state.blocks, task._scratch, task._rules, action, info)
+        step = compiled_entry(fused_step, *arguments)
+        times[n_envs] = microseconds(lambda: step(*arguments), max(calls // n_envs, 2))
         if n_envs == 1:
-            unpack = compiled_entry(_unpack_only, task._state, task._rules, action, info)
-            unpacking = microseconds(lambda: unpack(task._state, task._rules, action, info), calls)
+            unpack = compiled_entry(_unpack_only, *arguments)
+            unpacking = microseconds(lambda: unpack(*arguments), calls)
     return SingleEnvSplit(call=times[1], unpacking=unpacking, arithmetic=times[ARITHMETIC_ENVS] / ARITHMETIC_ENVS)
 
 
