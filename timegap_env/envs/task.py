@@ -140,14 +140,19 @@ class PlatoonTask:
         self._scratch = tuple(StepScratch.empty(self.ticks_per_decision, self.n_followers))
         self._reset_once = False  # a step needs every env reset first
         self._compiled: dict[str, Any] = {}  # fused_step and write_info_envs compiled for the types they are handed
+        self._result = self._step_result()
 
     def __getstate__(self) -> dict[str, Any]:
-        """For copy and pickle: everything but the compiled entries (the next calls compile or load them again)."""
-        return {**self.__dict__, "_compiled": {}}
+        """For copy and pickle: everything but the compiled entries (the next calls compile or load them again) and
+        the views of the state (made again from the copy's)."""
+        return {**self.__dict__, "_compiled": {}, "_result": None}
 
-    @property
-    def _result(self) -> StepResult:
-        """What the last step wrote, views of the state."""
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.__dict__.update(state)
+        self._result = self._step_result()
+
+    def _step_result(self) -> StepResult:
+        """What every step writes, views of the state."""
         step = self.state.views.step
         return StepResult(reward=step.reward, term_rows=self.state.rows(("terms",)),
                           objective_rows=self.state.rows(("objectives",)), cost=step.cost,
