@@ -15,7 +15,7 @@ from timegap_env.config import EnvConfig
 from timegap_env.envs.reward import REWARD_TERMS
 from timegap_env.envs.step_kernel import ENV, EnvState, env_dims
 from timegap_env.envs.vector_env import TimeGapMonitorVectorEnv
-from timegap_env.state import PerEnv, State, layout_of
+from timegap_env.state import PerEnv, State, layout_of, padded
 
 
 class Inner(NamedTuple):
@@ -37,7 +37,7 @@ outer_view, outer_prefetch = OUTER.view, OUTER.prefetch  # a kernel calls them b
 @numba.njit
 def _write_through(blocks):  # noqa: ANN001, ANN202
     outer_prefetch(blocks, 1)  # a hint for env 1's rows: changes nothing
-    value = outer_view(blocks)
+    value = outer_view(blocks, 2)
     value.a[0, 1], value.b[1, 0], value.inner.p[1, 0] = 1.5, 2.5, 3.5
     value.inner.count[0] += 1
     return value.inner.count[1]
@@ -126,3 +126,17 @@ def test_the_fused_step_is_handed_a_handful_of_arrays():
     env = TimeGapMonitorVectorEnv(2)
     env.reset(seed=0)
     assert len(env.task.state.blocks) <= 16  # about 120 arrays before the state was one allocation, 50 stacked
+
+
+def test_rows_of_4_kib_or_more_start_in_distinct_cache_sets():
+    """A block's rows hold a few padding envs when a row spans 4 KiB or more, so that one env's rows do not all fall
+    in the same cache sets; the views stay the envs' (n_envs rows), C-contiguous."""
+    assert padded(3, 40) == 3 and padded(1, 20_000) == 1  # small rows, or a single env: no padding
+    for n_envs, env_bytes in ((1024, 40), (4096, 8), (65536, 1), (300, 20_008)):
+        count = padded(n_envs, env_bytes)
+        assert n_envs <= count <= n_envs + n_envs // 16 and count * env_bytes % 128 == 64
+    state = State(Outer, {"width": 5}, n_envs=1024)
+    block = state.blocks[0]
+    sets = {(row.__array_interface__["data"][0] // 64) % 64 for row in block}
+    assert block.shape[1] > 1024 and len(sets) == len(block)
+    assert state.views.a.shape == (1024, 5) and state.views.a.flags.c_contiguous

@@ -146,12 +146,13 @@ def fused_step(blocks, scratch, rules, action, info):  # noqa: ANN001, ANN201
     :attr:`~timegap_env.state.State.blocks`) are updated in place under ``rules`` (:class:`StepRules`), the ticks
     going through ``scratch`` (:class:`StepScratch`); each env's per-step info values go into ``info`` (an
     :class:`~timegap_env.envs.info.InfoBlock` of every env, or of none: n_envs 0)."""
-    state, rules, scratch = env_view(blocks), StepRules(*rules), StepScratch(*scratch)
+    n_envs = action.shape[0]
+    state, rules, scratch = env_view(blocks, n_envs), StepRules(*rules), StepScratch(*scratch)
     platoon, sensors, monitor, chart = state.loop.platoon, state.loop.sensors, state.loop.monitor, state.loop.chart
     kinematics, leader, step, constants = platoon.state, state.leader, state.step, RewardConstants(*rules.reward)
-    term_rows = blocks[TERM_BLOCK][FIRST_TERM:FIRST_TERM + N_TERMS]  # (n_terms, n_envs), REWARD_TERMS order
-    objective_rows = blocks[TERM_BLOCK][FIRST_OBJECTIVE:FIRST_OBJECTIVE + N_TERMS]
-    n_envs, n_followers = kinematics.setting.shape
+    term_rows = blocks[TERM_BLOCK][FIRST_TERM:FIRST_TERM + N_TERMS, :n_envs]  # (n_terms, n_envs), REWARD_TERMS order
+    objective_rows = blocks[TERM_BLOCK][FIRST_OBJECTIVE:FIRST_OBJECTIVE + N_TERMS, :n_envs]
+    n_followers = kinematics.setting.shape[1]
     n_ticks = rules.ticks_per_step
     floats, flags, counts = scratch.floats, scratch.flags, scratch.counts
     ticks_leader = LeaderTicks(scratch.leader[0], scratch.leader[1], flags[0])

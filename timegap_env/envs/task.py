@@ -165,7 +165,9 @@ class PlatoonTask:
     def bytes_per_env(config: EnvConfig) -> int:
         """Bytes of NumPy state each env of a task with ``config`` holds (what one more env costs) [B]."""
         native = dataclasses.replace(config, simulator="native")  # the same arrays, whatever computes the ticks
-        return _owned_bytes(PlatoonTask(native, 2)) - _owned_bytes(PlatoonTask(native, 1))
+        two, one = PlatoonTask(native, 2), PlatoonTask(native, 1)
+        others = _owned_bytes(two, two.state.blocks) - _owned_bytes(one, one.state.blocks)  # outside the state
+        return others + one.state.bytes_per_env
 
     def close(self) -> None:
         """End what the simulator holds (SUMO's simulation; nothing natively)."""
@@ -395,10 +397,10 @@ def _physics(config: EnvConfig, n_envs: int, state: State) -> Platoon | None:
     return SumoPlatoon(config.platoon, config.sumo, config.episode_duration, state, ("loop", "platoon"))
 
 
-def _owned_bytes(root: Any) -> int:
+def _owned_bytes(root: Any, skip: tuple[np.ndarray, ...] = ()) -> int:
     """Bytes of every NumPy array reachable from ``root`` through attributes, containers and named tuples, each
-    array's memory counted once (a view counts as its base) [B]."""
-    seen: set[int] = set()
+    array's memory counted once (a view counts as its base), those of ``skip`` not at all [B]."""
+    seen: set[int] = {id(array) for array in skip}
     total, stack = 0, [root]
     while stack:
         item = stack.pop()
