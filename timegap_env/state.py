@@ -78,9 +78,10 @@ class Layout:
         source = (f"def view(blocks, n):\n    return {expression}\n\n\ndef prefetch(blocks, e):\n"
                   + "".join(f"    prefetch_rows(blocks[{b}], e)\n" for b in range(len(self.blocks))))
         exec(compile(source, f"<{root.__name__}'s Layout>", "exec"), namespace)  # noqa: S102
-        self._view: Callable[[tuple], Any] = namespace["view"]
-        # the views of a kernel's blocks, made inside it; env e's first cache line of every row, asked for ahead
-        self.view: Callable[[tuple], Any] = numba.njit(inline="always")(namespace["view"])
+        self._view: Callable[[tuple, int], Any] = namespace["view"]
+        # the views of a kernel's blocks for n envs, made inside it; env e's first cache line of every row, asked
+        # for ahead
+        self.view: Callable[[tuple, int], Any] = numba.njit(inline="always")(namespace["view"])
         self.prefetch: Callable[[tuple, int], None] = numba.njit(inline="always")(namespace["prefetch"])
 
     def _place(self, structure: type, path: tuple[str, ...], namespace: dict[str, Any]) -> str:
