@@ -20,7 +20,7 @@ SCRIPTS = sorted(path.stem for path in (ROOT / "train").glob("*.py") if 'if __na
 DIRECTORY_OUT = ["calibrate_openacc", "choose_degradation_mix", "choose_learner", "choose_recipe", "policy_behaviour", "compare_curves", "demo", "detection_benchmark", "benchmark",
                  "field_validation", "reproduce_paper", "sumo_report", "sweep", "task_map", "train_morl", "train_ppo", "train_rllib", "tune_rule",
                  "value_of_information"]  # --out is a directory
-FILE_OUT = ["bench", "bench_ray", "choose_window", "record_behaviour", "render_frame", "results_index"]  # --out is a file
+FILE_OUT = ["bench", "bench_against", "bench_ray", "choose_window", "record_behaviour", "render_frame", "results_index"]  # --out is a file
 OPENACC_FILE = "astazero_dynamic_part22.csv.gz"  # a small one
 
 

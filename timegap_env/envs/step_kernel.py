@@ -13,13 +13,12 @@ is the glue the staged path does in NumPy (which followers changed setting and h
 the leader's and V2V's ticks), and the tests check the two paths against each other bit for bit.
 
 Working env by env keeps each env's state in cache while all its stages run (the step asks for the next env's
-rows ahead: :func:`_prefetch`), and re-centres only the followers whose setting changed. The kernel takes two
-structures, :class:`StepState` (every array it reads or writes, the objects' own) and :class:`StepRules` (the
-config's constants), as plain tuples (see :mod:`timegap_env.sim.platoon`), besides the action and the
-:class:`~timegap_env.envs.info.InfoBlock` it writes the infos' values into (a single env's info). numba unpacks
-every array handed to it from Python at every call, so the state's structures come in their
-:class:`~timegap_env.compiled.Stacked` forms (a few stacks each, about 50 arrays in all rather than about 120) and
-are made again inside.
+rows ahead: :attr:`~timegap_env.state.Layout.prefetch`, and :func:`_prefetch_inside` for the places inside rows
+that move from step to step), and re-centres only the followers whose setting changed. Every env's state is
+:class:`EnvState`, one allocation (:mod:`timegap_env.state`) whose components each declare their own fields;
+the kernel is handed its few blocks and makes the named views inside (``env_view``), besides the scratch its
+ticks go through (:class:`StepScratch`), the config's constants (:class:`StepRules`), the action and the
+:class:`~timegap_env.envs.info.InfoBlock` it writes the infos' values into (a single env's info).
 """
 
 from __future__ import annotations
