@@ -11,6 +11,7 @@ import numba
 import numpy as np
 import pytest
 
+from tests.envs.reference import use_reference
 from timegap_env.config import EnvConfig
 from timegap_env.envs.reward import REWARD_TERMS
 from timegap_env.envs.step_kernel import ENV, EnvState, env_dims
@@ -102,7 +103,7 @@ def test_a_copied_vector_env_steps_like_the_original(how):
     task = twin.task
     assert task.loop.platoon.x.base is task.state.blocks[ENV.rows[("loop", "platoon", "state", "x")][0]]
     staged = copy.deepcopy(env)
-    staged.task.fused = False
+    use_reference(staged.task)
     for _ in range(4):
         results = [e.step(action) for e in (env, twin, staged)]
         for other in results[1:]:
@@ -113,7 +114,7 @@ def test_a_copied_vector_env_steps_like_the_original(how):
 def test_the_fused_step_follows_dynamics_set_after_the_first_reset():
     """set_dynamics writes the state's arrays, which both paths read."""
     envs = [TimeGapMonitorVectorEnv(2, autoreset_mode="same_step") for _ in range(2)]
-    envs[1].task.fused = False
+    use_reference(envs[1].task)
     for env in envs:
         env.reset(seed=1)
         env.task.loop.platoon.set_dynamics(np.array([[0.9], [0.3]]), 0.7)

@@ -1,7 +1,7 @@
 """How the package's numba kernels are compiled.
 
 A stage kernel (``ladder_env``, ``chart_sides_env``, ``count_excursions_env``, ``env_readouts``, ``encode_env``,
-...) works on one env and is called only from compiled code: the fused step and the staged path's loops over envs.
+...) works on one env and is called only from compiled code: the fused step and the components' loops over envs.
 It is compiled once and cached on its own (``STAGE_KERNEL``), without NumPy allocation (numba's reference counting
 off, so that an allocation fails to compile rather than costing time at every call) and without the wrappers that
 would let Python call it. Inlining every stage into the fused step instead made the fused step's compilation

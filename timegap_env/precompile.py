@@ -12,7 +12,8 @@ anywhere else the first step compiles, as it would without it.
 It makes, resets and steps ``TimeGapMonitor-v0`` and ``-v1``, one env and a native vector env of each (what
 ``gym.make`` and ``gym.make_vec`` give), behind every leader family that draws its episodes in a batch (the
 synthetic ones, whichever ``scenario_weights`` picks), which compiles every kernel their steps and resets run.
-Other paths (the staged step, ``truth_info``, the detectors, calibration) compile at their first use, as before.
+Other paths (SUMO's step halves, the components' own methods, ``truth_info``, the detectors, calibration) compile at
+their first use, as before.
 """
 
 from __future__ import annotations

@@ -1,7 +1,7 @@
-"""The fused step (one compiled call per step) against the staged reference path, bit for bit.
+"""The fused step (one compiled call per step) against the components' methods composed stage by stage, bit for bit.
 
-Two native vector envs run the same seeds and actions, one fused (the default) and one staged
-(``task.fused = False``); every observation, reward, flag and info must be the same bytes, over
+Two native vector envs run the same seeds and actions, one as it steps and one by the reference
+(``tests.envs.reference.use_reference``); every observation, reward, flag and info must be the same bytes, over
 episodes that cover every degradation kind, same-step and next-step autoresets, the three action
 modes, the three charts, a monitor without a window and a platoon without V2V.
 """
@@ -13,6 +13,7 @@ import os
 import numpy as np
 import pytest
 
+from tests.envs.reference import use_reference
 from timegap_env.envs.vector_env import TimeGapMonitorVectorEnv
 from timegap_env.sim.degradation import KINDS
 
@@ -44,7 +45,7 @@ def run_both(config: dict, n_steps: int, autoreset_mode: str = "same_step", n_en
     """Step a fused and a staged vector env alike and compare everything they return; the number of episodes ended."""
     envs = {fused: TimeGapMonitorVectorEnv(n_envs, config=config, autoreset_mode=autoreset_mode, truth_info=True)
             for fused in (True, False)}  # truth_info: the platoon's true state and the ground truth compared too
-    envs[False].task.fused = False
+    use_reference(envs[False].task)
     outputs = {fused: env.reset(seed=seed) for fused, env in envs.items()}
     same_bytes(outputs[True][0], outputs[False][0], "reset observation")
     same_bytes(outputs[True][1], outputs[False][1], "reset info")
@@ -86,13 +87,21 @@ def test_fused_equals_staged_with_the_default_config() -> None:
     run_both({}, 40, n_envs=3)
 
 
-def test_staged_only_while_tracing() -> None:
-    """A traced task (rendering) steps stage by stage; the fused one does not record a trace."""
-    env = TimeGapMonitorVectorEnv(1)
-    env.reset(seed=0)
-    trace = env.task.start_trace()
-    env.step(env.action_space.sample())
-    assert trace.arrays().t.size == env.task.ticks_per_decision
+def test_the_fused_step_records_the_trace_the_reference_records() -> None:
+    """A traced task (rendering) still steps in one compiled call; its trace hook writes env 0's ticks."""
+    envs = [TimeGapMonitorVectorEnv(2, config=SHORT) for _ in range(2)]
+    use_reference(envs[1].task)
+    traces = []
+    for env in envs:
+        env.reset(seed=3)
+        traces.append(env.task.start_trace(keep=None))
+        env.action_space.seed(3)
+        for _ in range(12):
+            env.step(env.action_space.sample())
+    fused, reference = (trace.arrays() for trace in traces)
+    assert fused.t.size == 12 * envs[0].task.ticks_per_decision
+    for part in ("t", "estimate", "center"):
+        same_bytes(getattr(fused, part), getattr(reference, part), f"trace {part}")
 
 
 def test_single_env_fused_equals_staged_in_every_action_mode() -> None:
@@ -101,7 +110,7 @@ def test_single_env_fused_equals_staged_in_every_action_mode() -> None:
 
     for mode in ("platoon", "per_vehicle", "relative"):
         envs = {fused: TimeGapMonitorEnv({**SHORT, "action_mode": mode}, truth_info=True) for fused in (True, False)}
-        envs[False].task.fused = False
+        use_reference(envs[False].task)
         envs[True].action_space.seed(1)
         for episode, kind in enumerate(("packet_loss", "radar_bias")):
             options = {"degradation": {"kind": kind, "size": 0.5, "followers": [2], "onset": 10.0}}

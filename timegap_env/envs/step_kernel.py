@@ -1,16 +1,16 @@
-"""The env step as one compiled call: action -> settings -> physics -> sensors -> monitor -> chart -> reward ->
+"""The env step, one compiled call: action -> settings -> physics -> sensors -> monitor -> chart -> reward ->
 observation, env by env, over state that lives in preallocated arrays.
 
-:func:`fused_step` runs, for each env in turn, what the staged path of
-:class:`~timegap_env.envs.task.PlatoonTask` runs stage by stage over every env: the action becomes
-settings (:class:`~timegap_env.envs.action.SettingLadder`), a changed setting ramps in the physics and
-re-centres that follower's prior and chart (:meth:`~timegap_env.monitoring.loop.MonitoredPlatoon.change_setting`),
-then the decision's ticks go through the platoon, the sensors, the monitor and the chart, and the step is
-scored, added to the episode totals and observed. Each stage is the same compiled function the staged
-path calls (``ladder_env``, ``advance_env``, ``measure_env``, ``update_env``, ``chart_sides_env``,
-``count_excursions_env``, ``env_readouts``, ...), so the arithmetic has one source; what is written here again
-is the glue the staged path does in NumPy (which followers changed setting and how long their alarms are held off,
-the leader's and V2V's ticks), and the tests check the two paths against each other bit for bit.
+:func:`fused_step` is the step, read top to bottom: for each env in turn, :func:`_prepare_env` turns the action
+into settings (:func:`~timegap_env.envs.action.ladder_env`; a changed setting ramps in the physics and re-centres
+that follower's prior and chart, :func:`~timegap_env.monitoring.loop.change_settings_env`) and lays out the
+leader's and V2V's ticks; ``advance_env`` runs the physics; :func:`_finish_env` runs the ticks through the
+sensors, the monitor and the chart, scores the step, adds it to the episode totals, sets the flags and writes
+the observation, the info's values and, when a trace is recorded, env 0's estimate and centre line. Each stage
+is a per-env kernel owned by its component, the one the component's own methods run over every env, so the
+arithmetic has one source and the glue is written here only. Another simulator's physics (SUMO's, in Python)
+runs between :func:`prepare_step` and :func:`finish_step`, the same two halves. The tests hold the step to the
+components' methods composed stage by stage (``tests/envs/reference.py``), bit for bit.
 
 Working env by env keeps each env's state in cache while all its stages run (the step asks for the next env's
 rows ahead: :attr:`~timegap_env.state.Layout.prefetch`, and :func:`_prefetch_inside` for the places inside rows
@@ -23,13 +23,12 @@ ticks go through (:class:`StepScratch`), the config's constants (:class:`StepRul
 
 from __future__ import annotations
 
-import math
 from typing import Annotated, NamedTuple
 
 import numba
 import numpy as np
 
-from timegap_env.compiled import NO_ALLOCATION, STAGE_KERNEL, follow_sources, prefetch_item
+from timegap_env.compiled import NO_ALLOCATION, follow_sources, prefetch_item
 from timegap_env.config import EnvConfig
 from timegap_env.envs.action import LadderRule, ladder_env
 from timegap_env.envs.episodes import LeaderTrack, episode_dims
@@ -40,12 +39,12 @@ from timegap_env.envs.reward import (
     env_weighted_sum,
 )
 from timegap_env.envs.totals import EpisodeTotals, add_step_env
-from timegap_env.monitoring.charts import ChartMemory, ChartRule, ChartState, chart_sides_env, count_excursions_env, restart_env
-from timegap_env.monitoring.loop import SAME_SETTING, LoopParts, loop_dims
-from timegap_env.monitoring.monitor import UPDATE_WORK_ROWS, MonitorTicks, WindowRule, recenter_env, update_env
+from timegap_env.monitoring.charts import ChartRule, ChartState, chart_sides_env, count_excursions_env
+from timegap_env.monitoring.loop import LoopParts, change_settings_env, loop_dims
+from timegap_env.monitoring.monitor import UPDATE_WORK_ROWS, MonitorTicks, WindowRule, update_env
 from timegap_env.monitoring.posterior import Prior
 from timegap_env.monitoring.sensors import UNIFORM_STREAMS, Readings, measure_env
-from timegap_env.sim.platoon import Controller, LeaderTicks, PlatoonState, PlatoonTicks, advance_env
+from timegap_env.sim.platoon import Controller, LeaderTicks, PlatoonTicks, advance_env
 from timegap_env.state import PerEnv, layout_of
 
 
@@ -88,8 +87,8 @@ N_TERMS = len(RewardTerms._fields)
 
 class StepScratch(NamedTuple):
     """Where the step puts one env's block of ticks, overwritten env by env, allocated once so that the step
-    allocates nothing: the staged path's blocks with one env's column, (n_ticks, 1, n_followers) each, stacked by
-    dtype so that the step takes a handful of arrays (each stack's rows in the order noted)."""
+    allocates nothing: the components' blocks of ticks with one env's column, (n_ticks, 1, n_followers) each,
+    stacked by dtype so that the step takes a handful of arrays (each stack's rows in the order noted)."""
 
     floats: np.ndarray  # (8, n_ticks, 1, n_followers): PlatoonTicks' spacing, speed, accel, applied_setting; Readings'
     #                     spacing, speed; MonitorTicks' tau_mean, tau_var
@@ -138,75 +137,120 @@ class StepRules(NamedTuple):
 
 
 @numba.njit(cache=True, error_model="numpy", **NO_ALLOCATION)  # allocates nothing (see timegap_env.compiled)
-def fused_step(blocks, scratch, rules, action, info):  # noqa: ANN001, ANN201
+def fused_step(blocks, scratch, rules, action, info, trace):  # noqa: ANN001, ANN201
     """One decision step of every env: ``action`` (n_envs, 1) ladder indices or relative steps, or (n_envs,
     n_followers) indices per follower, int64, checked by :meth:`~timegap_env.envs.action.SettingLadder.check`
     (numba checks no bounds; a raise here would cost seconds of compilation); ``blocks`` (an :class:`EnvState`'s,
     :attr:`~timegap_env.state.State.blocks`) are updated in place under ``rules`` (:class:`StepRules`), the ticks
     going through ``scratch`` (:class:`StepScratch`); each env's per-step info values go into ``info`` (an
-    :class:`~timegap_env.envs.info.InfoBlock` of every env, or of none: n_envs 0)."""
+    :class:`~timegap_env.envs.info.InfoBlock` of every env, or of none: n_envs 0), and env 0's estimate and centre
+    line at each tick into ``trace`` (n_ticks, 2, n_followers), unless it has no ticks."""
     n_envs = action.shape[0]
-    state, rules, scratch = env_view(blocks, n_envs), StepRules(*rules), StepScratch(*scratch)
-    platoon, sensors, monitor, chart = state.loop.platoon, state.loop.sensors, state.loop.monitor, state.loop.chart
-    kinematics, leader, step, constants = platoon.state, state.leader, state.step, RewardConstants(*rules.reward)
+    state, rules = env_view(blocks, n_envs), StepRules(*rules)
+    platoon, monitor, chart = state.loop.platoon, state.loop.monitor, state.loop.chart
+    for e in range(n_envs):
+        env_prefetch(blocks, e + 1)  # the next env's rows come in while this env's stages run
+        if e + 1 < n_envs:
+            _prefetch_inside(state.leader, platoon.state, chart.memory.starts, chart.tick, monitor.memory.slots,
+                             monitor.slot, rules.ticks_per_step, e + 1)
+        leader, physics = _prepare_env(state, rules, scratch, action, e)
+        advance_env(platoon.state, leader, platoon.nominal, rules.controller, platoon.faults, physics, e, 0)
+        _finish_env(blocks, state, rules, scratch, info, trace, e)
+
+
+@numba.njit(cache=True, error_model="numpy", **NO_ALLOCATION)
+def prepare_step(blocks, scratch, rules, action):  # noqa: ANN001, ANN201
+    """The part of :func:`fused_step` before the physics, for a simulator whose ticks run outside (SUMO's, one env):
+    the settings, and the leader's and V2V's ticks in ``scratch`` (:class:`StepScratch`: ``leader`` and the first
+    row of ``flags``). The simulator then writes the platoon's state and its ticks' records (``floats`` 0-3, the
+    second row of ``flags``), and :func:`finish_step` goes on."""
+    n_envs = action.shape[0]
+    state = env_view(blocks, n_envs)
+    for e in range(n_envs):
+        _prepare_env(state, StepRules(*rules), scratch, action, e)
+
+
+@numba.njit(cache=True, error_model="numpy", **NO_ALLOCATION)
+def finish_step(blocks, scratch, rules, n_envs, info, trace):  # noqa: ANN001, ANN201, PLR0913
+    """The part of :func:`fused_step` after the physics for ``n_envs`` envs (see :func:`prepare_step`)."""
+    state = env_view(blocks, n_envs)
+    for e in range(n_envs):
+        _finish_env(blocks, state, StepRules(*rules), scratch, info, trace, e)
+
+
+@numba.njit(inline="always")
+def _prepare_env(state, rules, scratch, action, e):  # noqa: ANN001, ANN202, PLR0913
+    """Env ``e``'s settings from its action (:func:`~timegap_env.envs.action.ladder_env`,
+    :func:`~timegap_env.monitoring.loop.change_settings_env`), and the leader at the end of each tick of the
+    step (held after its episode) and each follower's V2V during it, into ``scratch``; returns the
+    :class:`LeaderTicks` and the :class:`PlatoonTicks` the physics fills, views of the scratch."""
+    platoon, leader, scratch = state.loop.platoon, state.leader, StepScratch(*scratch)
+    kinematics, faults, flags = platoon.state, platoon.faults, scratch.flags
+    ladder_env(rules.ladder, action, kinematics.setting, e, scratch.targets)  # the action's settings
+    change_settings_env(kinematics, rules.controller, state.loop.monitor.memory, state.loop.monitor.slot,
+                        state.loop.chart, rules.chart, rules.settle_ticks, scratch.targets, state.step.changed, e)
+    ticks = LeaderTicks(scratch.leader[0], scratch.leader[1], flags[0])
+    for k in range(rules.ticks_per_step):
+        tick = kinematics.ticks[e] + k
+        sample = min(tick + 1, leader.episode_ticks[e])
+        ticks.speed[k, 0], ticks.accel[k, 0] = leader.speed[e, sample], leader.accel[e, sample]
+        for f in range(kinematics.setting.shape[1]):
+            down = faults.start[e, f] <= tick < faults.end[e, f] and faults.v2v_down[e, f]
+            ticks.v2v[k, 0, f] = rules.v2v_enabled and not down
+    floats = scratch.floats
+    return ticks, PlatoonTicks(floats[0], floats[1], floats[2], floats[3], flags[1])
+
+
+@numba.njit(inline="always")
+def _finish_env(blocks, state, rules, scratch, info, trace, e):  # noqa: ANN001, ANN202, PLR0913
+    """Env ``e``'s ticks, their physics done, through the sensors, the monitor and the chart; the step's scores, the
+    episode's totals, the flags, the observation and the info's values (and env 0's trace)."""
+    scratch, constants = StepScratch(*scratch), RewardConstants(*rules.reward)
+    sensors, monitor, chart = state.loop.sensors, state.loop.monitor, state.loop.chart
+    kinematics, step, memory, moments = state.loop.platoon.state, state.step, chart.memory, monitor.posterior
+    n_envs, n_followers, n_ticks = step.reward.shape[0], kinematics.setting.shape[1], rules.ticks_per_step
     term_rows = blocks[TERM_BLOCK][FIRST_TERM:FIRST_TERM + N_TERMS, :n_envs]  # (n_terms, n_envs), REWARD_TERMS order
     objective_rows = blocks[TERM_BLOCK][FIRST_OBJECTIVE:FIRST_OBJECTIVE + N_TERMS, :n_envs]
-    n_followers = kinematics.setting.shape[1]
-    n_ticks = rules.ticks_per_step
-    floats, flags, counts = scratch.floats, scratch.flags, scratch.counts
-    ticks_leader = LeaderTicks(scratch.leader[0], scratch.leader[1], flags[0])
+    floats, flags, counts, last = scratch.floats, scratch.flags, scratch.counts, n_ticks - 1
+    leader = LeaderTicks(scratch.leader[0], scratch.leader[1], flags[0])
     physics = PlatoonTicks(floats[0], floats[1], floats[2], floats[3], flags[1])
     measured, estimates = Readings(floats[4], floats[5]), MonitorTicks(flags[2], floats[6], floats[7])
     charted = ChartState(physics.applied_setting, flags[3], scratch.side, flags[4], counts[0], counts[1])
     ticks = StepTicks(estimates.tau_mean, charted.center, physics.applied_setting, charted.alarm, charted.exceedance,
-                      physics.collisions, ticks_leader.speed, ticks_leader.accel, physics.speed, physics.spacing,
-                      physics.accel)
-    memory, moments, faults = chart.memory, monitor.posterior, platoon.faults
+                      physics.collisions, leader.speed, leader.accel, physics.speed, physics.spacing, physics.accel)
+    ticks_before = kinematics.ticks[e] - n_ticks  # the physics counted the step's ticks
+    measure_env((physics.spacing, physics.speed), ticks_before, sensors.noise, sensors.faults, measured, e, 0,
+                scratch.work[:UNIFORM_STREAMS])
+    update_env(measured.speed, measured.spacing, monitor.memory, monitor.slot, rules.window, rules.prior, estimates,
+               moments, e, 0, scratch.work)
+    chart_sides_env(rules.chart, estimates.tau_mean, physics.applied_setting, chart.statistic, charted.side, e, 0)
+    count_excursions_env(memory, chart.tick[e], charted, e, 0)
+    chart.tick[e] += n_ticks
+    env_readouts(ticks, 0, step.previous_accel, step.envelope, constants, state.readouts, e)
+    collided = False
+    for f in range(n_followers):  # element by element: an array assignment compiles its error messages
+        kinematics.v2v[e, f] = leader.v2v[last, 0, f]
+        chart.center[e, f] = physics.applied_setting[last, 0, f]
+        step.previous_accel[e, f] = physics.accel[last, 0, f]
+        collided = collided or kinematics.collided[e, f]
+    env_reward_terms(state.readouts, kinematics.setting, step.changed, constants, state.terms, e)
+    env_weighted_sum(term_rows, rules.weights, step.reward, e)
+    env_objectives(state.readouts, kinematics.setting, step.changed, state.terms, constants, state.objectives,
+                   step.cost, e)
+    add_step_env(state.totals, state.readouts, kinematics.setting, step.changed, constants.gap_per_vehicle, e)
+    step.terminated[e] = collided
+    step.truncated[e] = kinematics.ticks[e] >= state.leader.episode_ticks[e] and not collided
     follower = FollowerState(moments.mean_tau, moments.var_tau, chart.center, memory.side, memory.exceedances_in_window,
                              memory.run_length, kinematics.setting, kinematics.v[:, 1:], kinematics.v2v)
-    half_width = ObservationScales(*rules.scales).half_width
-    last, writes_info = n_ticks - 1, InfoBlock(*info).floats.shape[1] > 0
-    for e in range(n_envs):
-        env_prefetch(blocks, e + 1)  # the next env's rows come in while this env's stages run
-        if e + 1 < n_envs:
-            _prefetch_inside(leader, kinematics, memory.starts, chart.tick, monitor.memory.slots, monitor.slot, n_ticks,
-                             e + 1)
-        _change_settings(kinematics, rules.controller, monitor.memory, monitor.slot, chart, rules, action, step.changed,
-                         scratch.targets, e)
-        ticks_before = kinematics.ticks[e]
-        for k in range(n_ticks):  # the leader at the end of each tick (held after its episode), V2V during it
-            tick = ticks_before + k
-            sample = min(tick + 1, leader.episode_ticks[e])
-            ticks_leader.speed[k, 0], ticks_leader.accel[k, 0] = leader.speed[e, sample], leader.accel[e, sample]
+    encode_env(follower, rules.scales, step.observation, e)
+    if InfoBlock(*info).floats.shape[1] > 0:
+        write_info_env(moments.mean_tau, moments.var_tau, kinematics.setting, chart.center,
+                       ObservationScales(*rules.scales).half_width, memory.side, kinematics.v2v, monitor.memory.skipped,
+                       term_rows, objective_rows, step.cost, info, e)
+    if e == 0 and trace.shape[0] > 0:  # the trace hook: env 0's estimate and centre line at each tick
+        for k in range(n_ticks):
             for f in range(n_followers):
-                down = faults.start[e, f] <= tick < faults.end[e, f] and faults.v2v_down[e, f]
-                ticks_leader.v2v[k, 0, f] = rules.v2v_enabled and not down
-        advance_env(kinematics, ticks_leader, platoon.nominal, rules.controller, faults, physics, e, 0)
-        measure_env((physics.spacing, physics.speed), ticks_before, sensors.noise, sensors.faults, measured, e, 0,
-                    scratch.work[:UNIFORM_STREAMS])
-        update_env(measured.speed, measured.spacing, monitor.memory, monitor.slot, rules.window, rules.prior, estimates,
-                   moments, e, 0, scratch.work)
-        chart_sides_env(rules.chart, estimates.tau_mean, physics.applied_setting, chart.statistic, charted.side, e, 0)
-        count_excursions_env(memory, chart.tick[e], charted, e, 0)
-        chart.tick[e] += n_ticks
-        env_readouts(ticks, 0, step.previous_accel, step.envelope, constants, state.readouts, e)
-        collided = False
-        for f in range(n_followers):  # element by element: an array assignment compiles its error messages
-            kinematics.v2v[e, f] = ticks_leader.v2v[last, 0, f]
-            chart.center[e, f] = physics.applied_setting[last, 0, f]
-            step.previous_accel[e, f] = physics.accel[last, 0, f]
-            collided = collided or kinematics.collided[e, f]
-        env_reward_terms(state.readouts, kinematics.setting, step.changed, constants, state.terms, e)
-        env_weighted_sum(term_rows, rules.weights, step.reward, e)
-        env_objectives(state.readouts, kinematics.setting, step.changed, state.terms, constants, state.objectives,
-                       step.cost, e)
-        add_step_env(state.totals, state.readouts, kinematics.setting, step.changed, constants.gap_per_vehicle, e)
-        step.terminated[e] = collided
-        step.truncated[e] = kinematics.ticks[e] >= leader.episode_ticks[e] and not collided
-        encode_env(follower, rules.scales, step.observation, e)
-        if writes_info:
-            write_info_env(moments.mean_tau, moments.var_tau, kinematics.setting, chart.center, half_width, memory.side,
-                           kinematics.v2v, monitor.memory.skipped, term_rows, objective_rows, step.cost, info, e)
+                trace[k, 0, f], trace[k, 1, f] = estimates.tau_mean[k, 0, f], charted.center[k, 0, f]
 
 
 @numba.njit(inline="always")
@@ -240,34 +284,10 @@ def _prefetch_inside(leader, platoon, starts, chart_tick, slots, slot, n_ticks, 
             prefetch_item(slots, (e, i, row))
 
 
-@numba.njit(**STAGE_KERNEL)
-def _change_settings(platoon, controller, memory, slot, chart, rules, action, changed, targets, e):  # noqa: ANN001, ANN202, PLR0913
-    """Env ``e``'s new settings from its action (:func:`~timegap_env.envs.action.ladder_env`, into ``targets``
-    (n_followers,)); a follower whose setting changes (``changed``) ramps to it, its prior and chart are re-centred
-    (the window's data and the chart's history cleared) and its alarms held off while it ramps and settles (see
-    :meth:`~timegap_env.monitoring.loop.MonitoredPlatoon.change_setting`). ``platoon`` (:class:`PlatoonState`),
-    ``memory`` (:class:`WindowMemory`), ``slot`` (the window's next slots) and ``chart``
-    (:class:`~timegap_env.monitoring.charts.ChartParts`) are :class:`EnvState`'s, ``controller`` the rules'."""
-    platoon, controller = PlatoonState(*platoon), Controller(*controller)
-    chart_memory, center, statistic, chart_tick = chart
-    ladder_env(rules.ladder, action, platoon.setting, e, targets)
-    for f in range(targets.shape[0]):
-        setting = targets[f]
-        changed[e, f] = not abs(setting - platoon.setting[e, f]) <= SAME_SETTING
-        if not changed[e, f]:
-            continue
-        platoon.setting[e, f] = setting
-        recenter_env(memory, slot, setting, e, f)
-        applied = platoon.applied_setting[e, f]
-        restart_env(rules.chart, chart_memory, center, statistic, chart_tick[e], applied, e, f)
-        ramp_ticks = math.ceil(abs(setting - applied) / controller.max_setting_change)
-        ChartMemory(*chart_memory).hold_off[e, f] = int(ramp_ticks + rules.settle_ticks)
-
-
 follow_sources(tuple(f"timegap_env.{module}" for module in (  # every kernel the step runs, and the step
     "compiled", "state", "config", "envs.action", "sim.counter_noise", "sim.platoon", "monitoring.sensors",
-    "monitoring.monitor", "monitoring.posterior", "monitoring.charts", "envs.reward", "envs.totals",
-    "envs.observation", "envs.info", "envs.episodes", "envs.step_kernel")),
-    reached=("timegap_env.monitoring.loop",))  # loop: SAME_SETTING, LoopParts
+    "monitoring.monitor", "monitoring.posterior", "monitoring.charts", "monitoring.loop", "envs.reward", "envs.totals",
+    "envs.observation", "envs.info", "envs.episodes", "envs.step_kernel")))
 
-__all__ = ["ENV", "EnvState", "StepOutputs", "StepRules", "StepScratch", "env_dims", "fused_step"]
+__all__ = ["ENV", "EnvState", "StepOutputs", "StepRules", "StepScratch", "env_dims", "finish_step", "fused_step",
+           "prepare_step"]

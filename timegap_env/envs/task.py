@@ -8,10 +8,11 @@ totals (:mod:`~timegap_env.envs.totals`); the observation is :mod:`~timegap_env.
 The single env runs the task with ``n_envs = 1``, the native vector env with ``n_envs = N``:
 same code, so they agree step by step.
 
-A step runs in one of two ways with the same result, bit for bit: fused (the default), one compiled
-call that takes each env through every stage (:func:`~timegap_env.envs.step_kernel.fused_step`); or
-staged (``fused=False``, and whenever a trace is recorded), each stage over every env in turn through
-the objects' own methods, the readable specification the tests hold the fused step to.
+A step is one compiled call that takes each env through every stage
+(:func:`~timegap_env.envs.step_kernel.fused_step`), a recorded trace included; with SUMO's physics the same
+stages run before and after its ticks (:func:`~timegap_env.envs.step_kernel.prepare_step`,
+:func:`~timegap_env.envs.step_kernel.finish_step`). The tests hold it to the components' own methods composed
+stage by stage (``tests/envs/reference.py``), bit for bit.
 """
 
 from __future__ import annotations
@@ -30,8 +31,8 @@ from timegap_env.envs.episodes import Episodes, check_reset_options
 from timegap_env.envs.info import TRUTH_PREFIX, VIEW_FLAGS, VIEW_FLOATS, InfoBlock, prefixed, write_info_envs
 from timegap_env.envs.observation import FollowerState, ObservationScales, observe_into
 from timegap_env.envs.rendering import DEFAULT_TIME_WINDOW, RenderFrame
-from timegap_env.envs.reward import REWARD_TERMS, RewardConstants, StepReadouts, StepTicks, score_step, weights_of
-from timegap_env.envs.step_kernel import EnvState, StepRules, StepScratch, env_dims, fused_step
+from timegap_env.envs.reward import REWARD_TERMS, RewardConstants, StepReadouts, weights_of
+from timegap_env.envs.step_kernel import EnvState, StepRules, StepScratch, env_dims, finish_step, fused_step, prepare_step
 from timegap_env.envs.totals import EpisodeTotals
 from timegap_env.monitoring.loop import MonitoredPlatoon
 from timegap_env.sim.platoon import Platoon
@@ -110,13 +111,11 @@ class PlatoonTask:
     """Episodes, actions, observations and rewards of ``n_envs`` monitored platoons.
 
     ``trace``: None, or a :class:`Trace` of env 0 that every step adds to (see :meth:`start_trace`).
-    ``fused``: steps run as one compiled call (True) or stage by stage (False); see the module docstring.
     """
 
-    def __init__(self, config: EnvConfig, n_envs: int, fused: bool = True, info_layout: str = "v1") -> None:
+    def __init__(self, config: EnvConfig, n_envs: int, info_layout: str = "v1") -> None:
         self.config = config
         self.n_envs = n_envs
-        self.fused = bool(fused) and config.simulator == "native"  # SUMO's ticks run stage by stage
         self.n_followers = config.platoon.n_followers
         self.ticks_per_decision = config.ticks_per_decision
         self.info_layout = info_layout  # the task's (timegap_env.tasks.INFO_LAYOUTS): what write_info fills
@@ -138,6 +137,8 @@ class PlatoonTask:
                                                   monitor.prior, self.loop.chart.rule, tuple(self._reward_constants),
                                                   np.array(self._weights), tuple(self._scales)))
         self._scratch = tuple(StepScratch.empty(self.ticks_per_decision, self.n_followers))
+        self._trace_block = np.empty((self.ticks_per_decision, 2, self.n_followers))  # env 0's ticks, when traced
+        self._no_trace = np.empty((0, 2, self.n_followers))
         self._reset_once = False  # a step needs every env reset first
         self._compiled: dict[str, Any] = {}  # fused_step and write_info_envs compiled for the types they are handed
         self._result = self._step_result()
@@ -227,44 +228,22 @@ class PlatoonTask:
         n_written = block[0].shape[1]  # InfoBlock.floats' n_envs
         if n_written not in (0, self.n_envs):  # the compiled step checks no bounds
             raise ValueError(f"an InfoBlock of {n_written} envs: must be of n_envs = {self.n_envs} or 0")
-        if self.fused and self.trace is None:
-            arguments = (self.state.blocks, self._scratch, self._rules, action, block)
+        trace = self._no_trace if self.trace is None else self._trace_block
+        if self.config.simulator == "native":  # the whole step in one compiled call
+            arguments = (self.state.blocks, self._scratch, self._rules, action, block, trace)
             if "step" not in self._compiled:  # for these types (SettingLadder.check gives every action one type)
                 self._compiled["step"] = compiled_entry(fused_step, *arguments)
             self._compiled["step"](*arguments)
-        else:
-            self._staged_step(action)
-            if n_written:
-                self.write_info(block, scored=True)
+        else:  # the same step around another simulator's physics
+            prepare_step(self.state.blocks, self._scratch, self._rules, action)
+            scratch = StepScratch(*self._scratch)
+            physics = self.loop.platoon.advance(scratch.leader[0], scratch.leader[1], scratch.flags[0])
+            scratch.floats[:4], scratch.flags[1] = physics[:4], physics.collisions
+            finish_step(self.state.blocks, self._scratch, self._rules, self.n_envs, block, trace)
+        if self.trace is not None:  # env 0's ticks of this step
+            ticks = self.loop.ticks[0] - self.ticks_per_decision + 1 + np.arange(self.ticks_per_decision)
+            self.trace.add(TraceArrays(ticks * self.config.platoon.dt, trace[:, 0], trace[:, 1]))
         return self._result
-
-    def _staged_step(self, action: np.ndarray) -> None:
-        """:meth:`_run_step`, stage by stage through the objects' methods."""
-        cfg, loop, platoon = self.config, self.loop, self.loop.platoon
-        changed = loop.change_setting(self.ladder.settings(action.reshape(self.ladder.shape), platoon.setting))
-        ticks = loop.ticks + np.arange(self.ticks_per_decision)[:, None]  # (n_ticks, n_envs), before each tick
-        leader_speed, leader_accel = self.episodes.leader_at(ticks + 1)
-        block = loop.run(leader_speed, leader_accel, self._v2v_during(ticks))
-        physics, chart = block.physics, block.chart
-        if self.trace is not None:
-            self.trace.add(TraceArrays((ticks[:, 0] + 1) * cfg.platoon.dt, block.tau_mean[:, 0], chart.center[:, 0]))
-
-        step = StepTicks(
-            tau_mean=block.tau_mean, center=chart.center, applied_setting=physics.applied_setting, alarm=chart.alarm,
-            exceedance=chart.exceedance, collisions=physics.collisions, leader_speed=leader_speed,
-            leader_accel=leader_accel, speed=physics.speed, spacing=physics.spacing, accel=physics.accel,
-        )
-        outputs, readouts = self.state.views.step, self.state.views.readouts
-        score = score_step(step, outputs.previous_accel, outputs.envelope, platoon.setting, changed,
-                           self._reward_constants, self._weights, readouts)
-        self.totals.add_step(readouts, platoon.setting, changed, self._reward_constants.gap_per_vehicle)
-        outputs.previous_accel[:] = physics.accel[-1]
-        result = self._result
-        result.reward[:], result.term_rows[:], outputs.changed[:] = score.reward, score.terms, changed
-        result.objective_rows[:], result.cost[:] = score.objectives, score.cost
-        np.any(platoon.collided, axis=1, out=result.terminated)
-        result.truncated[:] = (loop.ticks >= self.episodes.episode_ticks) & ~result.terminated
-        observe_into(self._follower_state(), self._scales, outputs.observation, np.ones(self.n_envs, dtype=bool))
 
     # ------------------------------------------------------------------ read-outs
     @property

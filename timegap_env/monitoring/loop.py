@@ -11,17 +11,20 @@ re-centres that follower's prior and chart on the new setting. :meth:`MonitoredP
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from typing import NamedTuple
 
+import numba
 import numpy as np
 
+from timegap_env.compiled import STAGE_KERNEL
 from timegap_env.config import ChartConfig, MonitorConfig, PlatoonConfig, SensorConfig
-from timegap_env.monitoring.charts import ChartParts, ChartState, chart_dims, make_chart
-from timegap_env.monitoring.monitor import MonitorParts, TimeGapMonitor, monitor_dims
+from timegap_env.monitoring.charts import ChartMemory, ChartParts, ChartState, chart_dims, make_chart, restart_env
+from timegap_env.monitoring.monitor import MonitorParts, TimeGapMonitor, monitor_dims, recenter_env
 from timegap_env.monitoring.sensors import Readings, SensorParts, Sensors
 from timegap_env.sim.degradation import Degradation, DegradationTable
-from timegap_env.sim.platoon import Platoon, PlatoonParts, PlatoonTicks, per_env, platoon_dims
+from timegap_env.sim.platoon import Controller, Platoon, PlatoonParts, PlatoonState, PlatoonTicks, per_env, platoon_dims
 from timegap_env.state import State
 
 SAME_SETTING = 1e-6  # settings closer than this are the same setting [s]
@@ -143,14 +146,15 @@ class MonitoredPlatoon:
         setting = np.asarray(setting, dtype=float)
         if setting.shape != platoon.setting.shape:
             setting = np.broadcast_to(setting, platoon.setting.shape)
-        changed = ~(np.abs(setting - platoon.setting) <= SAME_SETTING)  # NaN counts as a change, refused below
-        if mask is not None:
-            changed &= mask
-        if changed.any():
-            platoon.request_setting(setting, mask=changed)  # checks the settings
-            self.monitor.recenter(setting, changed)
-            self.chart.recenter(platoon.applied_setting, changed)
-            self.chart.hold(platoon.ramp_ticks(setting) + self.chart.config.settle_ticks, changed)
+        targets = setting if mask is None else np.where(mask, setting, platoon.setting)
+        changed = ~(np.abs(targets - platoon.setting) <= SAME_SETTING)  # NaN counts as a change, refused here
+        if changed.any() and not ((setting > 0) & (setting < np.inf)).all():
+            raise ValueError(f"setting = {setting}: every value must be finite and > 0 [s]")
+        monitor, chart = self.monitor.parts, self.chart.parts
+        _change_settings(tuple(platoon.state), tuple(platoon.controller), tuple(monitor.memory), monitor.slot,
+                         (tuple(chart.memory), *chart[1:]), tuple(self.chart.rule), self.chart.config.settle_ticks,
+                         np.ascontiguousarray(targets), changed)
+        self.monitor.restart_posterior(changed)
         return changed
 
     def tick(self, leader_speed: np.ndarray | float, leader_accel: np.ndarray | float) -> tuple[np.ndarray, ChartState]:
@@ -177,3 +181,35 @@ class MonitoredPlatoon:
         tau_mean = self.monitor.update_block(readings.speed, readings.spacing).tau_mean
         chart = self.chart.update_block(tau_mean, physics.applied_setting)
         return MonitoredTicks(physics, readings, tau_mean, chart)
+
+
+@numba.njit(**STAGE_KERNEL)
+def change_settings_env(platoon, controller, memory, slot, chart, chart_rule, settle_ticks, targets, changed, e):  # noqa: ANN001, ANN201, PLR0913
+    """Env ``e``'s followers asked for the settings ``targets`` (n_followers,) [s] (see
+    :meth:`MonitoredPlatoon.change_setting`): which change goes to ``changed`` (n_envs, n_followers); a follower
+    whose setting changes ramps to it, its prior and chart are re-centred (the window's data and the chart's
+    history cleared) and its alarms held off while it ramps and settles, ``settle_ticks`` more. ``platoon``
+    (:class:`~timegap_env.sim.platoon.PlatoonState`), ``controller``, ``memory`` (the monitor's
+    :class:`~timegap_env.monitoring.monitor.WindowMemory`), ``slot`` (its next ring slots), ``chart``
+    (:class:`~timegap_env.monitoring.charts.ChartParts`) and its ``chart_rule`` come as plain tuples or
+    structures; the posterior of a re-centred follower is the prior's once the window runs again."""
+    platoon, controller = PlatoonState(*platoon), Controller(*controller)
+    chart_memory, center, statistic, chart_tick = chart
+    for f in range(targets.shape[0]):
+        setting = targets[f]
+        changed[e, f] = not abs(setting - platoon.setting[e, f]) <= SAME_SETTING
+        if not changed[e, f]:
+            continue
+        platoon.setting[e, f] = setting
+        recenter_env(memory, slot, setting, e, f)
+        applied = platoon.applied_setting[e, f]
+        restart_env(chart_rule, chart_memory, center, statistic, chart_tick[e], applied, e, f)
+        ramp_ticks = math.ceil(abs(setting - applied) / controller.max_setting_change)
+        ChartMemory(*chart_memory).hold_off[e, f] = int(ramp_ticks + settle_ticks)
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _change_settings(platoon, controller, memory, slot, chart, chart_rule, settle_ticks, targets, changed):  # noqa: ANN001, ANN202, PLR0913
+    """:func:`change_settings_env` for every env, env e to ``targets[e]``."""
+    for e in range(targets.shape[0]):
+        change_settings_env(platoon, controller, memory, slot, chart, chart_rule, settle_ticks, targets[e], changed, e)

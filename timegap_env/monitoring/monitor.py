@@ -203,10 +203,14 @@ class TimeGapMonitor(OnState):
         """
         setting, vehicles = setting_array(setting, self.shape), vehicle_mask(mask, self.shape)
         vehicles = np.ascontiguousarray(vehicles)
-        memory = tuple(self.parts.memory)
-        _recenter(memory, self.parts.slot, np.ascontiguousarray(setting, dtype=float), vehicles)
-        # their posterior is the prior now (the others keep their last tick's)
-        _posterior_of_window(memory, tuple(self._prior), vehicles, tuple(self.parts.posterior))
+        _recenter(tuple(self.parts.memory), self.parts.slot, np.ascontiguousarray(setting, dtype=float), vehicles)
+        self.restart_posterior(vehicles)
+
+    def restart_posterior(self, vehicles: np.ndarray) -> None:
+        """The posterior of the vehicles in ``vehicles`` (n_envs, n_vehicles) bool, whose windows were just cleared,
+        is their prior now (the others keep their last tick's)."""
+        _posterior_of_window(tuple(self.parts.memory), tuple(self._prior), np.ascontiguousarray(vehicles),
+                             tuple(self.parts.posterior))
 
     def _latest(self) -> Moments:
         """The posterior after the last tick (or change of setting)."""

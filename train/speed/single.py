@@ -37,7 +37,7 @@ ARITHMETIC_ENVS = 256
 
 
 @numba.njit(cache=True, **NO_ALLOCATION)
-def _unpack_only(blocks, scratch, rules, action, info):  # noqa: ANN001, ANN202
+def _unpack_only(blocks, scratch, rules, action, info, trace):  # noqa: ANN001, ANN202
     """Reads one value of what fused_step takes, compiled as fused_step is; its cost is numba's unpacking of the
     arguments."""
     return blocks[0][0, 0, 0]
@@ -64,7 +64,7 @@ def measure(calls: int) -> SingleEnvSplit:
         task = env.task
         action = task.ladder.check(np.full(task.ladder.shape, 5))
         info = task._info_block if n_envs == 1 else task._no_info  # the single env writes its info values
-        arguments = (task.state.blocks, task._scratch, task._rules, action, info)
+        arguments = (task.state.blocks, task._scratch, task._rules, action, info, task._no_trace)
         step = compiled_entry(fused_step, *arguments)
         times[n_envs] = microseconds(lambda: step(*arguments), max(calls // n_envs, 2))
         if n_envs == 1:
