@@ -1,6 +1,7 @@
 """The package's modules import along the data flow only, never upward, and never in a cycle (issue 40):
 ground floor (compiled, state, config, tasks, generators, _extras) -> leaders -> sim -> monitoring -> envs ->
-agents, experiments -> the package's front (its __init__, cli, precompile). Imports inside functions count too."""
+agents, experiments -> the package's front (its __init__, cli, precompile) and what the scripts of train/ share: its
+studies and speed measures. Imports inside functions count too."""
 
 from __future__ import annotations
 
@@ -9,7 +10,7 @@ from pathlib import Path
 
 PACKAGE = Path(__file__).resolve().parents[1] / "timegap_env"
 GROUND = {"compiled", "state", "config", "tasks", "generators", "_extras"}
-LAYERS = {"leaders": 1, "sim": 2, "monitoring": 3, "envs": 4, "agents": 5, "experiments": 5}
+LAYERS = {"leaders": 1, "sim": 2, "monitoring": 3, "envs": 4, "agents": 5, "experiments": 5, "studies": 6, "speed": 6}
 FRONT = 6  # timegap_env/__init__.py, cli.py, precompile.py
 
 

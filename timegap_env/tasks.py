@@ -122,7 +122,7 @@ V1_GROUPS = (  # sizes: `python -m train.benchmark --size` (docs/benchmark.md), 
 )
 
 TASKS: dict[str, Task] = {task.id: task for task in (
-    Task("TimeGapMonitor-v0", "the initial task, kept bit for bit (its studies: results/v0, train.studies.heldout)",
+    Task("TimeGapMonitor-v0", "the initial task, kept bit for bit (its studies: results/v0, timegap_env.studies.heldout)",
          {}, "v0", Seeds(check_episodes=32)),
     Task("TimeGapMonitor-v1",
          "the default task (docs/task.md): the variation_first reward weighting, the regimes leader family beside "

@@ -8,7 +8,7 @@ rates. The targets are issue 16's, raised by issue 27 (the default env against C
    ``truth_info=True`` and with ``step_diagnostics=False``, against gymnasium's ``CartPole-v1``, the envs taking
    turns over several rounds in an order that rotates, then against highway-env's ``highway-fast-v0`` timed apart,
    and ``TimeGapMonitor-v1`` (the vector reward, cost, objectives and
-   regime in its info) against v0 (issue 24: within 10 %); then where its step goes (:mod:`train.speed.single`): a fused
+   regime in its info) against v0 (issue 24: within 10 %); then where its step goes (:mod:`timegap_env.speed.single`): a fused
    step's call, numba's unpacking of its arguments, and its arithmetic per env-step;
 2. the native vector env (``step_diagnostics=False``) from 256 to 65,536 envs on one core: env-steps/s
    against the 256-env figure and CartPole-v1's steps/s, peak memory per env (tracemalloc), 256 envs with
@@ -44,11 +44,11 @@ from timegap_env import cli
 from timegap_env.config import MonitorConfig, PlatoonConfig
 from timegap_env.generators import HASHED_FROM
 from timegap_env.sim import Platoon
-from train.speed import cold as bench_cold
-from train.speed import ppo as bench_ppo
-from train.speed import single as bench_single
-from train.speed import vector as bench_vector
-from train.speed.monitor import bench as bench_monitor
+from timegap_env.speed import cold as bench_cold
+from timegap_env.speed import ppo as bench_ppo
+from timegap_env.speed import single as bench_single
+from timegap_env.speed import vector as bench_vector
+from timegap_env.speed.monitor import bench as bench_monitor
 
 TARGET_VS_HIGHWAY = 100.0  # single env steps/s over highway-fast-v0's [-]
 TARGET_VS_CARTPOLE = 0.5  # single env as gym.make gives it, steps/s over CartPole-v1's (issue 27) [-]
@@ -228,7 +228,7 @@ def single_env_rows(sizes: Sizes) -> tuple[list[Row], float]:
 
 
 def single_env_split_rows(sizes: Sizes, cartpole: float) -> list[Row]:
-    """Where a single env's step goes (:mod:`train.speed.single`), against CartPole-v1's whole step."""
+    """Where a single env's step goes (:mod:`timegap_env.speed.single`), against CartPole-v1's whole step."""
     split = bench_single.measure(sizes.split_calls)
     step = f"CartPole-v1 step: {1e6 / cartpole:.2f}"
     return [

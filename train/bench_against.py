@@ -24,7 +24,7 @@ import tempfile
 from pathlib import Path
 
 from timegap_env import cli
-from train.speed import cold
+from timegap_env.speed import cold
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -56,12 +56,15 @@ def bench(tree: Path, out: Path) -> None:
 
 def first_steps(trees: dict[str, Path], work: Path, runs: int) -> dict[str, list[float]]:
     """CPU seconds of ``runs`` first steps after ``pip install`` of each tree's wheel (built once, in ``work``), the
-    trees by turns (``train.speed.cold``'s child, its own copy in each tree building that tree's wheel)."""
+    trees by turns (``timegap_env.speed.cold``'s child, its own copy in each tree building that tree's wheel)."""
     sites = {}
     for side, tree in trees.items():
         folder = work / side
         folder.mkdir()
-        build = f"from pathlib import Path\nfrom train.speed.cold import install_wheel\ninstall_wheel(Path({str(folder)!r}))"
+        build = ("from pathlib import Path\ntry:\n    from timegap_env.speed.cold import install_wheel\n"
+                 "except ImportError:  # a tree from before the speed code moved into the package\n"
+                 "    from train.speed.cold import install_wheel\n"
+                 f"install_wheel(Path({str(folder)!r}))")
         subprocess.run([sys.executable, "-c", build], cwd=tree, env={**os.environ, "PYTHONPATH": str(tree)}, check=True,
                        capture_output=True)
         sites[side] = folder / "site"

@@ -17,7 +17,7 @@ import argparse
 
 from timegap_env import cli
 from timegap_env.config import MonitorConfig
-from train.speed.monitor import bench
+from timegap_env.speed.monitor import bench
 
 
 def report(n_envs: int, n_vehicles: int, n_ticks: int, config: MonitorConfig) -> None:

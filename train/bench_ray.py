@@ -44,7 +44,7 @@ from typing import Any
 
 from timegap_env import cli
 from timegap_env.agents.protocol import EVAL_SEED_START
-from train.studies import heldout
+from timegap_env.studies import heldout
 from timegap_env.experiments.backends import Backend
 from timegap_env.experiments.registry import make as make_policy
 

@@ -13,7 +13,7 @@ Per group, with the seeds of each step fixed and disjoint:
 - the **constants** (every ladder setting) play selection seeds 5000-5999: the best constant (the highest mean
   return) and the best *safe* constant (the highest among those colliding in at most SAFE_BUDGET of them) are
   chosen there;
-- the **references** that know the truth (``train.studies.task_map.choose_references``: the V2V pair,
+- the **references** that know the truth (``timegap_env.studies.task_map.choose_references``: the V2V pair,
   regime-aware, degradation-aware and full oracles) build their tables on training seeds 0-15 and are chosen on
   selection seeds 5000-5127; ``hindsight`` is the best constant of each held-out episode;
 - **every policy** (the constants, the paper's rule, the other rules, the references, every training seed of the
@@ -77,8 +77,8 @@ from timegap_env.experiments.stats import (
     probability_of_improvement_interval,
     stratified_bootstrap, wilson_interval,
 )
-from train.studies.task_map import Plan, References, choose_references
-from train.studies.value import flag_aware_actions
+from timegap_env.studies.task_map import Plan, References, choose_references
+from timegap_env.studies.value import flag_aware_actions
 from timegap_env.tasks import SELECTION_SEED_START, HeldOutGroup, get_task
 from timegap_env.leaders.scenarios import missing_data
 
@@ -177,14 +177,14 @@ def join(parts: Sequence[Played]) -> Played:
 # --- the cache ------------------------------------------------------------------------------------------------------
 
 def code_digest() -> str:
-    """A digest of the package's code and data files, of the study code it plays through (train/studies) and of this
+    """A digest of the package's code and data files (its study code, timegap_env/studies, included) and of this
     script's functions whose results are cached (what an episode plays and how it is recorded, the constants'
     choice): an edit to any of them makes every key new. Scores are computed from the cached episodes at every run,
     so their code is not in it."""
     digest = hashlib.sha256()
-    package, studies = Path(timegap_env.__file__).parent, Path(__file__).parent / "studies"
-    for path in sorted([*package.rglob("*.py"), *package.rglob("*.json"), *studies.rglob("*.py")]):
-        digest.update(str(path.relative_to(package.parent if path.is_relative_to(package) else studies.parents[1])).encode())
+    package = Path(timegap_env.__file__).parent
+    for path in sorted([*package.rglob("*.py"), *package.rglob("*.json")]):
+        digest.update(str(path.relative_to(package.parent)).encode())
         digest.update(path.read_bytes())
     for cached in CACHED_CODE:
         digest.update(inspect.getsource(cached).encode())

@@ -34,7 +34,7 @@ from timegap_env.agents.protocol import EVAL_SEED_START
 from timegap_env import cli
 from timegap_env.config import DEGRADATION_KINDS, EnvConfig
 from timegap_env.envs.info import truth_of
-from train.studies.value import (
+from timegap_env.studies.value import (
     DEFAULT_TRAIN_EPISODES, SELECTION_SEED_START, TARGET_SHARE, all_oracles, constants, measure_lookup,
     run,
 )

@@ -15,7 +15,7 @@ candidate that is faster but shown worse is reported, not chosen.
 Seeds: training seeds 0 .. ``--seeds`` - 1 (``train_ppo --seed``; its sub-envs below 10,000), scored on the default
 task's selection episodes 5000 .. 5000 + ``--episodes`` - 1 (never held-out ones). Each run trains with
 ``python -m train.train_ppo`` in a child process into ``<runs>/<candidate>/seed<k>``; a run already there with its
-``training.md`` (a finished run) is scored again, not retrained. Throughput is ``train.speed.ppo.measure``'s on the
+``training.md`` (a finished run) is scored again, not retrained. Throughput is ``timegap_env.speed.ppo.measure``'s on the
 candidate's file (``make bench``'s PPO row): ``--rollouts`` timed rollouts with their updates, one torch thread.
 
 Writes ``<out>/learner.csv`` (a row per candidate and seed) and ``<out>/README.md``; ``--out`` must not exist
@@ -40,7 +40,7 @@ from timegap_env.experiments import registry
 from timegap_env.experiments.rollout import rollout
 from timegap_env.experiments.stats import bootstrap_mean, paired_mde
 from timegap_env.tasks import SELECTION_SEED_START, get_task
-from train.speed import ppo as speed_ppo
+from timegap_env.speed import ppo as speed_ppo
 
 SMALL_RELU = "dict(net_arch=dict(pi=[32, 32], vf=[32, 32]), activation_fn=nn.ReLU)"
 HYPERPARAMS = Path("hyperparams/ppo.yml")  # the file the candidates override

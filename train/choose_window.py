@@ -29,7 +29,7 @@ import numpy as np
 
 from timegap_env import cli
 from timegap_env.config import ChartConfig, MonitorConfig, PlatoonConfig, SensorConfig
-from train.studies.window_study import FAMILIES, NOISY, SEEDS, WINDOWS
+from timegap_env.studies.window_study import FAMILIES, NOISY, SEEDS, WINDOWS
 from timegap_env.leaders import make_leader
 from timegap_env.monitoring import MonitoredPlatoon
 

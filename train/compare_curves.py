@@ -26,7 +26,7 @@ import matplotlib.pyplot as plt
 from timegap_env import cli
 from timegap_env.agents.protocol import ENV_FILE, read_env_file
 from timegap_env.config import MonitorConfig
-from train.studies.training import CURVE_COLUMNS, CURVE_FILE
+from timegap_env.studies.training import CURVE_COLUMNS, CURVE_FILE
 
 
 def read_run(path: Path) -> dict[str, Any]:

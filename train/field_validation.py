@@ -55,7 +55,7 @@ from timegap_env.monitoring.estimate import estimate_time_gap
 from timegap_env.monitoring.sensors import Readings, Sensors
 from timegap_env.sim.platoon import actual_time_gap
 from timegap_env.config import TIME_GAP_MIN_SPEED
-from train.studies.window_study import FAMILIES, NOISY, SEEDS, WINDOWS
+from timegap_env.studies.window_study import FAMILIES, NOISY, SEEDS, WINDOWS
 
 REPO = Path(__file__).resolve().parents[1]
 DRIVING_SPEED = TIME_GAP_MIN_SPEED  # a record counts as driving at this speed or more [m/s]

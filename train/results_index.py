@@ -5,7 +5,7 @@
 Each entry of :data:`RESULTS` is a path under ``results/`` and the command that writes it (the Makefile's
 ``reproduce``, ``benchmark`` and ``train`` targets run them all). "Current" is read from git: the last commit that
 changed the path against the last commit that changed the code that writes it (its script, the ``timegap_env``
-package and the code the scripts share, train/studies and train/speed); a result older than its code says so and
+package and the code the scripts share, timegap_env/studies and timegap_env/speed); a result older than its code says so and
 since which commit, and may or may not change when rerun.
 """
 
@@ -18,7 +18,7 @@ from pathlib import Path
 from timegap_env import cli
 
 REPO = Path(__file__).resolve().parents[1]
-CODE = ("timegap_env", "train/studies", "train/speed")  # what every result depends on, besides its own script
+CODE = ("timegap_env", "timegap_env/studies", "timegap_env/speed")  # what every result depends on, besides its own script
 
 # path under results/ -> (the command that writes it, its script under train/)
 RESULTS: dict[str, tuple[str, str]] = {

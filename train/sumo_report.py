@@ -9,7 +9,7 @@ Needs the sumo extra (``pip install -e '.[sumo]'``; ``make sumo`` sets it up and
 1. **Cross-check** (``crosscheck.md``, ``crosscheck.csv``, ``crosscheck.png``): the paper's scenario, NGSIM and OpenACC
    lead cars (``--pieces``: how many of each, seeds from 10 000) drive a platoon natively and in SUMO (Plexe's CC
    model; SUMO's CACC model), at every ladder setting, without and with V2V, no degradation
-   (``train.studies.crosscheck``): acceleration amplification down the platoon and whether it stays string
+   (``timegap_env.studies.crosscheck``): acceleration amplification down the platoon and whether it stays string
    stable, the actual time gap's variation, the monitor's alarm rate, collisions; SUMO minus native with 95 %
    bootstrap intervals over the pieces. A source whose data is absent is left out, and the report says so.
 2. **Transfer** (``transfer.md``, ``transfer.csv``): every ladder constant, the paper's rule, the chart-step rule
@@ -41,7 +41,7 @@ from timegap_env.agents.protocol import EVAL_SEED_START
 from timegap_env.config import EnvConfig
 from timegap_env.tasks import get_task
 from timegap_env.experiments.backends import Backend, add_arguments
-from train.studies.crosscheck import SETUPS, SOURCES, crosscheck_rows, transfer_returns
+from timegap_env.studies.crosscheck import SETUPS, SOURCES, crosscheck_rows, transfer_returns
 from timegap_env.experiments.registry import fixed_name, load_learned, tuned_chart_step
 from timegap_env.experiments.registry import make as make_policy
 from timegap_env.experiments.stats import bootstrap_mean
@@ -55,7 +55,7 @@ def crosscheck_lines(rows: list[dict[str, Any]]) -> list[str]:
     """crosscheck.md's tables: per source and V2V, per setting, each simulator's means; the differences."""
     lines = ["# SUMO against the native simulator: the physics", "",
              "Each leader piece drives a platoon of five followers at one constant setting, no degradation, with the "
-             "env's sensors, monitor and chart (`train.studies.crosscheck`). Amplification: the largest ratio "
+             "env's sensors, monitor and chart (`timegap_env.studies.crosscheck`). Amplification: the largest ratio "
              "of a follower's peak |acceleration| to its predecessor's, each peak at least 0.1 m/s^2 (above 1: a "
              "disturbance grew); stable: the share "
              "of pieces where no ratio exceeds 1.01; gap std: the actual time gap's standard deviation [s]; alarms: the "

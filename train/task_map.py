@@ -3,7 +3,7 @@
     python -m train.task_map [--train 16] [--selection 32] [--held-out 100] [--out results/task]
                              [--backend serial|ray] [--address A]
 
-For each weighting x degradation severity x traffic mix of ``train.studies.task_map``: the best
+For each weighting x degradation severity x traffic mix of ``timegap_env.studies.task_map``: the best
 blind constant (chosen on selection seeds) and the gain of each reference over it on held-out seeds, with
 95 % bootstrap intervals, which weighting the criterion picks, and the Pareto fronts (capacity, string
 stability, variation) of the constants against the references with their hypervolumes. Then the same for
@@ -27,7 +27,7 @@ import numpy as np
 
 from timegap_env import cli
 from timegap_env.experiments.backends import Backend, add_arguments
-from train.studies.task_map import (
+from timegap_env.studies.task_map import (
     FRONT_OBJECTIVES, MAX_BLIND_COLLISION_RATE, REFERENCES, SEVERITIES, TARGET_SHARE, TRAFFIC, WEIGHTINGS, Plan,
     choose_default, task_map, v1_headroom,
 )

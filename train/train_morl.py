@@ -38,8 +38,8 @@ from timegap_env.experiments.backends import Backend
 from timegap_env.experiments.rollout import rollout
 from timegap_env.experiments.stats import bootstrap_mean
 from timegap_env.tasks import get_task
-from train.studies.task_map import FRONT_OBJECTIVES, front_rows, hypervolume, pair_terms, weigh
-from train.studies.value import SELECTION_SEED_START
+from timegap_env.studies.task_map import FRONT_OBJECTIVES, front_rows, hypervolume, pair_terms, weigh
+from timegap_env.studies.value import SELECTION_SEED_START
 
 PROG = "python -m train.train_morl"
 OBJECTIVES = ("efficiency", "string_stability", "tracking", "collision")  # the MO env's reward terms, in this order

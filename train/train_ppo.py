@@ -93,13 +93,13 @@ from timegap_env.envs.action import action_space
 from timegap_env.envs.info import summary_of, truth_of
 from timegap_env.envs.observation import MONITOR_FEATURES, feature_columns, observation_space
 from timegap_env.envs.sb3 import TimeGapVecEnv
-from train.studies.training import (
+from timegap_env.studies.training import (
     CURVE_COLUMNS, CURVE_FILE, check_seeds, load_hyperparams, with_env_config,
 )
 from timegap_env.experiments.backends import Backend
 from timegap_env.experiments.stats import bootstrap_mean
-from train.studies.task_map import WEIGHTINGS, Plan, choose_references
-from train.studies.value import DEFAULT_TRAIN_EPISODES, all_oracles, choose_oracle, constants, measure_lookup, run
+from timegap_env.studies.task_map import WEIGHTINGS, Plan, choose_references
+from timegap_env.studies.value import DEFAULT_TRAIN_EPISODES, all_oracles, choose_oracle, constants, measure_lookup, run
 
 REPORT_FILE = "training.md"
 CURVE_FIGURE = "curve.png"

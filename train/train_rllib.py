@@ -254,7 +254,7 @@ def check_returns(policy: Any, env_kwargs: dict[str, Any]) -> Checked:
     """``policy``'s deterministic actions on the default task's check episodes (its ``seeds.check``, below the
     held-out seeds) in the env of ``env_kwargs`` (gym.make's), through value_of_information.run as train_ppo's
     learning curve does."""
-    from train.studies.value import run
+    from timegap_env.studies.value import run
 
     task = get_task(DEFAULT_TASK)
     seeds = task.seeds.check
@@ -293,7 +293,7 @@ class Settings:
         """The settings of ``args``; a yml key with no counterpart, sizes below 1 or seeds reaching the evaluation's
         raise ValueError naming them."""
         # SB3's parser of the yml and its env_kwargs; the first seed of its check episodes
-        from train.studies.training import load_hyperparams, with_env_config
+        from timegap_env.studies.training import load_hyperparams, with_env_config
 
         hyperparams = load_hyperparams(args.hyperparams)
         unknown = set(hyperparams) - set(MAPPED) - UNMAPPED

@@ -31,7 +31,7 @@ from timegap_env.tasks import get_task
 from timegap_env.experiments.registry import fixed_name
 from timegap_env.experiments.registry import make as make_policy
 from timegap_env.experiments.rollout import rollout_side_by_side
-from train.studies.value import SELECTION_SEED_START, kind_groups
+from timegap_env.studies.value import SELECTION_SEED_START, kind_groups
 
 DEFAULT_EPISODES = 256
 DEFAULT_OUT = Path("runs/rule")  # never a committed result: make reproduce writes results/rule (v1), results/v0/rule

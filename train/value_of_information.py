@@ -52,7 +52,7 @@ from timegap_env.agents.protocol import EVAL_SEED_START
 from timegap_env import cli
 from timegap_env.config import EnvConfig
 from timegap_env.experiments.backends import Backend, add_arguments
-from train.studies.value import (
+from timegap_env.studies.value import (
     DEFAULT_TRAIN_EPISODES, MONITOR_SIGNALS, SELECTION_EPISODES, SELECTION_SEED_START, TARGET_SHARE, all_oracles, choose_oracle, constants,
     diagonal, kind_groups, measure_lookup, oracle_piece, run,
 )

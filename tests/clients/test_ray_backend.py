@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from train.studies import value
+from timegap_env.studies import value
 from train import benchmark, detection_benchmark, value_of_information
 from timegap_env.tasks import HeldOutGroup
 from timegap_env.experiments.backends import Backend

@@ -15,7 +15,7 @@ from timegap_env.agents.policies import PaperRulePolicy
 from timegap_env.envs.rendering import DEFAULT_TIME_WINDOW
 from timegap_env.envs.task import Trace, TraceArrays
 from timegap_env.agents.protocol import EVAL_SEED_START
-from train.studies import heldout
+from timegap_env.studies import heldout
 
 LONG = {"episode_duration": 5000.0, "degradation": {"kind_weights": {"none": 1.0}}}  # [s]
 DT = 0.1  # [s], the default tick

@@ -8,7 +8,7 @@ import pytest
 
 from timegap_env.config import EnvConfig
 from timegap_env.experiments.backends import Backend
-from train.studies.crosscheck import METRICS, SETUPS, crosscheck_rows, drive, piece_rows
+from timegap_env.studies.crosscheck import METRICS, SETUPS, crosscheck_rows, drive, piece_rows
 from timegap_env.leaders import LeaderProfile, make_leader
 
 
@@ -52,7 +52,7 @@ def test_a_steady_sumo_platoon_keeps_its_setting(setup: str) -> None:
 
 
 def test_a_recorded_source_gives_distinct_pieces() -> None:
-    from train.studies.crosscheck import distinct_seeds
+    from timegap_env.studies.crosscheck import distinct_seeds
 
     seeds = distinct_seeds("paper", 3, EnvConfig())
     profiles = {make_leader("paper", seed).speed.tobytes() for seed in seeds}

@@ -19,7 +19,7 @@ from timegap_env.tasks import get_task
 from timegap_env.envs.info import summary_of, truth_of
 from timegap_env.envs.reward import weights_of
 from timegap_env.experiments import rollout as harness
-from train.studies import value
+from timegap_env.studies import value
 from timegap_env.experiments.backends import Backend
 
 SEEDS = [10_000, 10_001, 10_002]

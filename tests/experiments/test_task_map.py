@@ -10,7 +10,7 @@ from timegap_env.config import EnvConfig
 from timegap_env.envs.info import truth_of
 from timegap_env.experiments.backends import Backend
 from timegap_env.experiments.rollout import rollout
-from train.studies.task_map import (
+from timegap_env.studies.task_map import (
     REFERENCES, SEVERITIES, TRAFFIC, V1_CELL, WEIGHTINGS, Plan, cell_config, choose_default, hypervolume, map_cell,
     regime_contexts, term_sums, v1_headroom, weigh,
 )

@@ -11,7 +11,7 @@ import pytest
 from timegap_env.tasks import HeldOutGroup
 from timegap_env.agents.policies import FixedPolicy, PaperRulePolicy
 from timegap_env.config import EnvConfig
-from train.studies import value
+from timegap_env.studies import value
 from train import benchmark, detection_benchmark, value_of_information
 from timegap_env.experiments.backends import Backend, add_arguments
 

@@ -5,7 +5,7 @@ import math
 import re
 import sys
 
-from train.speed import vector as bench_vector
+from timegap_env.speed import vector as bench_vector
 from train import bench
 
 NUMBER = re.compile(r"[-+]?\d[\d,]*(?:\.\d+)?(?:e[-+]?\d+)?|nan|inf", re.IGNORECASE)

@@ -9,7 +9,7 @@ import pytest
 import torch
 
 from train import choose_learner, choose_recipe
-from train.studies import training
+from timegap_env.studies import training
 
 ROOT = Path(__file__).resolve().parents[2]
 

@@ -33,7 +33,7 @@ def test_the_benchmark_writes_its_report(tmp_path):
 
 def test_calibration_selection_training_and_held_out_seeds_are_apart():
     from timegap_env.agents.protocol import EVAL_SEED_START
-    from train.studies import value as value_of_information
+    from timegap_env.studies import value as value_of_information
 
     calibration = range(bench.CALIBRATION_SEED_START, bench.CALIBRATION_SEED_START + 96)
     selection = range(value_of_information.SELECTION_SEED_START,

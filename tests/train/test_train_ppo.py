@@ -24,7 +24,7 @@ from timegap_env.agents.protocol import EVAL_SEED_START, read_env_file
 from timegap_env import DEFAULT_TASK, TASKS
 from timegap_env.envs.observation import FEATURES, MONITOR_FEATURES
 from timegap_env.envs.sb3 import TimeGapVecEnv
-from train.studies import training
+from timegap_env.studies import training
 from train import train_ppo
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -6,7 +6,7 @@
 - :mod:`~timegap_env.experiments.stats`: bootstrap intervals of a mean, Wilson intervals of a rate.
 
 The study code built on them (held-out groups, the value of information, the task map, ...) is not installed: it is
-the package ``train.studies`` of the repository (issue 38).
+the package ``timegap_env.studies`` of the repository (issue 38).
 
 Nothing here is imported by ``import timegap_env``: each module is imported where it is used.
 """

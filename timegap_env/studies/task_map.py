@@ -39,7 +39,7 @@ from timegap_env.experiments.backends import Backend
 from timegap_env.experiments.rollout import rollout
 from timegap_env.tasks import LARGER_DEGRADATIONS, get_task
 from timegap_env.experiments.stats import bootstrap_mean
-from train.studies.value import (
+from timegap_env.studies.value import (
     MARGINS, SELECTION_SEED_START, oracle_actions, pair_pieces, training_conditions,
 )
 

@@ -33,7 +33,7 @@ from timegap_env.experiments.registry import (
 from timegap_env.experiments.registry import make as make_policy
 from timegap_env.experiments.rollout import rollout
 from timegap_env.experiments.stats import bootstrap_mean, oracle_share, wilson_interval
-from train.studies.value import DEFAULT_TRAIN_EPISODES, make_oracle
+from timegap_env.studies.value import DEFAULT_TRAIN_EPISODES, make_oracle
 from timegap_env.leaders import default_ngsim_path, default_openacc_dir, openacc_paths
 from timegap_env.tasks import LARGER_DEGRADATIONS
 

@@ -23,7 +23,7 @@ import tempfile
 import time
 from pathlib import Path
 
-REPO = Path(__file__).resolve().parents[2]  # the repository: train/speed/cold.py -> .
+REPO = Path(__file__).resolve().parents[2]  # the repository: timegap_env/speed/cold.py -> .
 SOURCES = ("pyproject.toml", "README.md", "LICENSE", "MANIFEST.in", "CHANGELOG.md", "CITATION.cff", "build_backend",
            "timegap_env")  # what a wheel is built from (an sdist's contents)
 CHILD = """\

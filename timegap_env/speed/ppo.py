@@ -20,7 +20,7 @@ from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper, VecNormalize
 from stable_baselines3.common.vec_env.base_vec_env import VecEnvObs, VecEnvStepReturn
 
 from timegap_env.envs.sb3 import TimeGapVecEnv
-from train.studies.training import load_hyperparams
+from timegap_env.studies.training import load_hyperparams
 
 HYPERPARAMS = Path(__file__).resolve().parents[2] / "hyperparams" / "ppo.yml"  # in a clone of the repository
 

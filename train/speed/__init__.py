@@ -1,7 +1,0 @@
-"""The measurements behind ``make bench`` (``python -m train.bench``), each a ratio against a reference run in the
-same process: :mod:`~train.speed.cold` (first step in a child process), :mod:`~train.speed.vector`
-(the native vector env at growing sizes, memory, batched reset), :mod:`~train.speed.single` (where a
-single env's step goes), :mod:`~train.speed.ppo` (the env's share of PPO's time; needs the ``train``
-extra) and :mod:`~train.speed.monitor` (the streaming monitor). They print and never assert: timing
-depends on the machine.
-"""
