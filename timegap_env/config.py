@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from typing import Any, NamedTuple, NoReturn, Self, cast
 
 import numpy as np
@@ -613,20 +613,55 @@ class Interval(NamedTuple):
 
 
 @dataclasses.dataclass(frozen=True)
+class Lever:
+    """A follower's parameter that degradations set, as one record of :data:`LEVERS`: the
+    :class:`~timegap_env.sim.degradation.DegradationTable` holds it per follower (nominal while no degradation acts)
+    and copies it into every structure with a field of its name, the physics'
+    :class:`~timegap_env.sim.platoon.FollowerFaults` and the sensors'
+    :class:`~timegap_env.monitoring.sensors.SensorFaults`, whose kernels give it its effect; the ground truth
+    reports it among the true parameters under ``truth``."""
+
+    name: str  # the table's array, and the field of FollowerFaults or SensorFaults that reads it
+    dtype: type  # float, np.int64 (ticks) or bool (a flag)
+    unit: str
+    nominal: Callable[[PlatoonConfig, SensorConfig], float | np.ndarray]  # its value while no degradation acts (one,
+    # or one per follower)
+    truth: str | None = None  # its name among the ground truth's true parameters; None: not reported
+    # its value as the ground truth reports it, in that parameter's unit
+    reported: Callable[[np.ndarray | float, PlatoonConfig], np.ndarray | float] = lambda value, platoon: value
+
+
+LEVERS: dict[str, Lever] = {lever.name: lever for lever in (  # the true parameters are reported in this order
+    Lever("lag", float, "s", lambda platoon, sensors: platoon.per_follower("actuation_lag"), "lag"),  # GLVD lag T
+    Lever("gain", float, "-", lambda platoon, sensors: platoon.per_follower("actuation_gain"), "gain"),  # GLVD gain K
+    Lever("k_s", float, "1/s^2", lambda platoon, sensors: platoon.k_s, "k_s"),  # controller gain on the spacing error
+    Lever("k_v", float, "1/s", lambda platoon, sensors: platoon.k_v, "k_v"),  # controller gain on the speed difference
+    Lever("accel_max", float, "m/s^2", lambda platoon, sensors: platoon.accel_max),  # highest command
+    Lever("extra_delay", np.int64, "ticks", lambda platoon, sensors: 0, "v2v_delay",  # V2V delay added; reported:
+          lambda ticks, platoon: platoon.v2v_delay + ticks * platoon.dt),  # the whole V2V delay theta [s]
+    Lever("packet_loss", float, "-", lambda platoon, sensors: 0.0, "packet_loss"),  # chance a V2V message is lost
+    Lever("radar_bias", float, "m", lambda platoon, sensors: 0.0, "radar_bias"),  # added to the radar's spacing
+    Lever("radar_noise", float, "m", lambda platoon, sensors: sensors.spacing_noise_std, "radar_noise"),  # std of
+    # the radar's spacing noise
+    Lever("v2v_down", bool, "-", lambda platoon, sensors: False),  # the V2V link is down (the flag shows it)
+)}
+
+
+@dataclasses.dataclass(frozen=True)
 class DegradationKind:
     """What can go wrong with a follower, as one record of :data:`DEGRADATIONS` (:mod:`timegap_env.sim.degradation`
     draws it, writes it into the physics and the sensors, and reports its ground truth from these fields alone).
 
-    A sized kind sets one parameter of the follower, its ``lever``: a field of
-    :class:`~timegap_env.sim.degradation.DegradationTable` read by the physics, the sensors and the ground truth:
-    ``lag`` [s], ``gain`` [-], ``k_s`` [1/s^2], ``k_v`` [1/s], ``accel_max`` [m/s^2], ``extra_delay`` [ticks],
-    ``packet_loss`` [-], ``radar_bias`` [m], ``radar_noise`` [m] or the flag ``v2v_down``. The smallest
-    string-stable setting follows from the lever's new value.
+    A kind sets one parameter of the follower, its ``lever``, a record of :data:`LEVERS` read by the physics, the
+    sensors and the ground truth: ``lag`` [s], ``gain`` [-], ``k_s`` [1/s^2], ``k_v`` [1/s], ``accel_max``
+    [m/s^2], ``extra_delay`` [ticks], ``packet_loss`` [-], ``radar_bias`` [m], ``radar_noise`` [m] or the flag
+    ``v2v_down`` (a kind without a size sets a flag). The smallest string-stable setting follows from the lever's
+    new value.
     """
 
     name: str
     effect: str  # what happens while it acts, for the docs
-    lever: str | None  # the DegradationTable parameter it sets; None: commercial_acc, which replaces the car's model
+    lever: str | None  # the name of the LEVERS record it sets; None: commercial_acc, which replaces the car's model
     size: str | None = None  # what its size is, with its unit; None: the kind has no size (a flag lever is set)
     size_bounds: Interval | None = None  # a size given by hand (reset options) must lie in it
     range_field: str | None = None  # the DegradationConfig field its drawn sizes come from (a magnitude if signed)
@@ -661,6 +696,16 @@ DEGRADATIONS: dict[str, DegradationKind] = {kind.name: kind for kind in (  # in 
     DegradationKind("commercial_acc", "the follower is a commercial ACC car calibrated to OpenACC "
                     "(timegap_env.sim.presets): its lag, gains and highest command, and no V2V", None),
 )}
+def write_nominal_levers(faults: tuple, platoon: PlatoonConfig, sensors: SensorConfig) -> None:
+    """Set every array of ``faults`` (a NamedTuple, e.g. FollowerFaults) whose field is named as a lever of
+    :data:`LEVERS` to that lever's nominal value under ``platoon`` and ``sensors``."""
+    for name, values in zip(faults._fields, faults):  # type: ignore[attr-defined]
+        if name in LEVERS:
+            values[...] = LEVERS[name].nominal(platoon, sensors)
+
+
+if not all(kind.lever is None or kind.lever in LEVERS for kind in DEGRADATIONS.values()):
+    raise ImportError(f"timegap_env.config.DEGRADATIONS: each kind's lever must be one of LEVERS {list(LEVERS)}")
 DEGRADATION_KINDS = tuple(DEGRADATIONS)  # what can go wrong with a follower; only v2v_outage shows (the flag drops)
 
 

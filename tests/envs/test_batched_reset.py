@@ -21,7 +21,7 @@ from timegap_env.envs.vector_env import TimeGapMonitorVectorEnv
 from timegap_env.leaders import default_ngsim_path, default_openacc_dir, make_leader
 from timegap_env.leaders.profile import LeaderProfile
 from timegap_env.monitoring.loop import MonitoredPlatoon
-from timegap_env.sim.degradation import Categorical, Degradation, DegradationTable
+from timegap_env.sim.degradation import KINDS, Categorical, Degradation, DegradationTable
 
 EPISODE_DIGESTS = {  # case -> digest after each reset, first 16 hex digits
     "default": ('1b35a2b1d0555301', '57bd67640dcf7e12',),
@@ -84,7 +84,7 @@ LEADER_DIGESTS = {  # leader config/family -> digest of seeds 0-39, first 16 hex
 
 TABLE_FIELDS = ("kind", "size", "start", "end", "lag", "gain", "k_s", "k_v", "accel_max", "extra_delay",
                 "packet_loss", "radar_bias", "radar_noise", "v2v_down")
-FAULT_FIELDS = ("start", "end", "k_s", "k_v", "accel_max", "extra_delay", "packet_loss", "spacing_bias", "keys")
+FAULT_FIELDS = ("start", "end", "k_s", "k_v", "accel_max", "extra_delay", "packet_loss", "radar_bias", "keys")
 SPEED = 20.0 + 3.0 * np.sin(np.arange(1234) * 0.01)  # a user's leader [m/s]
 
 
@@ -149,11 +149,19 @@ def arrays(episodes: Episodes, loop: MonitoredPlatoon, rngs: list) -> list:
         episodes.leader_speed, episodes.leader_accel, episodes.episode_ticks, episodes.dropout_probability,
         episodes.initial_setting, episodes.noise_keys, episodes.packet_loss_keys,
         repr(list(episodes.scenario)), repr(episodes.degradations),
-        *(getattr(table, name) for name in TABLE_FIELDS), repr(table.descriptions),
+        *(recorded_form(table, name) for name in TABLE_FIELDS), repr(table.descriptions),
         *(table._reported[name] for name in ("size", "onset", "end")), table._while_active, table._otherwise,
         *(getattr(faults, name) for name in FAULT_FIELDS), *faults.dynamics, *loop.sensors.faults,
         *(repr(rng.bit_generator.state) for rng in rngs),  # an unseeded reset carries on from there
     ]
+
+
+def recorded_form(table: DegradationTable, name: str) -> np.ndarray:
+    """The table's array ``name`` as 156704a held it: its radar noise was NaN where no radar_noise degradation set it
+    (the table now holds the sensors' nominal noise there, as every lever holds its nominal value)."""
+    if name != "radar_noise":
+        return getattr(table, name)
+    return np.where(table.kind == KINDS.index("radar_noise"), table.radar_noise, np.nan)
 
 
 def digest(items: list) -> str:

@@ -6,10 +6,13 @@ import numpy as np
 import pytest
 
 import timegap_env
-from timegap_env.config import LeaderConfig, PlatoonConfig, SensorConfig
+from timegap_env.config import LEVERS, LeaderConfig, PlatoonConfig, SensorConfig
 from timegap_env.envs.info import truth_of
-from timegap_env.monitoring.sensors import Readings, Sensors
-from timegap_env.sim.degradation import Degradation, DegradationTable, parse_degradations, smallest_stable_setting
+from timegap_env.monitoring.sensors import Readings, SensorFaults, Sensors
+from timegap_env.sim.degradation import (
+    TRUE_PARAMETERS, Degradation, DegradationTable, parse_degradations, smallest_stable_setting,
+)
+from timegap_env.sim.platoon import FollowerFaults
 from timegap_env.sim.presets import COMMERCIAL_ACC, acc_presets
 from timegap_env.sim.stability import string_stability
 
@@ -115,7 +118,7 @@ def test_a_degraded_radar_biases_and_widens_the_readings_in_its_window():
     sensors = Sensors(SensorConfig(spacing_noise_std=0.1, speed_noise_std=0.0), n_envs=1, seed=0, n_followers=2)
     faults = sensors.faults
     faults.start[0], faults.end[0] = [10, 10], [20, 20]
-    faults.spacing_bias[0], faults.spacing_noise_std[0] = [2.0, 0.0], [0.1, 1.0]
+    faults.radar_bias[0], faults.radar_noise[0] = [2.0, 0.0], [0.1, 1.0]
     true = Readings(np.full((30, 1, 2), 40.0), np.full((30, 1, 2), 20.0))
     spacing = sensors.measure(true, np.zeros(1, dtype=np.int64)).spacing[:, 0]  # reading k follows tick k
     inside = np.arange(30)
@@ -204,3 +207,28 @@ def test_a_degradation_that_ends_returns_the_follower_to_nominal():
     nominal = run()
     gap = np.abs(ended.spacing - nominal.spacing)
     assert gap[ended.t > 30.5].max() > 0.5 and gap[-1].max() < 0.1 * gap[ended.t > 30.5].max()  # back to nominal
+
+
+def test_the_levers_records_drive_the_table_the_faults_and_the_truth():
+    """A lever is its LEVERS record: the table holds it at its nominal value, copies it by name into every faults
+    structure with a field of its name, and reports it among the true parameters under its truth name."""
+    platoon, sensors_config = PlatoonConfig(n_followers=3), SensorConfig(spacing_noise_std=0.2)
+    table = DegradationTable(platoon, 2, sensors_config)
+    assert TRUE_PARAMETERS == tuple(lever.truth for lever in LEVERS.values() if lever.truth)
+    for name, lever in LEVERS.items():
+        np.testing.assert_array_equal(getattr(table, name), np.broadcast_to(lever.nominal(platoon, sensors_config),
+                                                                            (2, 3)))
+    # every faults field is the schedule, a lever or the physics' own (its GLVD transition, its packet-loss keys)
+    for faults in (FollowerFaults, SensorFaults):
+        assert set(faults._fields) - {"start", "end", "dynamics", "keys"} <= set(LEVERS), faults.__name__
+    table.set_many(np.array([1]), [(Degradation("radar_noise", (2,), size=0.9, onset=1.0),
+                                   Degradation("v2v_latency", (3,), size=0.3))])
+    sensors = Sensors(sensors_config, n_envs=2, n_followers=3)
+    table.write_levers(sensors.faults, np.array([1]))
+    np.testing.assert_array_equal(sensors.faults.radar_noise, [[0.2, 0.2, 0.2], [0.2, 0.9, 0.2]])
+    np.testing.assert_array_equal(sensors.faults.start[1], [0, round(1.0 / platoon.dt), 0])
+    truth = table.truth(np.array([0, 20]), np.ones((2, 3), dtype=bool))
+    np.testing.assert_array_equal(truth["radar_noise"], [[0.2, 0.2, 0.2], [0.2, 0.9, 0.2]])
+    np.testing.assert_allclose(truth["v2v_delay"][1], [platoon.v2v_delay] * 2 + [platoon.v2v_delay + 0.3])
+    with pytest.raises(AttributeError, match="no attribute 'brake_fade'"):
+        table.brake_fade  # noqa: B018

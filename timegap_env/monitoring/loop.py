@@ -90,7 +90,7 @@ class MonitoredPlatoon:
         self.monitor = TimeGapMonitor(n_envs, platoon.n_followers, platoon.initial_setting, monitor, state,
                                       (*path, "monitor"))
         self.chart = make_chart(n_envs, platoon.n_followers, platoon.initial_setting, chart, state, (*path, "chart"))
-        self.degradation = DegradationTable(platoon, n_envs, sensors.spacing_noise_std)
+        self.degradation = DegradationTable(platoon, n_envs, sensors)
 
     ticks = property(lambda self: self.platoon.ticks, doc="Ticks since each env's reset (n_envs,) [-].")
 
@@ -103,12 +103,10 @@ class MonitoredPlatoon:
         """:meth:`degrade` for each env of ``envs`` (distinct indices) with its entry of ``degradations`` and of
         ``keys`` (uint64), at once."""
         envs = np.asarray(envs, dtype=np.intp)
-        table, faults = self.degradation, self.sensors.faults
+        table = self.degradation
         table.set_many(envs, degradations)
         table.write_faults_many(self.platoon, envs, keys)
-        faults.start[envs], faults.end[envs], faults.spacing_bias[envs] = table.start[envs], table.end[envs], table.radar_bias[envs]
-        radar_noise = table.radar_noise[envs]
-        faults.spacing_noise_std[envs] = np.where(np.isnan(radar_noise), self.sensors.config.spacing_noise_std, radar_noise)
+        table.write_levers(self.sensors.faults, envs)
 
     def reset(
         self,

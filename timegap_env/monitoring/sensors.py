@@ -21,7 +21,7 @@ import numba
 import numpy as np
 
 from timegap_env.compiled import INLINED_STAGE_KERNEL
-from timegap_env.config import SensorConfig
+from timegap_env.config import PlatoonConfig, SensorConfig, write_nominal_levers
 from timegap_env.sim.counter_noise import counter_uniform
 from timegap_env.state import OnState, PerEnv, State
 
@@ -49,9 +49,8 @@ class SensorFaults(NamedTuple):
 
     start: Annotated[np.ndarray, PerEnv(np.int64, "followers")]  # first tick it acts [ticks]
     end: Annotated[np.ndarray, PerEnv(np.int64, "followers")]  # first tick it no longer acts; start == end: never
-    spacing_bias: Annotated[np.ndarray, PerEnv(float, "followers")]  # added to the spacing reading [m]
-    # the spacing noise's std while it acts, replacing the config's [m]
-    spacing_noise_std: Annotated[np.ndarray, PerEnv(float, "followers")]
+    radar_bias: Annotated[np.ndarray, PerEnv(float, "followers")]  # added to the spacing reading [m]
+    radar_noise: Annotated[np.ndarray, PerEnv(float, "followers")]  # the spacing noise's std, replacing the config's [m]
 
 
 class SensorParts(NamedTuple):
@@ -80,7 +79,7 @@ class Sensors(OnState):
         noise.keys[:] = np.random.default_rng(seed).integers(0, 2**63, size=n_envs, dtype=np.uint64)
         noise.dropout_probability[:] = config.dropout_probability
         noise.spacing_noise_std[:], noise.speed_noise_std[:] = config.spacing_noise_std, config.speed_noise_std
-        self.parts.faults.spacing_noise_std[:] = config.spacing_noise_std
+        write_nominal_levers(self.parts.faults, PlatoonConfig(), config)  # the physics' levers are not the sensors'
 
     noise = property(lambda self: self.parts.noise, doc="The :class:`NoiseModel` (changed in place).")
     faults = property(lambda self: self.parts.faults, doc="The :class:`SensorFaults` (changed in place).")
@@ -140,8 +139,8 @@ def measure_env(true, ticks_before, noise, faults, out, e, column, uniforms):  #
             radius = np.sqrt(-2.0 * np.log(uniforms[0, j]))  # Box-Muller: two independent standard normals
             angle = 2.0 * np.pi * uniforms[1, j]
             if faults.start[e, f] <= tick - 1 < faults.end[e, f]:  # the reading after physics tick tick - 1
-                out.spacing[k, c, f] = (true.spacing[k, c, f] + faults.spacing_bias[e, f]
-                                        + faults.spacing_noise_std[e, f] * radius * np.cos(angle))
+                out.spacing[k, c, f] = (true.spacing[k, c, f] + faults.radar_bias[e, f]
+                                        + faults.radar_noise[e, f] * radius * np.cos(angle))
             else:
                 out.spacing[k, c, f] = true.spacing[k, c, f] + noise.spacing_noise_std[e] * radius * np.cos(angle)
             out.speed[k, c, f] = true.speed[k, c, f] + noise.speed_noise_std[e] * radius * np.sin(angle)

@@ -29,8 +29,8 @@ from typing import Any, NoReturn
 import numpy as np
 
 from timegap_env.config import (
-    DEGRADATION_KINDS, DEGRADATIONS, MAX_DT, MAX_EPISODE_TICKS, DegradationConfig, PlatoonConfig, SensorConfig,
-    is_finite, is_real, shown,
+    DEGRADATION_KINDS, DEGRADATIONS, LEVERS, MAX_DT, MAX_EPISODE_TICKS, DegradationConfig, PlatoonConfig,
+    SensorConfig, is_finite, is_real, shown,
 )
 from timegap_env.sim.platoon import Platoon, ZOHCoefficients
 from timegap_env.sim.stability import SettingSweep
@@ -40,16 +40,9 @@ MAX_TIME = MAX_EPISODE_TICKS * MAX_DT  # latest onset or end of a degradation, t
 DESCRIPTION_KEYS = ("kind", "size", "followers", "onset", "end", "car")  # what a degradation dict may hold
 NEVER = np.iinfo(np.int64).max // 4  # the end tick of a degradation that does not end
 SETTING_SEARCH = (0.05, 6.0)  # smallest_stable_setting searches tau* in this range [s]
-TRUE_PARAMETERS = (  # the true parameters the ground truth reports, nominal while no degradation acts
-    "lag",  # GLVD lag T [s]
-    "gain",  # GLVD gain K [-]
-    "k_s",  # controller gain on the spacing error [1/s^2]
-    "k_v",  # controller gain on the speed difference [1/s]
-    "v2v_delay",  # V2V delay theta [s]
-    "packet_loss",  # chance per tick that a V2V message is lost [-]
-    "radar_bias",  # added to the radar's spacing [m]
-    "radar_noise",  # std of the radar's spacing noise [m]
-)
+REPORTED_LEVERS = tuple(lever for lever in LEVERS.values() if lever.truth is not None)
+# the true parameters the ground truth reports, nominal while no degradation acts (LEVERS' records give their units)
+TRUE_PARAMETERS = tuple(lever.truth for lever in LEVERS.values() if lever.truth is not None)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -262,32 +255,23 @@ class DegradationTable:
     """Every follower's degradation in ``n_envs`` platoons of ``config``, arrays (n_envs, n_followers).
 
     Per follower: ``kind`` (int8 code, an index of KINDS), ``size`` (NaN without one), ``start`` and
-    ``end`` (ticks since reset, [start, end); start == end: none; NEVER: no end), and the parameters
-    while it acts, nominal otherwise: ``lag`` [s], ``gain`` [-], ``k_s`` [1/s^2], ``k_v`` [1/s],
-    ``accel_max`` [m/s^2], ``extra_delay`` (int, ticks), ``packet_loss`` [-], ``radar_bias`` [m],
-    ``radar_noise`` [m, NaN: the sensors' own, ``spacing_noise_std``], ``v2v_down`` [bool].
+    ``end`` (ticks since reset, [start, end); start == end: none; NEVER: no end), and in ``levers`` the value of
+    each lever of :data:`~timegap_env.config.LEVERS` while it acts (nominal where no degradation sets it; each also
+    an attribute: ``table.lag`` [s], ``table.extra_delay`` [ticks], ...); ``nominal`` holds the levers' nominal
+    values under ``config`` and ``sensors`` (the radar's noise). :meth:`write_levers` copies them into the
+    physics' and the sensors' faults.
     """
 
-    def __init__(self, config: PlatoonConfig, n_envs: int,
-                 spacing_noise_std: float = SensorConfig.spacing_noise_std) -> None:
+    def __init__(self, config: PlatoonConfig, n_envs: int, sensors: SensorConfig = SensorConfig()) -> None:
         self.config = config
-        self.spacing_noise_std = float(spacing_noise_std)
-        self._nominal_lag, self._nominal_gain = config.per_follower("actuation_lag"), config.per_follower("actuation_gain")
         shape = (n_envs, config.n_followers)
         self.kind = np.zeros(shape, dtype=np.int8)
         self.size = np.full(shape, np.nan)
         self.start = np.zeros(shape, dtype=np.int64)
         self.end = np.zeros(shape, dtype=np.int64)
-        self.lag = np.zeros(shape)
-        self.gain = np.zeros(shape)
-        self.k_s = np.zeros(shape)
-        self.k_v = np.zeros(shape)
-        self.accel_max = np.zeros(shape)
-        self.extra_delay = np.zeros(shape, dtype=np.int64)
-        self.packet_loss = np.zeros(shape)
-        self.radar_bias = np.zeros(shape)
-        self.radar_noise = np.full(shape, np.nan)
-        self.v2v_down = np.zeros(shape, dtype=bool)
+        self.nominal = {name: lever.nominal(config, sensors) for name, lever in LEVERS.items()}  # while nothing acts
+        self.levers: dict[str, np.ndarray] = {name: np.zeros(shape, dtype=lever.dtype)
+                                              for name, lever in LEVERS.items()}
         # the smallest string-stable setting [s], nominal / degraded parameters, V2V up / down (found when truth() asks)
         self.stable = {(degraded, up): np.zeros(shape) for degraded in (False, True) for up in (False, True)}
         # what truth() reports: fixed per episode, and the true parameters while it acts / otherwise
@@ -298,6 +282,13 @@ class DegradationTable:
         self.descriptions: list[tuple[Degradation, ...]] = [() for _ in range(n_envs)]
         self.set_many(np.arange(n_envs), [()] * n_envs)
 
+    def __getattr__(self, name: str) -> np.ndarray:
+        """The array of the lever ``name`` (``table.lag``)."""
+        levers: dict[str, np.ndarray] = self.__dict__.get("levers", {})
+        if name not in levers:
+            raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
+        return levers[name]
+
     def set(self, env: int, degradations: Sequence[Degradation]) -> None:
         """Env ``env``'s followers take ``degradations`` (from :func:`parse_degradations`); the others are nominal."""
         self.set_many(np.array([env]), [degradations])
@@ -306,14 +297,12 @@ class DegradationTable:
         """Each env of ``envs`` (distinct indices) takes its entry of ``degradations`` (as :meth:`set` does), all
         in a few array operations: the envs' rows are made nominal, then every hit follower takes its
         degradation's schedule and parameters."""
-        cfg = self.config
         envs = np.asarray(envs, dtype=np.intp)
         if not _distinct(envs):
             raise ValueError(f"envs = {envs.tolist()}: each env may be set once")
         self.kind[envs], self.size[envs], self.start[envs], self.end[envs] = 0, np.nan, 0, 0
-        self.lag[envs], self.gain[envs], self.k_s[envs], self.k_v[envs] = self._nominal_lag, self._nominal_gain, cfg.k_s, cfg.k_v
-        self.accel_max[envs], self.extra_delay[envs], self.packet_loss[envs] = cfg.accel_max, 0, 0.0
-        self.radar_bias[envs], self.radar_noise[envs], self.v2v_down[envs] = 0.0, np.nan, False
+        for name, values in self.levers.items():
+            values[envs] = self.nominal[name]
         hits = _Hits()
         for env, items in zip(envs.tolist(), degradations, strict=True):
             for degradation in items:
@@ -326,29 +315,25 @@ class DegradationTable:
         """The parts of :meth:`truth` fixed for the episode of each env of ``envs``."""
         cfg = self.config
         hit = self.kind[envs] > 0
-        start, end, radar_noise = self.start[envs], self.end[envs], self.radar_noise[envs]
+        start, end = self.start[envs], self.end[envs]
         self._reported["size"][envs] = np.nan_to_num(self.size[envs])
         self._reported["onset"][envs] = np.where(hit, start * cfg.dt, np.inf)
         self._reported["end"][envs] = np.where(hit & (end < NEVER), end * cfg.dt, np.inf)
-        noise = np.where(np.isnan(radar_noise), self.spacing_noise_std, radar_noise)
-        while_active: tuple[np.ndarray | float, ...] = (
-            self.lag[envs], self.gain[envs], self.k_s[envs], self.k_v[envs],
-            cfg.v2v_delay + self.extra_delay[envs] * cfg.dt, self.packet_loss[envs], self.radar_bias[envs], noise)
-        otherwise: tuple[np.ndarray | float, ...] = (
-            self._nominal_lag, self._nominal_gain, cfg.k_s, cfg.k_v, cfg.v2v_delay, 0.0, 0.0, self.spacing_noise_std)
-        for i, (active_value, other_value) in enumerate(zip(while_active, otherwise)):  # in TRUE_PARAMETERS order
-            self._while_active[i, envs], self._otherwise[i, envs] = active_value, other_value
+        for i, lever in enumerate(REPORTED_LEVERS):  # in TRUE_PARAMETERS order
+            self._while_active[i, envs] = lever.reported(self.levers[lever.name][envs], cfg)
+            self._otherwise[i, envs] = lever.reported(self.nominal[lever.name], cfg)
 
     def _find_stable_settings(self, envs: np.ndarray) -> None:
         """The smallest string-stable settings (``stable``) of the envs ``envs`` for their nominal and degraded
         parameters, with the link up and down: the nominal ones once for all; a follower whose degraded parameters
         are its nominal ones (not hit, or hit in the radar or the link only) copies them, the others are searched."""
         cfg = self.config
+        nominal_lag, nominal_gain = np.asarray(self.nominal["lag"]), np.asarray(self.nominal["gain"])
         for up in (False, True):
-            nominal = [self._stable_setting(self._nominal_lag[f], self._nominal_gain[f], cfg.k_s, cfg.k_v, 0.0, 0.0, up)
+            nominal = [self._stable_setting(nominal_lag[f], nominal_gain[f], cfg.k_s, cfg.k_v, 0.0, 0.0, up)
                        for f in range(cfg.n_followers)]
             self.stable[False, up][envs] = self.stable[True, up][envs] = nominal
-        own = ((self.lag[envs] != self._nominal_lag) | (self.gain[envs] != self._nominal_gain)
+        own = ((self.lag[envs] != nominal_lag) | (self.gain[envs] != nominal_gain)
                | (self.k_s[envs] != cfg.k_s) | (self.k_v[envs] != cfg.k_v) | (self.extra_delay[envs] != 0)
                | (self.packet_loss[envs] != 0.0))
         for env, f in zip(*np.nonzero(own)):
@@ -372,16 +357,21 @@ class DegradationTable:
         self.write_faults_many(platoon, np.array([env]), np.array([key], dtype=np.uint64))
 
     def write_faults_many(self, platoon: Platoon, envs: np.ndarray, keys: np.ndarray) -> None:
-        """:meth:`write_faults` for each env of ``envs`` with its key of ``keys`` (uint64), at once."""
+        """:meth:`write_faults` for each env of ``envs`` with its key of ``keys`` (uint64), at once: the levers
+        (:meth:`write_levers`), the GLVD transition of the lag and gain, the keys."""
         faults = platoon.faults
-        faults.start[envs], faults.end[envs] = self.start[envs], self.end[envs]
-        degraded = ZOHCoefficients.for_glvd(self.lag[envs], self.gain[envs], self.config.dt)
+        self.write_levers(faults, envs)
+        degraded = ZOHCoefficients.for_glvd(self.levers["lag"][envs], self.levers["gain"][envs], self.config.dt)
         for target, values in zip(faults.dynamics, degraded):
             target[envs] = values
-        faults.k_s[envs], faults.k_v[envs], faults.accel_max[envs] = self.k_s[envs], self.k_v[envs], self.accel_max[envs]
-        faults.extra_delay[envs], faults.packet_loss[envs] = self.extra_delay[envs], self.packet_loss[envs]
-        faults.spacing_bias[envs], faults.keys[envs] = self.radar_bias[envs], np.asarray(keys, dtype=np.uint64)
-        faults.v2v_down[envs] = self.v2v_down[envs]
+        faults.keys[envs] = np.asarray(keys, dtype=np.uint64)
+
+    def write_levers(self, faults: tuple, envs: np.ndarray) -> None:
+        """Copy the envs ``envs``' schedule (``start``, ``end``) and every lever that ``faults`` (a NamedTuple of
+        arrays (n_envs, n_followers): FollowerFaults, SensorFaults) has a field of, by name, into it."""
+        for name, target in zip(faults._fields, faults):  # type: ignore[attr-defined]
+            if name in ("start", "end") or name in LEVERS:
+                target[envs] = getattr(self, name)[envs]
 
     def active(self, ticks: np.ndarray) -> np.ndarray:
         """Which degradations act during tick ``ticks`` since reset, (..., n_envs) -> (..., n_envs, n_followers)."""

@@ -43,7 +43,7 @@ import numba
 import numpy as np
 
 from timegap_env.compiled import INLINED_STAGE_KERNEL
-from timegap_env.config import PlatoonConfig
+from timegap_env.config import PlatoonConfig, SensorConfig, write_nominal_levers
 from timegap_env.sim.counter_noise import counter_uniform
 from timegap_env.state import OnState, PerEnv, State
 
@@ -185,7 +185,7 @@ class FollowerFaults(NamedTuple):
     accel_max: FOLLOWERS  # highest command while it acts [m/s^2]
     extra_delay: Annotated[np.ndarray, PerEnv(np.int64, "followers")]  # V2V delay added while it acts [ticks]
     packet_loss: FOLLOWERS  # chance per tick that a V2V message is lost while it acts [-]
-    spacing_bias: FOLLOWERS  # added by the radar to the spacing the controller sees while it acts [m]
+    radar_bias: FOLLOWERS  # added by the radar to the spacing the controller sees while it acts [m]
     v2v_down: Annotated[np.ndarray, PerEnv(bool, "followers")]  # V2V is down while it acts (the flag shows it)
     keys: Annotated[np.ndarray, PerEnv(np.uint64)]  # keys of the packet-loss draws (counter-based, as the sensors')
 
@@ -252,7 +252,7 @@ class Platoon(OnState):
         self.set_dynamics(config.per_follower("actuation_lag"), config.per_follower("actuation_gain"))
         for degraded, nominal in zip(faults.dynamics, self.parts.nominal):  # no degradation: nominal parameters
             degraded[:] = nominal
-        faults.k_s[:], faults.k_v[:], faults.accel_max[:] = config.k_s, config.k_v, config.accel_max
+        write_nominal_levers(faults, config, SensorConfig())  # the sensors' levers are not the physics'
 
     # ----------------------------------------------------------------- state
     state = property(lambda self: self.parts.state, doc="The platoons' :class:`PlatoonState` (changed in place).")
@@ -480,7 +480,7 @@ def advance_env(state, leader, zoh, controller, faults, out, e, column):  # noqa
                     controller.accel_min, faults.accel_max[e, f], controller.standstill_spacing,
                     controller.vehicle_length, controller.max_setting_change, controller.v2v_delay_ticks,
                 )
-                seen_spacing = spacing + faults.spacing_bias[e, f]
+                seen_spacing = spacing + faults.radar_bias[e, f]
                 dynamics = degraded_zoh
             else:
                 state.received_accel[e, f] = ring[nominal_slot, f]
