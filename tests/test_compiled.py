@@ -17,7 +17,7 @@ def test_a_cache_index_naming_a_class_that_is_gone_is_compiled_anew(tmp_path):
     source = ("from typing import NamedTuple\nimport numba\nfrom timegap_env.compiled import follow_sources\n"
               "class {name}(NamedTuple):\n    x: float\n"
               "@numba.njit(cache=True)\ndef kernel(p):\n    return p.x + 1.0\n"
-              "follow_sources(('renamed',))\nprint(kernel({name}(1.0)))\n")
+              "follow_sources('renamed')\nprint(kernel({name}(1.0)))\n")
     environment = {**__import__("os").environ, "NUMBA_CACHE_DIR": str(tmp_path / "cache"), "PYTHONPATH": str(tmp_path)}
     for name in ("Before", "After"):
         module.write_text(source.format(name=name))
@@ -36,7 +36,7 @@ def test_a_cache_is_fresh_by_content_not_by_modification_time(tmp_path):
 
     source = ("import numba\nfrom timegap_env.compiled import follow_sources\nimport helper\n"
               "@numba.njit(cache=True)\ndef kernel(x):\n    return x + helper.OFFSET\n"
-              "follow_sources(('stamped',), reached=('helper',))\nprint(kernel(1.0))\n"
+              "follow_sources('stamped', reached=('helper',))\nprint(kernel(1.0))\n"
               "from timegap_env.precompile import compiled_not_loaded\nprint(compiled_not_loaded())\n")
 
     def run(folder, offset):
@@ -82,12 +82,42 @@ def test_a_kernel_is_stamped_by_one_call_only(tmp_path, monkeypatch):
     monkeypatch.syspath_prepend(str(tmp_path))
     monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path / "cache"))
     importlib.import_module("stamped_twice")
-    follow_sources(("stamped_twice",))
-    follow_sources(("stamped_twice",))
+    follow_sources("stamped_twice")
+    follow_sources("stamped_twice")
     with pytest.raises(ValueError, match="stamped by two calls"):
-        follow_sources(("stamped_twice",), reached=("timegap_env.config",))
+        follow_sources("stamped_twice", reached=("timegap_env.config",))
     with pytest.raises(ValueError, match="stamped by two calls"):
-        follow_sources(("timegap_env.sim.platoon",))  # the step's call stamps its kernels with the step's modules
+        follow_sources("timegap_env.sim.platoon", reached=("timegap_env.config",))  # its module's call stamped it
+
+
+def test_every_cached_kernel_of_the_package_is_stamped_with_the_modules_it_reaches():
+    """Each module of kernels stamps them (``follow_sources(__name__)``), with the modules their compiled code and
+    constants come from, derived: the fused step's reach every stage's module, the config its constants come from
+    and the state module that generates its views."""
+    import importlib
+    import pkgutil
+
+    from numba.core.dispatcher import Dispatcher
+
+    import timegap_env
+    from timegap_env.compiled import reached_modules
+    from timegap_env.envs.step_kernel import fused_step
+
+    unstamped = []
+    for module in pkgutil.walk_packages(timegap_env.__path__, "timegap_env."):
+        if module.name.startswith(("timegap_env.speed.ppo", "timegap_env.studies")):
+            continue  # need the train extra; they define no kernel
+        for value in vars(importlib.import_module(module.name)).values():
+            cache_file = getattr(getattr(value, "_cache", None), "_cache_file", None)
+            if isinstance(value, Dispatcher) and cache_file is not None and not hasattr(cache_file, "_followed"):
+                unstamped.append(f"{value.py_func.__module__}.{value.py_func.__name__}")
+    assert not unstamped
+    step = {f"timegap_env.{name}" for name in (
+        "compiled", "state", "config", "envs.action", "sim.counter_noise", "sim.platoon", "monitoring.sensors",
+        "monitoring.monitor", "monitoring.posterior", "monitoring.charts", "monitoring.loop", "envs.reward",
+        "envs.totals", "envs.observation", "envs.info", "envs.episodes", "envs.step_kernel")}  # the list kept by hand
+    assert step <= reached_modules(fused_step)
+    assert fused_step._cache._cache_file._source_stamp.startswith("sha256 of timegap_env.compiled, timegap_env.config")
 
 
 def test_prefetch_item_hints_any_element_and_changes_nothing():
@@ -111,3 +141,31 @@ def test_prefetch_item_hints_any_element_and_changes_nothing():
 
     with pytest.raises(TypingError):
         too_many(values)
+
+
+def test_an_edit_of_a_module_a_kernel_reaches_makes_its_cache_stale(tmp_path):
+    """Without naming it: a constant imported from another module of the kernel's package, and one computed at
+    import from a third module's (``reached_modules``' one level of imports)."""
+    import os
+    import subprocess
+    import sys
+
+    package = tmp_path / "pkg"
+    package.mkdir()
+    (package / "__init__.py").write_text("")
+    (package / "kernels.py").write_text(
+        "import numba\nfrom timegap_env.compiled import follow_sources\nfrom pkg.offsets import OFFSET, SCALE\n"
+        "@numba.njit(cache=True)\ndef kernel(x):\n    return x * SCALE + OFFSET\nfollow_sources(__name__)\n"
+        "print(kernel(1.0))\n")
+    (package / "offsets.py").write_text("from pkg.base import BASE\nOFFSET = 1.0\nSCALE = 2.0 * BASE\n")
+
+    def run(offset: float, base: float) -> str:
+        (package / "base.py").write_text(f"BASE = {base}\n")
+        (package / "offsets.py").write_text(f"from pkg.base import BASE\nOFFSET = {offset}\nSCALE = 2.0 * BASE\n")
+        environment = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "cache"), "PYTHONPATH": str(tmp_path)}
+        out = subprocess.run([sys.executable, "-c", "import pkg.kernels"], capture_output=True, text=True,
+                             env=environment, cwd=tmp_path)
+        assert out.returncode == 0, out.stderr[-2000:]
+        return out.stdout.strip()
+
+    assert [run(1.0, 1.0), run(1.0, 1.0), run(5.0, 1.0), run(5.0, 3.0)] == ["3.0", "3.0", "7.0", "11.0"]

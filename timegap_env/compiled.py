@@ -22,12 +22,15 @@ state's), :func:`prefetch_item` for one element where an env reads a row in the 
 from __future__ import annotations
 
 import contextlib
+import functools
 import gc
 import hashlib
 import pickle
+import re
 import sys
 from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
+from types import CodeType, ModuleType
 from typing import Any
 
 import numba
@@ -136,43 +139,108 @@ def collection_paused() -> Iterator[None]:
             gc.enable()
 
 
-def follow_sources(modules: tuple[str, ...], reached: tuple[str, ...] = ()) -> None:
-    """Make the numba cache of every kernel defined in ``modules`` (imported, by name) fresh exactly while the
-    contents of ``modules``' and ``reached``'s files are unchanged; ``reached``: modules whose kernels or constants
-    those kernels compile in but which this call does not stamp (each kernel is stamped by one call only).
+def follow_sources(module: str, reached: tuple[str, ...] = ()) -> None:
+    """Make the numba cache of every kernel defined in ``module`` (imported, by name) fresh exactly while the
+    contents of the files its compiled code comes from are unchanged: those of the modules of its package that its
+    kernels reach (:func:`reached_modules`) and of ``reached`` (modules outside the package). Every module of
+    kernels calls it once, after its last kernel.
 
     numba stamps a cache with its kernel's own file only (0.68: a hash of its contents; before: its modification
     time and size) and reloads it while that is unchanged. Two things break that. A kernel carries the compiled
     code of the kernels it calls, inlined or not, also those of other files (the fused step every stage's, a stage
-    the kernels it calls in turn), so an edit there alone would leave it running the old code. And, before numba
-    0.68, installing a file gave it a new modification time, so the cache a wheel ships
-    (:mod:`timegap_env.precompile`) would always look stale. Each cache's source stamp becomes a hash of all these
-    contents instead. numba 0.68 keeps the stamp in the dispatcher's ``_cache._cache_file._source_stamp``;
+    the kernels it calls in turn), and the values of the constants it reads, so an edit there alone would leave it
+    running the old code. And, before numba 0.68, installing a file gave it a new modification time, so the cache a
+    wheel ships (:mod:`timegap_env.precompile`) would always look stale. Each cache's source stamp becomes a hash of
+    all these contents instead. numba 0.68 keeps the stamp in the dispatcher's ``_cache._cache_file._source_stamp``;
     should that move, numba's own stamp decides.
 
     An index numba cannot read back counts as stale too: numba unpickles a cache's index before it compares the
     stamps, and an index written by an older version of these modules may name a class that is gone (a NamedTuple
     of a cached signature, renamed), which would raise at the kernel's first call instead of compiling it again.
     """
+    kernels = list(_kernels(module))
+    sources = sorted({module, *reached}.union(*(reached_modules(kernel) for kernel in kernels)))
     digest = hashlib.sha256()
-    for module in modules + reached:
-        source = sys.modules[module].__file__
-        assert source is not None  # the package's modules are files
-        digest.update(Path(source).read_bytes())
-    stamp, call = f"sha256 of {', '.join(modules + reached)}: {digest.hexdigest()}", (modules, reached)
-    for kernel in _kernels(modules):
+    for name in sources:
+        digest.update(_source(name).encode())
+    stamp, call = f"sha256 of {', '.join(sources)}: {digest.hexdigest()}", (module, reached)
+    for kernel in kernels:
         cache_file = getattr(getattr(kernel, "_cache", None), "_cache_file", None)
         if cache_file is None:
             continue
         if getattr(cache_file, "_followed", call) != call:  # the same call again (a module reloaded) may restamp
             raise ValueError(f"follow_sources: kernel {kernel.py_func.__qualname__} of {kernel.py_func.__module__} "
-                             "is stamped by two calls; list its module in one call's modules, in others' reached")
+                             "is stamped by two calls")
         cache_file._followed = call
         if hasattr(cache_file, "_source_stamp"):
             cache_file._source_stamp = stamp
         if hasattr(cache_file, "_load_index") and not hasattr(cache_file, "_load_numba_index"):
             cache_file._load_numba_index = cache_file._load_index
             cache_file._load_index = _readable_or_stale(cache_file._load_numba_index)
+
+
+def reached_modules(kernel: Dispatcher) -> set[str]:
+    """The modules of ``kernel``'s package whose code or constants compile into it: its own; for each global name
+    its code reads, the module that defines the value (a class's, a function's: its ``__module__``) and the module
+    it is imported from; those of every kernel it calls, in turn; and every module of the package these import
+    from (a constant may be computed from theirs at import: ``EWMA = CHART_KINDS.index("ewma")``). Over-counting
+    costs a recompilation after an edit, under-counting a stale cache: a name counts wherever it could come from."""
+    package = kernel.py_func.__module__.partition(".")[0]
+    modules: set[str] = set()
+    seen: set[int] = set()
+    functions = [kernel.py_func]
+    while functions:
+        function = functions.pop()
+        if id(function) in seen:
+            continue
+        seen.add(id(function))
+        home = function.__globals__.get("__name__")  # None: generated code (a Layout's views)
+        imported = _imported_names(home) if home else {}
+        modules.update({home} if home else set())
+        for name in _global_names(function.__code__):
+            if name not in function.__globals__:
+                continue
+            value = function.__globals__[name]
+            if isinstance(value, Dispatcher):
+                functions.append(value.py_func)
+            source = value.__name__ if isinstance(value, ModuleType) else getattr(value, "__module__", None)
+            modules.update(candidate for candidate in (source, imported.get(name))
+                           if isinstance(candidate, str) and candidate.partition(".")[0] == package)
+    imports = {source for name in modules for source in _imported_names(name).values()
+               if source.partition(".")[0] == package}  # what their constants may have been computed from
+    return {name for name in modules | imports if name in sys.modules}
+
+
+def _global_names(code: CodeType) -> set[str]:
+    """The names ``code`` and the code nested in it read, globals among them."""
+    names = set(code.co_names)
+    for constant in code.co_consts:
+        if isinstance(constant, CodeType):
+            names |= _global_names(constant)
+    return names
+
+
+_FROM_IMPORT = re.compile(r"^from\s+([\w.]+)\s+import\s+(\([^)]*\)|[^\n]*)", flags=re.MULTILINE)
+
+
+@functools.cache
+def _imported_names(module: str) -> dict[str, str]:
+    """Each name ``module`` imports with ``from ... import``, and the module it comes from."""
+    names = {}
+    for source, imported in _FROM_IMPORT.findall(_source(module)):
+        for item in re.sub(r"#[^\n]*", "", imported).strip("()").split(","):
+            parts = item.split()
+            if parts:
+                names[parts[-1]] = source  # "name" or "name as alias"
+    return names
+
+
+@functools.cache
+def _source(module: str) -> str:
+    """The text of ``module``'s file."""
+    path = sys.modules[module].__file__
+    assert path is not None  # kernels live in files
+    return Path(path).read_text(encoding="utf-8")
 
 
 def _readable_or_stale(load_index: Callable[[], dict]) -> Callable[[], dict]:
@@ -187,15 +255,14 @@ def _readable_or_stale(load_index: Callable[[], dict]) -> Callable[[], dict]:
     return load
 
 
-def _kernels(modules: tuple[str, ...]) -> Iterable[Dispatcher]:
-    """Every numba kernel defined in ``modules``, once each."""
+def _kernels(module: str) -> Iterable[Dispatcher]:
+    """Every numba kernel defined in ``module``, once each."""
     seen: set[int] = set()
-    for module in modules:
-        for value in vars(sys.modules[module]).values():
-            if isinstance(value, Dispatcher) and value.py_func.__module__ == module and id(value) not in seen:
-                seen.add(id(value))
-                yield value
+    for value in vars(sys.modules[module]).values():
+        if isinstance(value, Dispatcher) and value.py_func.__module__ == module and id(value) not in seen:
+            seen.add(id(value))
+            yield value
 
 
 __all__ = ["INLINED_STAGE_KERNEL", "NO_ALLOCATION", "STAGE_KERNEL", "collection_paused", "compiled_entry",
-           "follow_sources", "prefetch_env", "prefetch_item", "prefetch_rows"]
+           "follow_sources", "prefetch_env", "prefetch_item", "prefetch_rows", "reached_modules"]

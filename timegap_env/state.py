@@ -73,7 +73,7 @@ class Layout:
         self.blocks: list[tuple[np.dtype, tuple[str, ...]]] = []
         self.fills: list[list[float]] = []  # each block's rows' first values
         self.rows: dict[tuple[str, ...], tuple[int, int]] = {}
-        namespace: dict[str, Any] = {"prefetch_rows": prefetch_rows}
+        namespace: dict[str, Any] = {"__name__": __name__, "prefetch_rows": prefetch_rows}  # generated here
         expression = self._place(root, (), namespace)
         source = (f"def view(blocks, n):\n    return {expression}\n\n\ndef prefetch(blocks, e):\n"
                   + "".join(f"    prefetch_rows(blocks[{b}], e)\n" for b in range(len(self.blocks))))

@@ -9,7 +9,7 @@ import numba
 import numpy as np
 from gymnasium import spaces
 
-from timegap_env.compiled import STAGE_KERNEL
+from timegap_env.compiled import STAGE_KERNEL, follow_sources
 from timegap_env.config import ACTION_MODES, EnvConfig, shown
 
 
@@ -104,3 +104,6 @@ def ladder_env(rule, action, current, e, out):  # noqa: ANN001, ANN201
         level = action[e, 0]
     for f in range(n_followers):
         out[f] = levels[action[e, f] if rule.mode == PER_VEHICLE else level]
+
+
+follow_sources(__name__)

@@ -50,7 +50,7 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
-from timegap_env.compiled import STAGE_KERNEL
+from timegap_env.compiled import STAGE_KERNEL, follow_sources
 from timegap_env.envs.reward import OBJECTIVES, REWARD_TERMS
 from timegap_env.leaders.scenarios import regime_names
 from timegap_env.sim.degradation import KINDS
@@ -273,6 +273,8 @@ def objectives_of(info: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
     values = np.asarray(info[OBJECTIVES_KEY])
     return {objective.name: values[..., i] for i, objective in enumerate(OBJECTIVES.values())}
 
+
+follow_sources(__name__)
 
 __all__ = ["COST", "EPISODE_PREFIX", "KIND_NAMES", "OBJECTIVES_KEY", "REWARD_PREFIX", "TRUTH_PREFIX", "VECTOR_REWARD",
            "EnvInfoPool", "EnvInfoSet", "InfoBlock", "info_flags", "no_scores", "objectives_of", "of_env", "prefixed",

@@ -17,7 +17,7 @@ import numba
 import numpy as np
 from gymnasium import spaces
 
-from timegap_env.compiled import STAGE_KERNEL
+from timegap_env.compiled import STAGE_KERNEL, follow_sources
 from timegap_env.config import EnvConfig
 from timegap_env.monitoring.posterior import outside_probability
 
@@ -198,3 +198,6 @@ def decode_observation(observation: np.ndarray, config: EnvConfig) -> FollowerVi
         setting=levels[index],
         v2v=features[..., FEATURES.index("v2v")] > 0.5,
     )
+
+
+follow_sources(__name__)

@@ -50,7 +50,7 @@ from typing import TYPE_CHECKING, Annotated, Any, NamedTuple
 import numba
 import numpy as np
 
-from timegap_env.compiled import STAGE_KERNEL
+from timegap_env.compiled import STAGE_KERNEL, follow_sources
 from timegap_env.config import TIME_GAP_MIN_SPEED, EnvConfig, RewardWeights
 from timegap_env.state import PerEnv, State
 
@@ -387,3 +387,6 @@ def env_weighted_sum(terms, weights, out, e):  # noqa: ANN001, ANN201
     out[e] = 0.0
     for t in range(terms.shape[0]):
         out[e] += weights[t] * terms[t, e]
+
+
+follow_sources(__name__)

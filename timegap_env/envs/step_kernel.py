@@ -284,10 +284,7 @@ def _prefetch_inside(leader, platoon, starts, chart_tick, slots, slot, n_ticks, 
             prefetch_item(slots, (e, i, row))
 
 
-follow_sources(tuple(f"timegap_env.{module}" for module in (  # every kernel the step runs, and the step
-    "compiled", "state", "config", "envs.action", "sim.counter_noise", "sim.platoon", "monitoring.sensors",
-    "monitoring.monitor", "monitoring.posterior", "monitoring.charts", "monitoring.loop", "envs.reward", "envs.totals",
-    "envs.observation", "envs.info", "envs.episodes", "envs.step_kernel")))
+follow_sources(__name__)
 
 __all__ = ["ENV", "EnvState", "StepOutputs", "StepRules", "StepScratch", "env_dims", "finish_step", "fused_step",
            "prepare_step"]

@@ -7,7 +7,7 @@ from typing import Annotated, NamedTuple
 import numba
 import numpy as np
 
-from timegap_env.compiled import STAGE_KERNEL
+from timegap_env.compiled import STAGE_KERNEL, follow_sources
 from timegap_env.config import EnvConfig
 from timegap_env.envs.reward import StepReadouts
 from timegap_env.state import PerEnv, State
@@ -102,3 +102,6 @@ def add_step_env(totals, readouts, setting, changed, gap_per_vehicle, e):  # noq
     totals.capacity[e] += capacity / n_followers
     totals.collision[e] = max(totals.collision[e], 1.0 if readouts.collided[e] else 0.0)
     totals.min_ttc[e] = min(totals.min_ttc[e], min_ttc)
+
+
+follow_sources(__name__)

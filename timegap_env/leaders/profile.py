@@ -35,6 +35,7 @@ from pathlib import Path
 import numba
 import numpy as np
 
+from timegap_env.compiled import follow_sources
 from timegap_env.config import HELD_OUT_EVERY, MAX_SPEED, RECORDED_PARTS, LeaderConfig, shown
 
 T = TypeVar("T")
@@ -341,3 +342,6 @@ def _step_in_band(speed, accel, dt, low, high):  # noqa: ANN001, ANN202
     after [m/s] and the acceleration realised [m/s^2]."""
     after = min(max(speed + accel * dt, low), high)
     return after, (after - speed) / dt
+
+
+follow_sources(__name__)

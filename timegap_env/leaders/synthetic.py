@@ -466,4 +466,4 @@ def _pursue_targets(normal, uniform, motion):  # noqa: ANN001, ANN202
 
 
 # The leaders' kernels (profile's too: the package's leaders import this module): numba's cache by content
-follow_sources(("timegap_env.leaders.profile", "timegap_env.leaders.synthetic"), reached=("timegap_env.config",))
+follow_sources(__name__)

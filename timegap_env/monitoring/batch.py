@@ -91,4 +91,4 @@ def _all_finite(values):  # noqa: ANN001, ANN202
 
 
 # Its kernel: numba's cache by content
-follow_sources(("timegap_env.monitoring.batch",))
+follow_sources(__name__)

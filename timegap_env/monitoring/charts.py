@@ -36,7 +36,7 @@ import numba
 import numpy as np
 from numpy.typing import ArrayLike
 
-from timegap_env.compiled import STAGE_KERNEL
+from timegap_env.compiled import STAGE_KERNEL, follow_sources
 from timegap_env.config import CHART_KINDS, ChartConfig
 from timegap_env.monitoring.batch import batch_array, batch_shape, check_finite, env_mask, setting_array, vehicle_mask
 from timegap_env.state import OnState, PerEnv, State
@@ -405,3 +405,6 @@ def switch_rule(exceedances_in_window: ArrayLike, setting: ArrayLike, config: Ch
     """
     enough = np.asarray(exceedances_in_window) >= config.switch_exceedances
     return enough & ~np.isclose(setting, config.switch_to)
+
+
+follow_sources(__name__)

@@ -186,4 +186,4 @@ def _rls_kernel(speed, spacing, memory, forgetting, tau_out):  # noqa: ANN001, A
 
 
 # Its kernel: numba's cache by content
-follow_sources(("timegap_env.monitoring.detectors",), reached=("timegap_env.config",))
+follow_sources(__name__)

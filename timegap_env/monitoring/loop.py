@@ -18,7 +18,7 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
-from timegap_env.compiled import STAGE_KERNEL
+from timegap_env.compiled import STAGE_KERNEL, follow_sources
 from timegap_env.config import ChartConfig, MonitorConfig, PlatoonConfig, SensorConfig
 from timegap_env.monitoring.charts import ChartMemory, ChartParts, ChartState, chart_dims, make_chart, restart_env
 from timegap_env.monitoring.monitor import MonitorParts, TimeGapMonitor, monitor_dims, recenter_env
@@ -211,3 +211,6 @@ def _change_settings(platoon, controller, memory, slot, chart, chart_rule, settl
     """:func:`change_settings_env` for every env, env e to ``targets[e]``."""
     for e in range(targets.shape[0]):
         change_settings_env(platoon, controller, memory, slot, chart, chart_rule, settle_ticks, targets[e], changed, e)
+
+
+follow_sources(__name__)

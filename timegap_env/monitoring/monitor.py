@@ -15,7 +15,7 @@ import numba
 import numpy as np
 from numpy.typing import ArrayLike
 
-from timegap_env.compiled import INLINED_STAGE_KERNEL, STAGE_KERNEL
+from timegap_env.compiled import INLINED_STAGE_KERNEL, STAGE_KERNEL, follow_sources
 from timegap_env.config import MonitorConfig
 from timegap_env.monitoring.batch import batch_array, batch_shape, env_mask, setting_array, vehicle_mask
 from timegap_env.monitoring.posterior import Moments, Prior, WindowSums, outside_probability, posterior_moments
@@ -441,3 +441,6 @@ def _posterior_of_window(memory, prior, vehicles, out):  # noqa: ANN001, ANN202
             moments = posterior_moments(sums, prior_tau[e, i], prior)
             out.mean_s0[e, i], out.mean_tau[e, i], out.var_s0[e, i] = moments.mean_s0, moments.mean_tau, moments.var_s0
             out.cov_s0_tau[e, i], out.var_tau[e, i] = moments.cov_s0_tau, moments.var_tau
+
+
+follow_sources(__name__)

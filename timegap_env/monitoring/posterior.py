@@ -32,6 +32,7 @@ import numba
 import numpy as np
 from numpy.typing import ArrayLike
 
+from timegap_env.compiled import follow_sources
 from timegap_env.state import PerEnv
 
 __all__ = ["Moments", "Prior", "WindowSums", "outside_probability", "posterior", "posterior_moments",
@@ -189,3 +190,6 @@ def outside_probability(mean: float, variance: float, low: float, high: float) -
     """P(X < low or X > high) for X ~ N(mean, variance), as a NumPy ufunc (also callable inside kernels)."""
     scale = math.sqrt(2.0 * variance)
     return 0.5 * (math.erfc((mean - low) / scale) + math.erfc((high - mean) / scale))
+
+
+follow_sources(__name__)

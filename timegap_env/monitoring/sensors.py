@@ -20,7 +20,7 @@ from typing import Annotated, NamedTuple, cast
 import numba
 import numpy as np
 
-from timegap_env.compiled import INLINED_STAGE_KERNEL
+from timegap_env.compiled import INLINED_STAGE_KERNEL, follow_sources
 from timegap_env.config import PlatoonConfig, SensorConfig, write_nominal_levers
 from timegap_env.sim.counter_noise import counter_uniform
 from timegap_env.state import OnState, PerEnv, State
@@ -144,3 +144,6 @@ def measure_env(true, ticks_before, noise, faults, out, e, column, uniforms):  #
             else:
                 out.spacing[k, c, f] = true.spacing[k, c, f] + noise.spacing_noise_std[e] * radius * np.cos(angle)
             out.speed[k, c, f] = true.speed[k, c, f] + noise.speed_noise_std[e] * radius * np.sin(angle)
+
+
+follow_sources(__name__)

@@ -255,4 +255,4 @@ def _best_fit(
 
 
 # Its kernel, which runs the platoon's: numba's cache by content
-follow_sources(("timegap_env.sim.calibration",), reached=("timegap_env.config", "timegap_env.sim.platoon"))
+follow_sources(__name__)

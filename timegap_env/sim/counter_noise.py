@@ -11,6 +11,8 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from timegap_env.compiled import follow_sources
+
 _SPLITMIX_INCREMENT = np.uint64(0x9E3779B97F4A7C15)  # SplitMix64 constants (Steele, Lea & Flood 2014)
 _SPLITMIX_MULTIPLIERS = (np.uint64(0xBF58476D1CE4E5B9), np.uint64(0x94D049BB133111EB))
 
@@ -28,3 +30,6 @@ def _splitmix64(x):  # noqa: ANN001, ANN202
     x = (x ^ (x >> np.uint64(30))) * _SPLITMIX_MULTIPLIERS[0]
     x = (x ^ (x >> np.uint64(27))) * _SPLITMIX_MULTIPLIERS[1]
     return x ^ (x >> np.uint64(31))
+
+
+follow_sources(__name__)

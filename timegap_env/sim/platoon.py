@@ -42,7 +42,7 @@ from typing import Annotated, NamedTuple
 import numba
 import numpy as np
 
-from timegap_env.compiled import INLINED_STAGE_KERNEL
+from timegap_env.compiled import INLINED_STAGE_KERNEL, follow_sources
 from timegap_env.config import PlatoonConfig, SensorConfig, write_nominal_levers
 from timegap_env.sim.counter_noise import counter_uniform
 from timegap_env.state import OnState, PerEnv, State
@@ -507,3 +507,6 @@ def advance_env(state, leader, zoh, controller, faults, out, e, column):  # noqa
             out.accel[k, c, f] = a[e, f + 1]
             out.applied_setting[k, c, f] = state.applied_setting[e, f]
     state.ticks[e] += n_ticks
+
+
+follow_sources(__name__)

@@ -74,4 +74,4 @@ def measure(calls: int) -> SingleEnvSplit:
 
 
 # Its kernel: numba's cache by content
-follow_sources(("timegap_env.speed.single",), reached=("timegap_env.compiled", "timegap_env.envs.step_kernel"))
+follow_sources(__name__)
