@@ -5,7 +5,9 @@ Every config is a frozen dataclass. Its fields carry units in comments, its
 the bounds are in the comment after each field's unit, e.g. ``[s], (0, 10]``), and
 ``with_overrides`` builds a copy from a dict of overrides. A bad value or an unknown
 key raises ``ValueError`` naming the class, the field and the value. A bool is never
-a number, an integer field takes only integers, a pair only two numbers.
+a number, an integer field takes only integers, a pair only two numbers. The fields of
+``RewardWeights`` and ``RewardScales`` are made of the reward terms' records,
+``REWARD_TERM_RECORDS`` (their defaults, units and bounds are the records').
 
 The upper bounds are generous for research and keep one env's memory modest. With
 every memory-relevant field at its bound (``MAX_FOLLOWERS`` followers, the shortest tick
@@ -892,8 +894,8 @@ class EnvConfig(ConfigMixin):
     sensors: SensorConfig = SensorConfig()
     monitor: MonitorConfig = MonitorConfig()
     chart: ChartConfig = ChartConfig()
-    reward_weights: RewardWeights = RewardWeights()
-    reward_scales: RewardScales = RewardScales()
+    reward_weights: RewardWeights = RewardWeights()  # noqa: RUF009 (frozen, a dataclass made by _float_fields)
+    reward_scales: RewardScales = RewardScales()  # noqa: RUF009 (frozen, a dataclass made by _float_fields)
     decision_interval: float = 1.0  # time between two actions, a multiple of platoon.dt [s], at most
     # MAX_DECISION_TICKS ticks and episode_duration
     episode_duration: float = 250.0  # [s], a multiple of platoon.dt, at most MAX_EPISODE_TICKS ticks

@@ -180,7 +180,8 @@ def test_what_a_term_touches_follows_its_record():
     """RewardWeights, RewardScales, REWARD_TERMS, OBJECTIVES, COST_TERMS, term_lows, the constants' scales and the
     module docstring's table are made of REWARD_TERM_RECORDS, in its order."""
     records = list(REWARD_TERM_RECORDS.values())
-    assert REWARD_TERMS == tuple(REWARD_TERM_RECORDS) == tuple(field.name for field in dataclasses.fields(RewardWeights))
+    weight_fields = tuple(field.name for field in dataclasses.fields(RewardWeights))
+    assert REWARD_TERMS == tuple(REWARD_TERM_RECORDS) == weight_fields
     assert REWARD_TERMS[:3] == ("tracking", "string_stability", "safety") and REWARD_TERMS[-1] == "switching"
     assert dataclasses.astuple(RewardWeights()) == tuple(term.weight for term in records)
     scales = [scale for term in records for scale in term.scales]
@@ -188,7 +189,8 @@ def test_what_a_term_touches_follows_its_record():
     assert list(REWARD_SCALE_RECORDS.values()) == scales
     assert dataclasses.astuple(RewardScales()) == tuple(scale.default for scale in scales)
     assert OBJECTIVES == {term.name: term.objective for term in records}
-    assert COST_TERMS == tuple(term.name for term in records if term.cost) == ("string_stability", "safety", "collision")
+    assert COST_TERMS == tuple(term.name for term in records if term.cost)
+    assert COST_TERMS == ("string_stability", "safety", "collision")
     config = EnvConfig.from_dict({"reward_scales": {"tracking_cap": 1.0, "tracking_reference": 0.5}})
     assert term_lows(config) == {term.name: term.low(config.reward_scales) for term in records}
     assert term_lows(config)["tracking"] == -2.0 and term_lows(config)["safety"] == -np.inf

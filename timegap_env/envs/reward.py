@@ -136,9 +136,10 @@ else:  # the config's numbers, then every reward scale of the records under its 
 
 
 class RewardConstants(_ConstantFields):
-    """The config's numbers scoring needs: those of ``_CONFIG_CONSTANTS``, then each reward scale of
-    :data:`~timegap_env.config.REWARD_SCALE_RECORDS` (a field of :class:`~timegap_env.config.RewardScales`) under
-    its name, in its record's unit."""
+    """The config's numbers scoring needs, by name: dt [s], ticks_per_step [-], smallest_level [s], level_span [s],
+    preferred_setting [s], gap_per_vehicle [m], standstill_spacing [m], min_speed [m/s] and envelope_decay [-]
+    (``_CONFIG_CONSTANTS``), then each reward scale of :data:`~timegap_env.config.REWARD_SCALE_RECORDS` (a field of
+    :class:`~timegap_env.config.RewardScales`) under its name, in its record's unit."""
 
     __slots__ = ()
 
