@@ -5,7 +5,9 @@ Every config is a frozen dataclass. Its fields carry units in comments, its
 the bounds are in the comment after each field's unit, e.g. ``[s], (0, 10]``), and
 ``with_overrides`` builds a copy from a dict of overrides. A bad value or an unknown
 key raises ``ValueError`` naming the class, the field and the value. A bool is never
-a number, an integer field takes only integers, a pair only two numbers.
+a number, an integer field takes only integers, a pair only two numbers. The fields of
+``RewardWeights`` and ``RewardScales`` are made of the reward terms' records,
+``REWARD_TERM_RECORDS`` (their defaults, units and bounds are the records').
 
 The upper bounds are generous for research and keep one env's memory modest. With
 every memory-relevant field at its bound (``MAX_FOLLOWERS`` followers, the shortest tick
@@ -19,9 +21,10 @@ each (tests/test_config_fields.py builds and steps that env and measures it).
 from __future__ import annotations
 
 import dataclasses
+import inspect
 import math
 from collections.abc import Callable, Mapping
-from typing import Any, NamedTuple, NoReturn, Self, cast
+from typing import TYPE_CHECKING, Any, ClassVar, NamedTuple, NoReturn, Self, TypeVar, cast
 
 import numpy as np
 
@@ -505,23 +508,172 @@ MONITOR_PRESETS: dict[str, MonitorConfig] = {
 }
 
 
-@dataclasses.dataclass(frozen=True)
-class RewardWeights(ConfigMixin):
-    """Weight of each reward term of ``TimeGapMonitor-v0``, one field per term in the order they are summed.
+class Interval(NamedTuple):
+    """The numbers from ``low`` to ``high``, each end closed unless it is open."""
 
-    The terms themselves (each <= 0, about -1 at its worst) and the reasons for these weights are in
+    low: float
+    high: float
+    open_low: bool = False
+    open_high: bool = False
+
+    def __contains__(self, value: object) -> bool:
+        return is_real(value) and _within(float(cast(float, value)), *self)
+
+    def __str__(self) -> str:
+        return _interval(*self)
+
+
+class Objective(NamedTuple):
+    """What a reward term measures, in natural units, and how the term is made of it."""
+
+    name: str  # its name in objectives_of(info) (TimeGapMonitor-v1's info["objectives"])
+    unit: str
+    term: str  # the term as a function of the objective (per follower, then the mean, where it says so)
+
+
+@dataclasses.dataclass(frozen=True)
+class RewardScale:
+    """A reference scale of a reward term: a field of :class:`RewardScales` and, by the same name, of the reward's
+    constants (``timegap_env.envs.reward.RewardConstants``)."""
+
+    name: str
+    default: float
+    unit: str
+    bounds: Interval  # a value must lie in it
+    meaning: str  # what it is (and, where it is not plain, why its bounds)
+
+
+@dataclasses.dataclass(frozen=True)
+class RewardTerm:
+    """A term of ``TimeGapMonitor-v0``'s reward, one record of :data:`REWARD_TERM_RECORDS`: everything about it but
+    its formula and its objective's, which the compiled kernels of :mod:`timegap_env.envs.reward` compute
+    (``env_reward_terms``, ``env_objectives``)."""
+
+    name: str  # a field of RewardWeights and of reward.RewardTerms; info's "reward_<name>"
+    weight: float  # its default weight [-]
+    value: str  # its value per step (<= 0), as env_reward_terms computes it
+    why: str
+    objective: Objective  # what it measures in natural units, as env_objectives computes it
+    scales: tuple[RewardScale, ...] = ()  # its reference scales, fields of RewardScales in this order
+    lowest: float | Callable[[RewardScales], float] = -1.0  # its lowest value in a step, or that as a function of
+    # the scales; -inf where it has none
+    cost: bool = False  # it counts in info["cost"] (reward.COST_TERMS), clipped to [-1, 0]
+
+    def low(self, scales: RewardScales) -> float:
+        """The term's lowest value in a step under ``scales``; -inf where it has none."""
+        return self.lowest(scales) if callable(self.lowest) else self.lowest
+
+
+REWARD_TERM_RECORDS: dict[str, RewardTerm] = {term.name: term for term in (  # in the order the terms are summed
+    RewardTerm(
+        "tracking", 1.0,
+        "-mean over follower-ticks of min(abs((s - s0)/v - applied setting), tracking_cap) / tracking_reference, "
+        "at v >= 1 m/s",
+        "keep the actual gap at the setting; capped at 0.5 s (-2) because at low speed (s - s0)/v explodes",
+        Objective("time_gap_variation", "s", "-time_gap_variation / tracking_reference: the mean over "
+                  "follower-ticks of min(abs(actual time gap - applied setting), tracking_cap), 0 below 1 m/s"),
+        (RewardScale("tracking_reference", 0.25, "s", Interval(0.001, MAX_TIME_GAP), "a tick's |actual time gap - "
+                     "setting| costing one tracking unit (smaller would make the term, tracking_cap over it, absurdly "
+                     "large)"),
+         RewardScale("tracking_cap", 0.5, "s", Interval(0.0, MAX_TIME_GAP, open_low=True),
+                     "a tick's |actual time gap - setting| counts up to this in the tracking term")),
+        lowest=lambda scales: -scales.tracking_cap / scales.tracking_reference),
+    RewardTerm(
+        "string_stability", 1.0,
+        "-min(1, sum over vehicles of max(0, envelope of the vehicle - envelope of its predecessor) / "
+        "accel_growth_reference) at the step's end, a vehicle's envelope its peak abs(acceleration) decaying with "
+        "time constant accel_envelope_time, the leader first",
+        "disturbances must not grow down the platoon (string stability is about accelerations; a static offset of "
+        "the gap does not count)",
+        Objective("acceleration_growth", "m/s^2", "-min(1, acceleration_growth / accel_growth_reference): the rise "
+                  "of the acceleration envelopes down the platoon"),
+        (RewardScale("accel_growth_reference", 1.0, "m/s^2", Interval(0.001, MAX_ACCEL),
+                     "growth of the peak acceleration down the platoon costing one string-stability unit"),
+         RewardScale("accel_envelope_time", 5.0, "s", Interval(0.0, MAX_DURATION, open_low=True),
+                     "time constant of the decaying peak acceleration the growth compares")),
+        cost=True),
+    RewardTerm(
+        "safety", 2.0,
+        "-max(0, 1 - TTC / ttc_threshold), TTC the step's smallest (below -1 once a gap is gone)",
+        "keep a margin to the predecessor",
+        Objective("ttc_shortfall", "s", "-ttc_shortfall / ttc_threshold: the mean over followers of "
+                  "max(0, ttc_threshold - the step's smallest time-to-collision)"),
+        (RewardScale("ttc_threshold", 4.0, "s", Interval(0.0, 60.0, open_low=True),
+                     "time-to-collision below which safety is penalised"),),
+        lowest=-math.inf, cost=True),  # a negative TTC once a gap is gone
+    RewardTerm(
+        "collision", 1000.0,
+        "-1 on the step a collision ends the episode",
+        "outweighs any whole episode of the rest",
+        Objective("collision", "-", "-collision: 1 on the step a gap reaches 0"),
+        cost=True),
+    RewardTerm(
+        "comfort", 0.05,
+        "-mean over ticks of (jerk / jerk_reference)^2",
+        "no chattering",
+        Objective("jerk_squared", "m^2/s^6", "-jerk_squared / jerk_reference^2: the mean over follower-ticks of "
+                  "jerk^2"),
+        (RewardScale("jerk_reference", 2.0, "m/s^3", Interval(0.01, MAX_JERK),
+                     "jerk that costs one comfort unit (smaller would let the squared term overflow)"),),
+        lowest=-math.inf),  # jerk squared has no bound
+    RewardTerm(
+        "efficiency", 1.0,
+        "-(1 - capacity(tau*) / capacity(smallest level)) at the current speed",
+        "a smaller setting moves more vehicles per hour",
+        Objective("capacity", "veh/h", "-mean over followers of (1 - capacity / capacity at the smallest level); "
+                  "capacity = 3600 v / (v tau* + s0 + vehicle length) at the step's final speed v, the objective its "
+                  "mean over followers")),
+    RewardTerm(
+        "preference", 0.5,
+        "-abs(tau* - preferred_setting) / span of the levels",
+        "the driver chose 1.6 s",
+        Objective("preference_deviation", "s", "-preference_deviation / span of the levels: the mean over followers "
+                  "of abs(tau* - preferred_setting)")),
+    RewardTerm(
+        "switching", 0.2,
+        "-share of followers whose setting changed",
+        "no chattering",
+        Objective("switching", "-", "-switching: the share of followers whose setting changed")),
+)}
+REWARD_SCALE_RECORDS: dict[str, RewardScale] = {  # every term's scales, in the order of the terms
+    scale.name: scale for term in REWARD_TERM_RECORDS.values() for scale in term.scales}
+
+_Config = TypeVar("_Config", bound=ConfigMixin)
+
+
+def _float_fields(fields: dict[str, float], listing: str) -> Callable[[type[_Config]], type[_Config]]:
+    """Makes the decorated config class a frozen dataclass of ``fields`` (name -> default), one float each in their
+    order, and adds ``listing``, what they are, to its docstring (for configs whose fields come from records)."""
+
+    def make(cls: type[_Config]) -> type[_Config]:
+        cls.__annotations__ = {name: float for name in fields}
+        for name, default in fields.items():
+            setattr(cls, name, default)
+        cls.__doc__ = f"{inspect.cleandoc(cls.__doc__ or '')}\n\n{listing}"
+        return dataclasses.dataclass(frozen=True)(cls)
+
+    return make
+
+
+@_float_fields({term.name: term.weight for term in REWARD_TERM_RECORDS.values()},
+               "Fields (made at import from REWARD_TERM_RECORDS), default weights [-]: "
+               + ", ".join(f"{term.name} = {term.weight:g}" for term in REWARD_TERM_RECORDS.values()) + ".")
+class RewardWeights(ConfigMixin):
+    """Weight of each reward term of ``TimeGapMonitor-v0``, one field per record of :data:`REWARD_TERM_RECORDS` in the
+    order the terms are summed (tracking, string_stability, safety, collision, comfort, efficiency, preference,
+    switching), its default the record's ``weight``.
+
+    The terms themselves (each <= 0, about -1 at its worst) are in their records and
     :mod:`timegap_env.envs.reward`, whose ``RewardTerms`` takes its field names from this class.
     Every weight lies in [0, MAX_WEIGHT].
     """
 
-    tracking: float = 1.0  # [-]
-    string_stability: float = 1.0  # [-]
-    safety: float = 2.0  # [-]
-    collision: float = 1000.0  # [-], outweighs any whole episode of the other terms
-    comfort: float = 0.05  # [-]
-    efficiency: float = 1.0  # [-]
-    preference: float = 0.5  # [-]
-    switching: float = 0.2  # [-]
+    if TYPE_CHECKING:  # the fields come from the records at import: one float per term
+        __dataclass_fields__: ClassVar[dict[str, dataclasses.Field[Any]]]
+
+        def __init__(self, *weights: float, **by_name: float) -> None: ...
+
+        def __getattr__(self, name: str) -> float: ...
 
     def __post_init__(self) -> None:
         for field in dataclasses.fields(self):
@@ -571,45 +723,27 @@ REWARD_PRESETS: dict[str, RewardPreset] = {preset.name: preset for preset in (
 )}
 
 
-@dataclasses.dataclass(frozen=True)
+@_float_fields({scale.name: scale.default for scale in REWARD_SCALE_RECORDS.values()},
+               "Fields (made at import from the records' scales), default [unit], bounds: what it is:\n\n"
+               + "\n".join(f"- {scale.name} = {scale.default:g} [{scale.unit}], {scale.bounds}: {scale.meaning}"
+                           for scale in REWARD_SCALE_RECORDS.values()))
 class RewardScales(ConfigMixin):
-    """What one unit of each reward term is, in natural units: the reference scales beside :class:`RewardWeights`
-    (:mod:`timegap_env.envs.reward` gives each term's formula)."""
+    """What one unit of each reward term is, in natural units: the reference scales beside :class:`RewardWeights`,
+    one field per :class:`RewardScale` of the records of :data:`REWARD_TERM_RECORDS` (tracking_reference,
+    tracking_cap, accel_growth_reference, accel_envelope_time, ttc_threshold, jerk_reference), its default, unit and
+    bounds the record's (:mod:`timegap_env.envs.reward` gives each term's formula)."""
 
-    tracking_reference: float = 0.25  # a tick's |actual time gap - setting| costing one tracking unit [s],
-    # [0.001, MAX_TIME_GAP] (smaller would make the term, tracking_cap over it, absurdly large)
-    tracking_cap: float = 0.5  # a tick's |actual time gap - setting| counts up to this in the tracking term [s],
-    # (0, MAX_TIME_GAP]
-    accel_growth_reference: float = 1.0  # growth of the peak acceleration down the platoon costing one
-    # string-stability unit [m/s^2], [0.001, MAX_ACCEL]
-    accel_envelope_time: float = 5.0  # time constant of the decaying peak acceleration the growth compares [s],
-    # (0, MAX_DURATION]
-    ttc_threshold: float = 4.0  # time-to-collision below which safety is penalised [s], (0, 60]
-    jerk_reference: float = 2.0  # jerk that costs one comfort unit [m/s^3], [0.01, MAX_JERK] (smaller would let the
-    # squared term overflow)
+    if TYPE_CHECKING:  # the fields come from the records at import: one float per scale
+        __dataclass_fields__: ClassVar[dict[str, dataclasses.Field[Any]]]
+
+        def __init__(self, *scales: float, **by_name: float) -> None: ...
+
+        def __getattr__(self, name: str) -> float: ...
 
     def __post_init__(self) -> None:
-        self._number("tracking_reference", 0.001, MAX_TIME_GAP)
-        self._number("tracking_cap", 0.0, MAX_TIME_GAP, open_low=True)
-        self._number("accel_growth_reference", 0.001, MAX_ACCEL)
-        self._number("accel_envelope_time", 0.0, MAX_DURATION, open_low=True)
-        self._number("ttc_threshold", 0.0, 60.0, open_low=True)
-        self._number("jerk_reference", 0.01, MAX_JERK)
-
-
-class Interval(NamedTuple):
-    """The numbers from ``low`` to ``high``, each end closed unless it is open."""
-
-    low: float
-    high: float
-    open_low: bool = False
-    open_high: bool = False
-
-    def __contains__(self, value: object) -> bool:
-        return is_real(value) and _within(float(cast(float, value)), *self)
-
-    def __str__(self) -> str:
-        return _interval(*self)
+        for scale in REWARD_SCALE_RECORDS.values():
+            bounds = scale.bounds
+            self._number(scale.name, bounds.low, bounds.high, open_low=bounds.open_low, open_high=bounds.open_high)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -805,8 +939,8 @@ class EnvConfig(ConfigMixin):
     sensors: SensorConfig = SensorConfig()
     monitor: MonitorConfig = MonitorConfig()
     chart: ChartConfig = ChartConfig()
-    reward_weights: RewardWeights = RewardWeights()
-    reward_scales: RewardScales = RewardScales()
+    reward_weights: RewardWeights = RewardWeights()  # noqa: RUF009 (frozen, a dataclass made by _float_fields)
+    reward_scales: RewardScales = RewardScales()  # noqa: RUF009 (frozen, a dataclass made by _float_fields)
     decision_interval: float = 1.0  # time between two actions, a multiple of platoon.dt [s], at most
     # MAX_DECISION_TICKS ticks and episode_duration
     episode_duration: float = 250.0  # [s], a multiple of platoon.dt, at most MAX_EPISODE_TICKS ticks

@@ -3,12 +3,16 @@
 from __future__ import annotations
 
 import dataclasses
+import re
 
 import numpy as np
 import pytest
 
-from timegap_env.config import EnvConfig, RewardWeights
+from timegap_env.config import REWARD_SCALE_RECORDS, REWARD_TERM_RECORDS, EnvConfig, RewardScales, RewardWeights
+from timegap_env.envs import reward
 from timegap_env.envs.reward import (
+    COST_TERMS,
+    OBJECTIVES,
     REWARD_TERMS,
     RewardConstants,
     RewardTerms,
@@ -17,6 +21,7 @@ from timegap_env.envs.reward import (
     reward_terms,
     score_step,
     step_readouts,
+    term_lows,
     weighted_sum,
     weights_of,
 )
@@ -171,6 +176,46 @@ def test_reward_constants_come_from_the_config():
     assert (constants.jerk_reference, constants.preferred_setting) == (config.reward_scales.jerk_reference, config.preferred_setting)
 
 
+def test_what_a_term_touches_follows_its_record():
+    """RewardWeights, RewardScales, REWARD_TERMS, OBJECTIVES, COST_TERMS, term_lows, the constants' scales and the
+    module docstring's table are made of REWARD_TERM_RECORDS, in its order."""
+    records = list(REWARD_TERM_RECORDS.values())
+    weight_fields = tuple(field.name for field in dataclasses.fields(RewardWeights))
+    assert REWARD_TERMS == tuple(REWARD_TERM_RECORDS) == weight_fields
+    assert REWARD_TERMS[:3] == ("tracking", "string_stability", "safety") and REWARD_TERMS[-1] == "switching"
+    assert dataclasses.astuple(RewardWeights()) == tuple(term.weight for term in records)
+    scales = [scale for term in records for scale in term.scales]
+    assert [field.name for field in dataclasses.fields(RewardScales)] == [scale.name for scale in scales]
+    assert list(REWARD_SCALE_RECORDS.values()) == scales
+    assert dataclasses.astuple(RewardScales()) == tuple(scale.default for scale in scales)
+    assert OBJECTIVES == {term.name: term.objective for term in records}
+    assert COST_TERMS == tuple(term.name for term in records if term.cost)
+    assert COST_TERMS == ("string_stability", "safety", "collision")
+    config = EnvConfig.from_dict({"reward_scales": {"tracking_cap": 1.0, "tracking_reference": 0.5}})
+    assert term_lows(config) == {term.name: term.low(config.reward_scales) for term in records}
+    assert term_lows(config)["tracking"] == -2.0 and term_lows(config)["safety"] == -np.inf
+    constants = RewardConstants.from_config(config)
+    assert {scale.name: getattr(constants, scale.name) for scale in scales} == dataclasses.asdict(config.reward_scales)
+    for term in records:
+        assert f"| ``{term.name}`` | {term.value} | {term.why} |" in (reward.__doc__ or "")
+        assert f"{term.name} = {term.weight:g}" in (RewardWeights.__doc__ or "")
+    for scale in scales:
+        assert f"- {scale.name} = {scale.default:g} [{scale.unit}], {scale.bounds}: " in (RewardScales.__doc__ or "")
+
+
+@pytest.mark.parametrize("scale", REWARD_SCALE_RECORDS.values(), ids=lambda scale: scale.name)
+def test_a_scale_beyond_its_records_bounds_is_refused_naming_field_and_value(scale):
+    bounds = scale.bounds
+    for bad in (bounds.high * 2 + 1, bounds.low if bounds.open_low else bounds.low / 2 - 1):
+        message = f"RewardScales.{scale.name} = {bad!r}: must be in {bounds}"
+        with pytest.raises(ValueError, match=re.escape(message)):
+            RewardScales(**{scale.name: bad})
+        with pytest.raises(ValueError, match=re.escape(message)):
+            EnvConfig.from_dict({"reward_scales": {scale.name: bad}})
+    edge = bounds.high if not bounds.open_high else bounds.low
+    assert getattr(RewardScales(**{scale.name: edge}), scale.name) == edge
+
+
 @pytest.mark.parametrize("name", REWARD_TERMS)
 def test_weighted_sum_with_a_one_hot_weight_picks_that_term(name):
     step, previous_accel, setting, changed = random_step(4)
@@ -218,6 +263,9 @@ def test_score_step_is_the_three_steps_in_one_call(seed):
     for got, want in zip(score.terms, expected_terms):
         np.testing.assert_array_equal(got, want)
     np.testing.assert_array_equal(score.reward, weighted_sum(expected_terms, weights))
+    # the cost: COST_TERMS' rows, each clipped to [-1, 0], summed in REWARD_TERMS order (bit for bit as written out)
+    t = expected_terms
+    np.testing.assert_array_equal(score.cost, 0.0 - (t.string_stability + np.maximum(-1.0, t.safety) + t.collision))
 
 
 def test_a_static_offset_of_the_gaps_costs_no_string_stability():

@@ -19,19 +19,13 @@ A step is scored in three steps, each a compiled function over named structures:
 
 :func:`score_step` runs the three in one compiled call, the env's hot path.
 
-The terms, means over followers (their weights are :class:`~timegap_env.config.RewardWeights`'s, their
-scales, named below, :class:`~timegap_env.config.RewardScales`'s); the applied setting is the tau* the controller uses (it ramps after a change of setting), s0 the platoon's:
-
-| term | value | why |
-|---|---|---|
-| ``tracking`` | -mean over follower-ticks of min(abs((s - s0)/v - applied setting), tracking_cap) / tracking_reference, at v >= 1 m/s | keep the actual gap at the setting; capped at 0.5 s (-2) because at low speed (s - s0)/v explodes |
-| ``string_stability`` | -min(1, sum over vehicles of max(0, envelope of the vehicle - envelope of its predecessor) / accel_growth_reference) at the step's end, a vehicle's envelope its peak abs(acceleration) decaying with time constant accel_envelope_time, the leader first | disturbances must not grow down the platoon (string stability is about accelerations; a static offset of the gap does not count) |
-| ``safety`` | -max(0, 1 - TTC / ttc_threshold), TTC the step's smallest (below -1 once a gap is gone) | keep a margin to the predecessor |
-| ``collision`` | -1 on the step a collision ends the episode | outweighs any whole episode of the rest |
-| ``comfort`` | -mean over ticks of (jerk / jerk_reference)^2 | no chattering |
-| ``efficiency`` | -(1 - capacity(tau*) / capacity(smallest level)) at the current speed | a smaller setting moves more vehicles per hour |
-| ``preference`` | -abs(tau* - preferred_setting) / span of the levels | the driver chose 1.6 s |
-| ``switching`` | -share of followers whose setting changed | no chattering |
+The terms are the records of :data:`timegap_env.config.REWARD_TERM_RECORDS`, in the order they are summed: each
+its name, default weight (a field of :class:`~timegap_env.config.RewardWeights`), scales (fields of
+:class:`~timegap_env.config.RewardScales`, named in the formulas), lowest value, objective, whether it counts in
+the cost, and its value and why, which the table at the end of this docstring shows (made of the records at import:
+``help(timegap_env.envs.reward)``). A term's value is a mean over followers; the applied setting is the tau* the
+controller uses (it ramps after a change of setting), s0 the platoon's. :func:`env_reward_terms` computes the terms,
+:func:`env_objectives` their objectives.
 
 Each term is at most a few units per step over 250 steps, so with the default weights a collision
 (1000) costs more than any whole episode of everything else: no efficiency gain pays for one, and
@@ -45,13 +39,20 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from typing import TYPE_CHECKING, Annotated, Any, NamedTuple
+from typing import TYPE_CHECKING, Annotated, Any, NamedTuple, Self
 
 import numba
 import numpy as np
 
 from timegap_env.compiled import STAGE_KERNEL, follow_sources
-from timegap_env.config import TIME_GAP_MIN_SPEED, EnvConfig, RewardWeights
+from timegap_env.config import (
+    REWARD_SCALE_RECORDS,
+    REWARD_TERM_RECORDS,
+    TIME_GAP_MIN_SPEED,
+    EnvConfig,
+    Objective,
+    RewardWeights,
+)
 from timegap_env.state import PerEnv, State
 
 if TYPE_CHECKING:  # mypy cannot see fields computed at import: a tuple of one term per field, read by name
@@ -68,6 +69,8 @@ else:  # a float per env each, in a state
                                              for field in dataclasses.fields(RewardWeights)])
 RewardTerms.__doc__ = """The reward terms, one field per field of RewardWeights: (n_envs,) arrays, or the weights themselves."""
 REWARD_TERMS: tuple[str, ...] = RewardTerms._fields
+__doc__ = (__doc__ or "") + "\n".join(["\n| term | value | why |", "|---|---|---|", *(
+    f"| ``{term.name}`` | {term.value} | {term.why} |" for term in REWARD_TERM_RECORDS.values())]) + "\n"
 
 
 class StepTicks(NamedTuple):
@@ -107,41 +110,53 @@ class StepReadouts(NamedTuple):
         return State(cls, {"followers": n_followers}, n_envs).views
 
 
-class RewardConstants(NamedTuple):
-    """The config's numbers scoring needs."""
+_CONFIG_CONSTANTS: tuple[tuple[str, type], ...] = (  # RewardConstants' fields before the scales: (name, type)
+    ("dt", float),  # tick [s]
+    ("ticks_per_step", int),  # ticks in a step [-]
+    ("smallest_level", float),  # [s]
+    ("level_span", float),  # largest level - smallest level [s]
+    ("preferred_setting", float),  # [s]
+    ("gap_per_vehicle", float),  # standstill spacing + vehicle length [m]
+    ("standstill_spacing", float),  # s0 [m]
+    ("min_speed", float),  # below it the actual time gap is not tracked [m/s]
+    ("envelope_decay", float),  # an acceleration envelope's decay per tick, exp(-dt / accel_envelope_time) [-]
+)
+if TYPE_CHECKING:  # mypy cannot see fields computed at import: a tuple of numbers, read by name
 
-    dt: float  # tick [s]
-    ticks_per_step: int  # ticks in a step [-]
-    tracking_reference: float  # [s]
-    ttc_threshold: float  # [s]
-    jerk_reference: float  # [m/s^3]
-    smallest_level: float  # [s]
-    level_span: float  # largest level - smallest level [s]
-    preferred_setting: float  # [s]
-    gap_per_vehicle: float  # standstill spacing + vehicle length [m]
-    standstill_spacing: float  # s0 [m]
-    min_speed: float  # below it the actual time gap is not tracked [m/s]
-    tracking_cap: float  # [s]
-    accel_growth_reference: float  # [m/s^2]
-    envelope_decay: float  # an acceleration envelope's decay per tick, exp(-dt / accel_envelope_time) [-]
+    class _ConstantFields(tuple[Any, ...]):
+        _fields: tuple[str, ...]
+
+        def __new__(cls, *values: Any, **by_name: Any) -> Self: ...
+
+        def __getattr__(self, name: str) -> Any: ...
+
+else:  # the config's numbers, then every reward scale of the records under its name
+    _ConstantFields = NamedTuple("RewardConstants", [*_CONFIG_CONSTANTS,
+                                                     *((name, float) for name in REWARD_SCALE_RECORDS)])
+
+
+class RewardConstants(_ConstantFields):
+    """The config's numbers scoring needs, by name: dt [s], ticks_per_step [-], smallest_level [s], level_span [s],
+    preferred_setting [s], gap_per_vehicle [m], standstill_spacing [m], min_speed [m/s] and envelope_decay [-]
+    (``_CONFIG_CONSTANTS``), then each reward scale of :data:`~timegap_env.config.REWARD_SCALE_RECORDS` (a field of
+    :class:`~timegap_env.config.RewardScales`) under its name, in its record's unit."""
+
+    __slots__ = ()
 
     @classmethod
     def from_config(cls, config: EnvConfig) -> RewardConstants:
+        scales = config.reward_scales
         return cls(
             dt=float(config.platoon.dt),
             ticks_per_step=config.ticks_per_decision,
-            tracking_reference=float(config.reward_scales.tracking_reference),
-            ttc_threshold=float(config.reward_scales.ttc_threshold),
-            jerk_reference=float(config.reward_scales.jerk_reference),
             smallest_level=float(config.setting_levels[0]),
             level_span=config.setting_span,
             preferred_setting=float(config.preferred_setting),
             gap_per_vehicle=float(config.platoon.standstill_spacing + config.platoon.vehicle_length),
             standstill_spacing=float(config.platoon.standstill_spacing),
             min_speed=TIME_GAP_MIN_SPEED,
-            tracking_cap=float(config.reward_scales.tracking_cap),
-            accel_growth_reference=float(config.reward_scales.accel_growth_reference),
-            envelope_decay=math.exp(-config.platoon.dt / config.reward_scales.accel_envelope_time),
+            envelope_decay=math.exp(-config.platoon.dt / scales.accel_envelope_time),
+            **{name: float(getattr(scales, name)) for name in REWARD_SCALE_RECORDS},
         )
 
 
@@ -159,45 +174,19 @@ def weights_of(config: EnvConfig) -> RewardTerms:
     return RewardTerms(*(float(weight) for weight in dataclasses.astuple(config.reward_weights)))
 
 
-class Objective(NamedTuple):
-    """What a reward term measures, in natural units, and how the term is made of it."""
-
-    name: str  # its name in objectives_of(info) (TimeGapMonitor-v1's info["objectives"])
-    unit: str
-    term: str  # the term as a function of the objective (per follower, then the mean, where it says so)
-
-
-# Reward term -> its objective, in REWARD_TERMS order: each term is the documented function of its objective, so the
-# objectives say in natural units what the terms weigh.
-OBJECTIVES: dict[str, Objective] = {
-    "tracking": Objective("time_gap_variation", "s", "-time_gap_variation / tracking_reference: the mean over "
-                          "follower-ticks of min(abs(actual time gap - applied setting), tracking_cap), 0 below 1 m/s"),
-    "string_stability": Objective("acceleration_growth", "m/s^2", "-min(1, acceleration_growth / "
-                                  "accel_growth_reference): the rise of the acceleration envelopes down the platoon"),
-    "safety": Objective("ttc_shortfall", "s", "-ttc_shortfall / ttc_threshold: the mean over followers of "
-                        "max(0, ttc_threshold - the step's smallest time-to-collision)"),
-    "collision": Objective("collision", "-", "-collision: 1 on the step a gap reaches 0"),
-    "comfort": Objective("jerk_squared", "m^2/s^6", "-jerk_squared / jerk_reference^2: the mean over follower-ticks "
-                         "of jerk^2"),
-    "efficiency": Objective("capacity", "veh/h", "-mean over followers of (1 - capacity / capacity at the smallest "
-                            "level); capacity = 3600 v / (v tau* + s0 + vehicle length) at the step's final speed v, "
-                            "the objective its mean over followers"),
-    "preference": Objective("preference_deviation", "s", "-preference_deviation / span of the levels: the mean over "
-                            "followers of abs(tau* - preferred_setting)"),
-    "switching": Objective("switching", "-", "-switching: the share of followers whose setting changed"),
-}
-assert tuple(OBJECTIVES) == REWARD_TERMS
-COST_TERMS = ("string_stability", "safety", "collision")  # info["cost"] = -(the sum of these terms, each clipped to
-# [-1, 0]), in [0, 3]: a step's string instability, TTC shortfall and collision (Safety-Gymnasium's convention: >= 0,
-# 0 when safe); env_objectives writes it
+# Reward term -> its objective (its record's), in REWARD_TERMS order: each term is the documented function of its
+# objective, so the objectives say in natural units what the terms weigh.
+OBJECTIVES: dict[str, Objective] = {name: term.objective for name, term in REWARD_TERM_RECORDS.items()}
+COST_TERMS = tuple(name for name, term in REWARD_TERM_RECORDS.items() if term.cost)  # info["cost"] = -(the sum of
+# these terms, each clipped to [-1, 0]), in [0, 3]: a step's string instability, TTC shortfall and collision
+# (Safety-Gymnasium's convention: >= 0, 0 when safe); env_objectives writes it
+COST_ROWS = tuple(REWARD_TERMS.index(name) for name in COST_TERMS)  # their rows in REWARD_TERMS order
 
 
 def term_lows(config: EnvConfig) -> dict[str, float]:
-    """The lowest value of each reward term in a step under ``config``, in REWARD_TERMS order; -inf where it has none
-    (safety: a negative TTC once a gap is gone; comfort: jerk squared)."""
-    scales = config.reward_scales
-    return {"tracking": -scales.tracking_cap / scales.tracking_reference, "string_stability": -1.0, "safety": -np.inf,
-            "collision": -1.0, "comfort": -np.inf, "efficiency": -1.0, "preference": -1.0, "switching": -1.0}
+    """The lowest value of each reward term in a step under ``config`` (its record's ``low``), in REWARD_TERMS
+    order; -inf where it has none (safety: a negative TTC once a gap is gone; comfort: jerk squared)."""
+    return {name: term.low(config.reward_scales) for name, term in REWARD_TERM_RECORDS.items()}
 
 
 def step_readouts(step: StepTicks, previous_accel: np.ndarray, envelope: np.ndarray,
@@ -261,7 +250,7 @@ def _score(step, previous_accel, envelope, setting, changed, constants, weights,
     _reward_terms(readouts, setting, changed, constants, terms)
     _weighted_sum(term_rows, weights, reward)
     for e in range(setting.shape[0]):
-        env_objectives(readouts, setting, changed, terms, constants, objectives, cost, e)
+        env_objectives(readouts, setting, changed, term_rows, constants, objectives, cost, e)
 
 
 @numba.njit(cache=True, error_model="numpy")
@@ -348,10 +337,10 @@ def env_reward_terms(readouts, setting, changed, constants, out, e):  # noqa: AN
 
 
 @numba.njit(**STAGE_KERNEL)
-def env_objectives(readouts, setting, changed, terms, constants, out, cost, e):  # noqa: ANN001, ANN201, PLR0913
+def env_objectives(readouts, setting, changed, term_rows, constants, out, cost, e):  # noqa: ANN001, ANN201, PLR0913
     """Env ``e``'s objectives of :data:`OBJECTIVES` in natural units (into ``out``, a :class:`RewardTerms` of
     (n_envs,) rows, each term's objective under its name) from its read-outs, and its cost (into ``cost``,
-    (n_envs,)) from its ``terms`` (a :class:`RewardTerms`)."""
+    (n_envs,)) from its terms (``term_rows``, (n_terms, n_envs) in REWARD_TERMS order): the rows of COST_TERMS."""
     n_followers = setting.shape[1]
     n_ticks = constants.ticks_per_step
     shortfall = jerk_squared = capacity = preference = switching = 0.0
@@ -370,8 +359,12 @@ def env_objectives(readouts, setting, changed, terms, constants, out, cost, e): 
     out.efficiency[e] = capacity / n_followers  # capacity [veh/h]
     out.preference[e] = preference / n_followers  # preference_deviation [s]
     out.switching[e] = switching / n_followers  # [-]
-    # each cost term in [0, 1]: the safety term falls below -1 once a gap is gone (a negative TTC); 0.0 - : never -0.0
-    cost[e] = 0.0 - (terms.string_stability[e] + max(-1.0, terms.safety[e]) + terms.collision[e])
+    # each cost term clipped to [-1, 0] (the safety term falls below -1 once a gap is gone, a negative TTC), summed in
+    # REWARD_TERMS order; 0.0 - : never -0.0
+    total = 0.0
+    for t in COST_ROWS:
+        total += max(-1.0, term_rows[t, e])
+    cost[e] = 0.0 - total
 
 
 @numba.njit(cache=True, error_model="numpy")

@@ -235,7 +235,7 @@ def _finish_env(blocks, state, rules, scratch, info, trace, e):  # noqa: ANN001,
         collided = collided or kinematics.collided[e, f]
     env_reward_terms(state.readouts, kinematics.setting, step.changed, constants, state.terms, e)
     env_weighted_sum(term_rows, rules.weights, step.reward, e)
-    env_objectives(state.readouts, kinematics.setting, step.changed, state.terms, constants, state.objectives,
+    env_objectives(state.readouts, kinematics.setting, step.changed, term_rows, constants, state.objectives,
                    step.cost, e)
     add_step_env(state.totals, state.readouts, kinematics.setting, step.changed, constants.gap_per_vehicle, e)
     step.terminated[e] = collided
