@@ -660,8 +660,7 @@ def _float_fields(fields: dict[str, float], listing: str) -> Callable[[type[_Con
                + ", ".join(f"{term.name} = {term.weight:g}" for term in REWARD_TERM_RECORDS.values()) + ".")
 class RewardWeights(ConfigMixin):
     """Weight of each reward term of ``TimeGapMonitor-v0``, one field per record of :data:`REWARD_TERM_RECORDS` in the
-    order the terms are summed (tracking, string_stability, safety, collision, comfort, efficiency, preference,
-    switching), its default the record's ``weight``.
+    order the terms are summed, its default the record's ``weight`` (the fields are listed below).
 
     The terms themselves (each <= 0, about -1 at its worst) are in their records and
     :mod:`timegap_env.envs.reward`, whose ``RewardTerms`` takes its field names from this class.
@@ -729,9 +728,8 @@ REWARD_PRESETS: dict[str, RewardPreset] = {preset.name: preset for preset in (
                            for scale in REWARD_SCALE_RECORDS.values()))
 class RewardScales(ConfigMixin):
     """What one unit of each reward term is, in natural units: the reference scales beside :class:`RewardWeights`,
-    one field per :class:`RewardScale` of the records of :data:`REWARD_TERM_RECORDS` (tracking_reference,
-    tracking_cap, accel_growth_reference, accel_envelope_time, ttc_threshold, jerk_reference), its default, unit and
-    bounds the record's (:mod:`timegap_env.envs.reward` gives each term's formula)."""
+    one field per :class:`RewardScale` of the records of :data:`REWARD_TERM_RECORDS` (listed below), its default,
+    unit and bounds the record's (:mod:`timegap_env.envs.reward` gives each term's formula)."""
 
     if TYPE_CHECKING:  # the fields come from the records at import: one float per scale
         __dataclass_fields__: ClassVar[dict[str, dataclasses.Field[Any]]]

@@ -34,15 +34,15 @@ def reference_step(task: PlatoonTask, action: np.ndarray, block: tuple | None = 
     )
     outputs, readouts = task.state.views.step, task.state.views.readouts
     score = score_step(step, outputs.previous_accel, outputs.envelope, platoon.setting, changed,
-                       task._reward_constants, task._weights, readouts)
-    task.totals.add_step(readouts, platoon.setting, changed, task._reward_constants.gap_per_vehicle)
+                       task.params.reward, task.params.weights, readouts)
+    task.totals.add_step(readouts, platoon.setting, changed, task.params.reward.gap_per_vehicle)
     outputs.previous_accel[:] = physics.accel[-1]
     result = task._result
     result.reward[:], result.term_rows[:], outputs.changed[:] = score.reward, score.terms, changed
     result.objective_rows[:], result.cost[:] = score.objectives, score.cost
     np.any(platoon.collided, axis=1, out=result.terminated)
     result.truncated[:] = (loop.ticks >= task.episodes.episode_ticks) & ~result.terminated
-    observe_into(task._follower_state(), task._scales, outputs.observation, np.ones(task.n_envs, dtype=bool))
+    observe_into(task._follower_state(), task.params.scales, outputs.observation, np.ones(task.n_envs, dtype=bool))
     if block is not None and block[0].shape[1]:
         task.write_info(block, scored=True)
     return result

@@ -275,3 +275,19 @@ def test_actions_of_any_memory_layout_share_one_compiled_step() -> None:
     env.step(np.broadcast_to(np.int64(2), (4, 5)))  # read-only: the task calls one compiled entry for one type
     assert len(fused_step.signatures) == compiled
     assert env.task.ladder.check(np.broadcast_to(np.int64(2), (4, 5))).flags.writeable
+
+
+@pytest.mark.parametrize("chart", ["shewhart", "ewma", "cusum"])
+def test_the_params_made_from_the_config_are_the_components_own_constants(chart):
+    """``EnvParams.from_config`` gives each section exactly the record the component running alone makes."""
+    from timegap_env.config import EnvConfig
+    from timegap_env.envs.task import PlatoonTask
+
+    config = EnvConfig.from_dict({"chart": {"kind": chart}, "monitor": {"forgetting": 0.99}})
+    task = PlatoonTask(config, 2)
+    params, loop = task.params, task.loop
+    sections = {"ladder": task.ladder.rule, "controller": loop.platoon.controller, "window": loop.monitor.rule,
+                "prior": loop.monitor.prior, "chart": loop.chart.rule}
+    for name, own in sections.items():
+        same_bytes(dict(getattr(params, name)._asdict()), dict(own._asdict()), name)
+    assert params.chart.half_width == loop.chart.half_width and params.ticks_per_step == config.ticks_per_decision

@@ -17,7 +17,7 @@ rows ahead: :attr:`~timegap_env.state.Layout.prefetch`, and :func:`_prefetch_ins
 that move from step to step), and re-centres only the followers whose setting changed. Every env's state is
 :class:`EnvState`, one allocation (:mod:`timegap_env.state`) whose components each declare their own fields;
 the kernel is handed its few blocks and makes the named views inside (``env_view``), besides the scratch its
-ticks go through (:class:`StepScratch`), the config's constants (:class:`StepRules`), the action and the
+ticks go through (:class:`StepScratch`), the config's constants (:class:`EnvParams`), the action and the
 :class:`~timegap_env.envs.info.InfoBlock` it writes the infos' values into (a single env's info).
 """
 
@@ -36,12 +36,12 @@ from timegap_env.envs.info import InfoBlock, write_info_env
 from timegap_env.envs.observation import FEATURES, FollowerState, ObservationScales, encode_env
 from timegap_env.envs.reward import (
     RewardConstants, RewardTerms, StepReadouts, StepTicks, env_objectives, env_readouts, env_reward_terms,
-    env_weighted_sum,
+    env_weighted_sum, weights_of,
 )
 from timegap_env.envs.totals import EpisodeTotals, add_step_env
 from timegap_env.monitoring.charts import ChartRule, ChartState, chart_sides_env, count_excursions_env
 from timegap_env.monitoring.loop import LoopParts, change_settings_env, loop_dims
-from timegap_env.monitoring.monitor import UPDATE_WORK_ROWS, MonitorTicks, WindowRule, update_env
+from timegap_env.monitoring.monitor import UPDATE_WORK_ROWS, MonitorTicks, WindowRule, monitor_prior, update_env
 from timegap_env.monitoring.posterior import Prior
 from timegap_env.monitoring.sensors import UNIFORM_STREAMS, Readings, measure_env
 from timegap_env.sim.platoon import Controller, LeaderTicks, PlatoonTicks, advance_env
@@ -109,57 +109,58 @@ class StepScratch(NamedTuple):
                    work=np.empty((max(UPDATE_WORK_ROWS, UNIFORM_STREAMS), n_ticks * n_followers)))
 
 
-class StepRules(NamedTuple):
-    """The config's constants of a step."""
+class EnvParams(NamedTuple):
+    """Every constant of a step, made from the config once (gymnax's ``EnvParams``): each component's section, the
+    record its kernels take (and its own methods, when it runs alone), and the step's own."""
 
-    ladder: tuple  # LadderRule, the action's (timegap_env.envs.action)
+    ladder: LadderRule  # the action's (timegap_env.envs.action)
+    controller: Controller  # the platoon's (timegap_env.sim.platoon)
+    window: WindowRule  # the monitor's (timegap_env.monitoring.monitor)
+    prior: Prior  # the monitor's
+    chart: ChartRule  # the chart's (timegap_env.monitoring.charts)
+    reward: RewardConstants  # the scores' (timegap_env.envs.reward)
+    weights: np.ndarray  # (n_terms,) the reward weights, REWARD_TERMS order
+    scales: ObservationScales  # the observation's (timegap_env.envs.observation)
     v2v_enabled: bool  # PlatoonConfig.v2v: False keeps every follower in ACC
     ticks_per_step: int
     settle_ticks: int  # alarms wait this long after a change has ramped in [ticks]
-    controller: tuple  # Controller, the platoon's (timegap_env.sim.platoon)
-    window: tuple  # WindowRule, the monitor's (timegap_env.monitoring.monitor)
-    prior: tuple  # Prior, the monitor's
-    chart: tuple  # ChartRule, the chart's (timegap_env.monitoring.charts)
-    reward: tuple  # RewardConstants
-    weights: np.ndarray  # (n_terms,) the reward weights, REWARD_TERMS order
-    scales: tuple  # ObservationScales
 
     @classmethod
-    def from_config(cls, config: EnvConfig, ladder: LadderRule, controller: Controller, window: WindowRule,
-                    prior: Prior, chart: ChartRule, reward: tuple, weights: np.ndarray, scales: tuple) -> StepRules:
-        """The rules of ``config``; the others are the components' own rules."""
+    def from_config(cls, config: EnvConfig) -> EnvParams:
         return cls(
-            ladder=tuple(ladder), v2v_enabled=bool(config.platoon.v2v),
-            ticks_per_step=int(config.ticks_per_decision), settle_ticks=config.chart.settle_ticks,
-            controller=tuple(controller), window=tuple(window), prior=tuple(prior), chart=tuple(chart), reward=reward,
-            weights=weights, scales=scales,
+            ladder=LadderRule.from_config(config), controller=Controller.from_config(config.platoon),
+            window=WindowRule.from_config(config.monitor), prior=monitor_prior(config.monitor),
+            chart=ChartRule.from_config(config.chart, config.chart.kind), reward=RewardConstants.from_config(config),
+            weights=np.array(weights_of(config)), scales=ObservationScales.from_config(config),
+            v2v_enabled=bool(config.platoon.v2v), ticks_per_step=int(config.ticks_per_decision),
+            settle_ticks=config.chart.settle_ticks,
         )
 
 
 @numba.njit(cache=True, error_model="numpy", **NO_ALLOCATION)  # allocates nothing (see timegap_env.compiled)
-def fused_step(blocks, scratch, rules, action, info, trace):  # noqa: ANN001, ANN201
+def fused_step(blocks, scratch, params, action, info, trace):  # noqa: ANN001, ANN201
     """One decision step of every env: ``action`` (n_envs, 1) ladder indices or relative steps, or (n_envs,
     n_followers) indices per follower, int64, checked by :meth:`~timegap_env.envs.action.SettingLadder.check`
     (numba checks no bounds; a raise here would cost seconds of compilation); ``blocks`` (an :class:`EnvState`'s,
-    :attr:`~timegap_env.state.State.blocks`) are updated in place under ``rules`` (:class:`StepRules`), the ticks
+    :attr:`~timegap_env.state.State.blocks`) are updated in place under ``params`` (:class:`EnvParams`), the ticks
     going through ``scratch`` (:class:`StepScratch`); each env's per-step info values go into ``info`` (an
     :class:`~timegap_env.envs.info.InfoBlock` of every env, or of none: n_envs 0), and env 0's estimate and centre
     line at each tick into ``trace`` (n_ticks, 2, n_followers), unless it has no ticks."""
     n_envs = action.shape[0]
-    state, rules = env_view(blocks, n_envs), StepRules(*rules)
+    state = env_view(blocks, n_envs)
     platoon, monitor, chart = state.loop.platoon, state.loop.monitor, state.loop.chart
     for e in range(n_envs):
         env_prefetch(blocks, e + 1)  # the next env's rows come in while this env's stages run
         if e + 1 < n_envs:
             _prefetch_inside(state.leader, platoon.state, chart.memory.starts, chart.tick, monitor.memory.slots,
-                             monitor.slot, rules.ticks_per_step, e + 1)
-        leader, physics = _prepare_env(state, rules, scratch, action, e)
-        advance_env(platoon.state, leader, platoon.nominal, rules.controller, platoon.faults, physics, e, 0)
-        _finish_env(blocks, state, rules, scratch, info, trace, e)
+                             monitor.slot, params.ticks_per_step, e + 1)
+        leader, physics = _prepare_env(state, params, scratch, action, e)
+        advance_env(platoon.state, leader, platoon.nominal, params.controller, platoon.faults, physics, e, 0)
+        _finish_env(blocks, state, params, scratch, info, trace, e)
 
 
 @numba.njit(cache=True, error_model="numpy", **NO_ALLOCATION)
-def prepare_step(blocks, scratch, rules, action):  # noqa: ANN001, ANN201
+def prepare_step(blocks, scratch, params, action):  # noqa: ANN001, ANN201
     """The part of :func:`fused_step` before the physics, for a simulator whose ticks run outside (SUMO's, one env):
     the settings, and the leader's and V2V's ticks in ``scratch`` (:class:`StepScratch`: ``leader`` and the first
     row of ``flags``). The simulator then writes the platoon's state and its ticks' records (``floats`` 0-3, the
@@ -167,48 +168,48 @@ def prepare_step(blocks, scratch, rules, action):  # noqa: ANN001, ANN201
     n_envs = action.shape[0]
     state = env_view(blocks, n_envs)
     for e in range(n_envs):
-        _prepare_env(state, StepRules(*rules), scratch, action, e)
+        _prepare_env(state, params, scratch, action, e)
 
 
 @numba.njit(cache=True, error_model="numpy", **NO_ALLOCATION)
-def finish_step(blocks, scratch, rules, n_envs, info, trace):  # noqa: ANN001, ANN201, PLR0913
+def finish_step(blocks, scratch, params, n_envs, info, trace):  # noqa: ANN001, ANN201, PLR0913
     """The part of :func:`fused_step` after the physics for ``n_envs`` envs (see :func:`prepare_step`)."""
     state = env_view(blocks, n_envs)
     for e in range(n_envs):
-        _finish_env(blocks, state, StepRules(*rules), scratch, info, trace, e)
+        _finish_env(blocks, state, params, scratch, info, trace, e)
 
 
 @numba.njit(inline="always")
-def _prepare_env(state, rules, scratch, action, e):  # noqa: ANN001, ANN202, PLR0913
+def _prepare_env(state, params, scratch, action, e):  # noqa: ANN001, ANN202, PLR0913
     """Env ``e``'s settings from its action (:func:`~timegap_env.envs.action.ladder_env`,
     :func:`~timegap_env.monitoring.loop.change_settings_env`), and the leader at the end of each tick of the
     step (held after its episode) and each follower's V2V during it, into ``scratch``; returns the
     :class:`LeaderTicks` and the :class:`PlatoonTicks` the physics fills, views of the scratch."""
     platoon, leader, scratch = state.loop.platoon, state.leader, StepScratch(*scratch)
     kinematics, faults, flags = platoon.state, platoon.faults, scratch.flags
-    ladder_env(rules.ladder, action, kinematics.setting, e, scratch.targets)  # the action's settings
-    change_settings_env(kinematics, rules.controller, state.loop.monitor.memory, state.loop.monitor.slot,
-                        state.loop.chart, rules.chart, rules.settle_ticks, scratch.targets, state.step.changed, e)
+    ladder_env(params.ladder, action, kinematics.setting, e, scratch.targets)  # the action's settings
+    change_settings_env(kinematics, params.controller, state.loop.monitor.memory, state.loop.monitor.slot,
+                        state.loop.chart, params.chart, params.settle_ticks, scratch.targets, state.step.changed, e)
     ticks = LeaderTicks(scratch.leader[0], scratch.leader[1], flags[0])
-    for k in range(rules.ticks_per_step):
+    for k in range(params.ticks_per_step):
         tick = kinematics.ticks[e] + k
         sample = min(tick + 1, leader.episode_ticks[e])
         ticks.speed[k, 0], ticks.accel[k, 0] = leader.speed[e, sample], leader.accel[e, sample]
         for f in range(kinematics.setting.shape[1]):
             down = faults.start[e, f] <= tick < faults.end[e, f] and faults.v2v_down[e, f]
-            ticks.v2v[k, 0, f] = rules.v2v_enabled and not down
+            ticks.v2v[k, 0, f] = params.v2v_enabled and not down
     floats = scratch.floats
     return ticks, PlatoonTicks(floats[0], floats[1], floats[2], floats[3], flags[1])
 
 
 @numba.njit(inline="always")
-def _finish_env(blocks, state, rules, scratch, info, trace, e):  # noqa: ANN001, ANN202, PLR0913
+def _finish_env(blocks, state, params, scratch, info, trace, e):  # noqa: ANN001, ANN202, PLR0913
     """Env ``e``'s ticks, their physics done, through the sensors, the monitor and the chart; the step's scores, the
     episode's totals, the flags, the observation and the info's values (and env 0's trace)."""
-    scratch, constants = StepScratch(*scratch), RewardConstants(*rules.reward)
+    scratch, constants = StepScratch(*scratch), params.reward
     sensors, monitor, chart = state.loop.sensors, state.loop.monitor, state.loop.chart
     kinematics, step, memory, moments = state.loop.platoon.state, state.step, chart.memory, monitor.posterior
-    n_envs, n_followers, n_ticks = step.reward.shape[0], kinematics.setting.shape[1], rules.ticks_per_step
+    n_envs, n_followers, n_ticks = step.reward.shape[0], kinematics.setting.shape[1], params.ticks_per_step
     term_rows = blocks[TERM_BLOCK][FIRST_TERM:FIRST_TERM + N_TERMS, :n_envs]  # (n_terms, n_envs), REWARD_TERMS order
     objective_rows = blocks[TERM_BLOCK][FIRST_OBJECTIVE:FIRST_OBJECTIVE + N_TERMS, :n_envs]
     floats, flags, counts, last = scratch.floats, scratch.flags, scratch.counts, n_ticks - 1
@@ -221,9 +222,9 @@ def _finish_env(blocks, state, rules, scratch, info, trace, e):  # noqa: ANN001,
     ticks_before = kinematics.ticks[e] - n_ticks  # the physics counted the step's ticks
     measure_env((physics.spacing, physics.speed), ticks_before, sensors.noise, sensors.faults, measured, e, 0,
                 scratch.work[:UNIFORM_STREAMS])
-    update_env(measured.speed, measured.spacing, monitor.memory, monitor.slot, rules.window, rules.prior, estimates,
+    update_env(measured.speed, measured.spacing, monitor.memory, monitor.slot, params.window, params.prior, estimates,
                moments, e, 0, scratch.work)
-    chart_sides_env(rules.chart, estimates.tau_mean, physics.applied_setting, chart.statistic, charted.side, e, 0)
+    chart_sides_env(params.chart, estimates.tau_mean, physics.applied_setting, chart.statistic, charted.side, e, 0)
     count_excursions_env(memory, chart.tick[e], charted, e, 0)
     chart.tick[e] += n_ticks
     env_readouts(ticks, 0, step.previous_accel, step.envelope, constants, state.readouts, e)
@@ -234,7 +235,7 @@ def _finish_env(blocks, state, rules, scratch, info, trace, e):  # noqa: ANN001,
         step.previous_accel[e, f] = physics.accel[last, 0, f]
         collided = collided or kinematics.collided[e, f]
     env_reward_terms(state.readouts, kinematics.setting, step.changed, constants, state.terms, e)
-    env_weighted_sum(term_rows, rules.weights, step.reward, e)
+    env_weighted_sum(term_rows, params.weights, step.reward, e)
     env_objectives(state.readouts, kinematics.setting, step.changed, term_rows, constants, state.objectives,
                    step.cost, e)
     add_step_env(state.totals, state.readouts, kinematics.setting, step.changed, constants.gap_per_vehicle, e)
@@ -242,10 +243,10 @@ def _finish_env(blocks, state, rules, scratch, info, trace, e):  # noqa: ANN001,
     step.truncated[e] = kinematics.ticks[e] >= state.leader.episode_ticks[e] and not collided
     follower = FollowerState(moments.mean_tau, moments.var_tau, chart.center, memory.side, memory.exceedances_in_window,
                              memory.run_length, kinematics.setting, kinematics.v[:, 1:], kinematics.v2v)
-    encode_env(follower, rules.scales, step.observation, e)
+    encode_env(follower, params.scales, step.observation, e)
     if InfoBlock(*info).floats.shape[1] > 0:
         write_info_env(moments.mean_tau, moments.var_tau, kinematics.setting, chart.center,
-                       ObservationScales(*rules.scales).half_width, memory.side, kinematics.v2v, monitor.memory.skipped,
+                       params.scales.half_width, memory.side, kinematics.v2v, monitor.memory.skipped,
                        term_rows, objective_rows, step.cost, info, e)
     if e == 0 and trace.shape[0] > 0:  # the trace hook: env 0's estimate and centre line at each tick
         for k in range(n_ticks):
@@ -286,5 +287,5 @@ def _prefetch_inside(leader, platoon, starts, chart_tick, slots, slot, n_ticks, 
 
 follow_sources(__name__)
 
-__all__ = ["ENV", "EnvState", "StepOutputs", "StepRules", "StepScratch", "env_dims", "finish_step", "fused_step",
+__all__ = ["ENV", "EnvParams", "EnvState", "StepOutputs", "StepScratch", "env_dims", "finish_step", "fused_step",
            "prepare_step"]

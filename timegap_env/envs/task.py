@@ -29,10 +29,10 @@ from timegap_env.config import TIME_GAP_MIN_SPEED, EnvConfig
 from timegap_env.envs.action import SettingLadder
 from timegap_env.envs.episodes import Episodes, check_reset_options
 from timegap_env.envs.info import TRUTH_PREFIX, VIEW_FLAGS, VIEW_FLOATS, InfoBlock, prefixed, write_info_envs
-from timegap_env.envs.observation import FollowerState, ObservationScales, observe_into
+from timegap_env.envs.observation import FollowerState, observe_into
 from timegap_env.envs.rendering import DEFAULT_TIME_WINDOW, RenderFrame
-from timegap_env.envs.reward import REWARD_TERMS, RewardConstants, StepReadouts, weights_of
-from timegap_env.envs.step_kernel import EnvState, StepRules, StepScratch, env_dims, finish_step, fused_step, prepare_step
+from timegap_env.envs.reward import REWARD_TERMS, StepReadouts
+from timegap_env.envs.step_kernel import EnvParams, EnvState, StepScratch, env_dims, finish_step, fused_step, prepare_step
 from timegap_env.envs.totals import EpisodeTotals
 from timegap_env.monitoring.loop import MonitoredPlatoon
 from timegap_env.sim.platoon import Platoon
@@ -124,18 +124,12 @@ class PlatoonTask:
         self.ladder = SettingLadder(config, n_envs)
         self.loop = MonitoredPlatoon(config.platoon, config.monitor, config.chart, config.sensors, n_envs,
                                      physics=_physics(config, n_envs, self.state), state=self.state, path=("loop",))
-        self._scales = ObservationScales.from_config(config)
-        self._reward_constants = RewardConstants.from_config(config)
-        self._weights = weights_of(config)
+        self.params = EnvParams.from_config(config)  # every constant of a step
         self.trace: Trace | None = None
         self._no_scores = (np.zeros((len(REWARD_TERMS), n_envs)), np.zeros((len(REWARD_TERMS), n_envs)),
                            np.zeros(n_envs))  # a reset's info: no step's terms, objectives, cost
         self._info_block = tuple(InfoBlock.empty(n_envs, self.n_followers, info_layout))  # monitor_info's
         self._no_info = tuple(InfoBlock.empty(0, self.n_followers, info_layout))  # a step writing no info
-        monitor = self.loop.monitor
-        self._rules = tuple(StepRules.from_config(config, self.ladder.rule, self.loop.platoon.controller, monitor.rule,
-                                                  monitor.prior, self.loop.chart.rule, tuple(self._reward_constants),
-                                                  np.array(self._weights), tuple(self._scales)))
         self._scratch = tuple(StepScratch.empty(self.ticks_per_decision, self.n_followers))
         self._trace_block = np.empty((self.ticks_per_decision, 2, self.n_followers))  # env 0's ticks, when traced
         self._no_trace = np.empty((0, 2, self.n_followers))
@@ -199,7 +193,7 @@ class PlatoonTask:
         readouts.min_ttc[mask] = np.inf
         readouts.jerk_squared[mask] = 0.0
         self.totals.restart(mask)
-        observe_into(self._follower_state(), self._scales, step.observation, mask)
+        observe_into(self._follower_state(), self.params.scales, step.observation, mask)
         self._reset_once = True
 
     def _v2v_during(self, ticks: np.ndarray) -> np.ndarray:
@@ -230,16 +224,16 @@ class PlatoonTask:
             raise ValueError(f"an InfoBlock of {n_written} envs: must be of n_envs = {self.n_envs} or 0")
         trace = self._no_trace if self.trace is None else self._trace_block
         if self.config.simulator == "native":  # the whole step in one compiled call
-            arguments = (self.state.blocks, self._scratch, self._rules, action, block, trace)
+            arguments = (self.state.blocks, self._scratch, self.params, action, block, trace)
             if "step" not in self._compiled:  # for these types (SettingLadder.check gives every action one type)
                 self._compiled["step"] = compiled_entry(fused_step, *arguments)
             self._compiled["step"](*arguments)
         else:  # the same step around another simulator's physics
-            prepare_step(self.state.blocks, self._scratch, self._rules, action)
+            prepare_step(self.state.blocks, self._scratch, self.params, action)
             scratch = StepScratch(*self._scratch)
             physics = self.loop.platoon.advance(scratch.leader[0], scratch.leader[1], scratch.flags[0])
             scratch.floats[:4], scratch.flags[1] = physics[:4], physics.collisions
-            finish_step(self.state.blocks, self._scratch, self._rules, self.n_envs, block, trace)
+            finish_step(self.state.blocks, self._scratch, self.params, self.n_envs, block, trace)
         if self.trace is not None:  # env 0's ticks of this step
             ticks = self.loop.ticks[0] - self.ticks_per_decision + 1 + np.arange(self.ticks_per_decision)
             self.trace.add(TraceArrays(ticks * self.config.platoon.dt, trace[:, 0], trace[:, 1]))
@@ -282,7 +276,7 @@ class PlatoonTask:
         result = self._result
         scores = (result.term_rows, result.objective_rows, result.cost) if scored else self._no_scores
         arguments = (monitor.moments.mean_tau, monitor.moments.var_tau, platoon.setting, chart.center,
-                     self._scales.half_width, chart.side, platoon.v2v, monitor.skipped, *scores, block)
+                     self.params.scales.half_width, chart.side, platoon.v2v, monitor.skipped, *scores, block)
         if "info" not in self._compiled:  # the same types at every call
             self._compiled["info"] = compiled_entry(write_info_envs, *arguments)
         self._compiled["info"](*arguments)
@@ -342,7 +336,7 @@ class PlatoonTask:
         arrays = trace.arrays()
         recent = arrays.t >= now - history
         centers = arrays.center[recent]
-        half_width = self._scales.half_width
+        half_width = self.params.scales.half_width
         return RenderFrame(
             t=now,
             x=platoon.x[0].copy(),

@@ -105,11 +105,23 @@ class ChartRule(NamedTuple):
     cusum_k: float  # [sigma_desired]
     cusum_h: float  # [sigma_desired]
 
+    @classmethod
+    def from_config(cls, config: ChartConfig, kind: str) -> ChartRule:
+        """The constants of a chart of ``kind`` (one of CHART_KINDS) under ``config``: the limits are centre -/+ L
+        sigma_desired, the EWMA's its asymptotic L_ewma sigma_desired sqrt(lambda / (2 - lambda))."""
+        lam = float(config.ewma_lambda)
+        half_width = (config.ewma_width * config.baseline_std * np.sqrt(lam / (2.0 - lam)) if kind == "ewma"
+                      else config.half_width)
+        return cls(kind=CHART_KINDS.index(kind), half_width=float(half_width), ewma_lambda=lam,
+                   baseline_std=float(config.baseline_std), cusum_k=float(config.cusum_k),
+                   cusum_h=float(config.cusum_h))
+
 
 class ControlChart(OnState):
     """What every chart shares: excursions, their windowed count, run length, re-centring.
 
-    A subclass names its ``kind`` (its key in :data:`CHARTS`) and its limits' ``half_width``. How its statistic
+    A subclass names its ``kind`` (its key in :data:`CHARTS`; its limits' ``half_width`` is the kind's, in
+    :meth:`ChartRule.from_config`). How its statistic
     moves, on which side of its limits it lies and how it restarts are the kind's branches of
     :func:`chart_sides_env` and :func:`restart_env`, the kernels both the chart and the fused step run. A
     statistic lives in ``statistic`` (n_envs, n_vehicles, 2), in place.
@@ -127,9 +139,7 @@ class ControlChart(OnState):
         self.shape = batch_shape(n_envs, n_vehicles)
         # A start counts only if it is no older than the vehicle's last (re)start, so re-centring never clears the ring.
         self._bind(State(ChartParts, chart_dims(config, n_vehicles), n_envs) if state is None else state, path)
-        self.rule = ChartRule(kind=CHART_KINDS.index(self.kind), half_width=float(self.half_width),
-                              ewma_lambda=float(config.ewma_lambda), baseline_std=float(config.baseline_std),
-                              cusum_k=float(config.cusum_k), cusum_h=float(config.cusum_h))
+        self.rule = ChartRule.from_config(config, self.kind)
         self.reset(None, center)
 
     center = property(lambda self: self.parts.center, doc="The centre line, the applied setting tau* [s].")
@@ -144,8 +154,9 @@ class ControlChart(OnState):
     @property
     def half_width(self) -> float:
         """Distance from the centre line to either limit of the charted statistic [s]: L sigma_desired (the
-        EWMA chart's own; the CUSUM chart holds its sums against ``cusum_h`` instead)."""
-        return self.config.half_width
+        EWMA chart's own, :meth:`ChartRule.from_config`; the CUSUM chart holds its sums against ``cusum_h``
+        instead)."""
+        return self.rule.half_width
 
     @property
     def alarm(self) -> np.ndarray:
@@ -247,12 +258,6 @@ class EwmaChart(ControlChart):
     kind = "ewma"
 
     ewma = property(lambda self: self.statistic[..., 0], doc="z (n_envs, n_vehicles) [s] (the chart's own array).")
-
-    @property
-    def half_width(self) -> float:
-        """Distance from the centre line to either limit [s]."""
-        lam = self.config.ewma_lambda
-        return self.config.ewma_width * self.config.baseline_std * np.sqrt(lam / (2.0 - lam))
 
     @property
     def lcl(self) -> np.ndarray:

@@ -21,7 +21,7 @@ from timegap_env.monitoring.batch import batch_array, batch_shape, env_mask, set
 from timegap_env.monitoring.posterior import Moments, Prior, WindowSums, outside_probability, posterior_moments
 from timegap_env.state import OnState, PerEnv, State
 
-__all__ = ["MonitorTicks", "TimeGapMonitor"]
+__all__ = ["MonitorTicks", "TimeGapMonitor", "WindowRule", "monitor_prior"]
 
 N_SUMS = len(WindowSums._fields)  # channels of the window sums: n, sum V, sum V^2, sum S, sum V S
 UPDATE_WORK_ROWS = N_SUMS + 3  # rows of update_env's scratch: the window sums, prior mean, mean and variance of tau
@@ -77,6 +77,18 @@ class WindowRule(NamedTuple):
     age_weight: np.ndarray  # (W,) weight of slot m when its block is full [-]
     raw_gap: bool  # MonitorConfig.estimator == "raw_gap": report each tick's (s - s0) / v instead of the posterior
 
+    @classmethod
+    def from_config(cls, config: MonitorConfig) -> WindowRule:
+        W, decay = config.window_ticks or 0, float(config.forgetting)  # W = 0: no window
+        return cls(max_speed=float(config.max_speed), max_spacing=float(config.max_spacing),
+                   min_speed=float(config.min_speed), forgetting=decay, suffix_weight=decay ** np.arange(1, W + 1),
+                   age_weight=decay ** np.arange(W - 1, -1, -1.0), raw_gap=config.estimator == "raw_gap")
+
+
+def monitor_prior(config: MonitorConfig) -> Prior:
+    """The prior's constants under ``config`` (:class:`Prior`)."""
+    return Prior.from_cov(config.prior_standstill_spacing, config.prior_cov, config.noise_variance)
+
 
 class TimeGapMonitor(OnState):
     """Streaming posterior of [s0, tau] for every vehicle of every env, O(1) work per measurement.
@@ -130,21 +142,12 @@ class TimeGapMonitor(OnState):
                  state: State | None = None, path: tuple[str, ...] = ()) -> None:
         self.config = config
         self.shape = batch_shape(n_envs, n_vehicles)
-        W, decay = config.window_ticks or 0, float(config.forgetting)  # W = 0: no window
         if state is None:
             state = State(MonitorParts, monitor_dims(config, n_vehicles), n_envs)
         self._bind(state, path)  # parts: its arrays (MonitorParts)
-        self.parts.slot[:] = 0 if W else -1
-        self._rule = WindowRule(
-            max_speed=float(config.max_speed),
-            max_spacing=float(config.max_spacing),
-            min_speed=float(config.min_speed),
-            forgetting=decay,
-            suffix_weight=decay ** np.arange(1, W + 1),
-            age_weight=decay ** np.arange(W - 1, -1, -1.0),
-            raw_gap=config.estimator == "raw_gap",
-        )
-        self._prior = Prior.from_cov(config.prior_standstill_spacing, config.prior_cov, config.noise_variance)
+        self.parts.slot[:] = 0 if config.window_ticks else -1  # -1: no window
+        self._rule = WindowRule.from_config(config)
+        self._prior = monitor_prior(config)
         self.reset(None, setting)
 
     # ---- streaming ------------------------------------------------------------------------

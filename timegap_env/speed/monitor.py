@@ -16,8 +16,8 @@ from collections.abc import Callable
 import numpy as np
 
 from timegap_env.config import MonitorConfig
-from timegap_env.monitoring.monitor import N_SUMS, TimeGapMonitor
-from timegap_env.monitoring.posterior import Prior, WindowSums, posterior_moments
+from timegap_env.monitoring.monitor import N_SUMS, TimeGapMonitor, monitor_prior
+from timegap_env.monitoring.posterior import WindowSums, posterior_moments
 
 
 def seconds_per_call(step: Callable[[int], object], n_calls: int) -> tuple[float, float]:
@@ -51,7 +51,7 @@ def bench(n_envs: int, n_vehicles: int, n_ticks: int, config: MonitorConfig) -> 
 
     window = config.window_ticks or 1
     buffer = np.zeros((window, N_SUMS, n_envs, n_vehicles))
-    prior = Prior.from_cov(config.prior_standstill_spacing, config.prior_cov, config.noise_variance)
+    prior = monitor_prior(config)
     prior_tau = np.full((n_envs, n_vehicles), 1.6)
 
     def recompute(t: int) -> None:

@@ -64,7 +64,7 @@ def measure(calls: int) -> SingleEnvSplit:
         task = env.task
         action = task.ladder.check(np.full(task.ladder.shape, 5))
         info = task._info_block if n_envs == 1 else task._no_info  # the single env writes its info values
-        arguments = (task.state.blocks, task._scratch, task._rules, action, info, task._no_trace)
+        arguments = (task.state.blocks, task._scratch, task.params, action, info, task._no_trace)
         step = compiled_entry(fused_step, *arguments)
         times[n_envs] = microseconds(lambda: step(*arguments), max(calls // n_envs, 2))
         if n_envs == 1:
