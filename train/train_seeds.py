@@ -60,16 +60,9 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     return args
 
 
-def root() -> Path:
-    """The root of the repository this process runs from (a Ray worker on a cluster: its copy of it)."""
-    import train
-
-    return Path(train.__file__).resolve().parents[1]
-
-
 def train_one(arguments: list[str], seed: int, out: str) -> Trained:
     """One seed's ``train_ppo`` in a child process, from the root of the repository this piece runs in."""
-    where = root()
+    where = backends.REPO  # the repository this piece runs in (a Ray worker: its copy of it)
     command = [sys.executable, "-m", "train.train_ppo", *arguments, "--seed", str(seed), "--out", out,
                "--no-progress-bar"]
     done = subprocess.run(command, cwd=where, stderr=subprocess.PIPE, text=True)  # its progress shown as it goes
@@ -95,15 +88,15 @@ def main(argv: list[str] | None = None) -> None:
     backend = backends.Backend.from_args(args)
     outs = [args.out.replace("{seed}", str(seed)) for seed in args.seeds]
     for out in outs:
-        cli.output_dir(root() / out)
-    here = f"{socket.gethostname()}:{root()}"
+        cli.output_dir(backends.REPO / out)
+    here = f"{socket.gethostname()}:{backends.REPO}"
     results = backend.map(train_one, [(args.train_ppo, seed, out) for seed, out in zip(args.seeds, outs)])
     for seed, out, trained in zip(args.seeds, outs, results):
         if trained.error:
             print(f"seed {seed}: failed at {trained.where}: {trained.error}", flush=True)
             continue
         if trained.where != here:
-            bring_back(root() / out, trained.files)
+            bring_back(backends.REPO / out, trained.files)
         print(f"seed {seed}: {out} ({len(trained.files)} files, trained at {trained.where})", flush=True)
     if failed := [seed for seed, trained in zip(args.seeds, results) if trained.error]:
         raise RuntimeError(f"--seeds {failed}: train_ppo failed (above); the other seeds' runs are written")

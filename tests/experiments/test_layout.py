@@ -13,13 +13,15 @@ SCRIPTS = {path.stem for path in (ROOT / "train").glob("*.py")} - {"__init__"}  
 
 
 def imported_train(path: Path) -> set[str]:
-    """The train/ modules and packages ``path`` imports (their first name below ``train``)."""
+    """The train/ modules and packages ``path`` imports (their first name below ``train``; ``train`` for the package
+    itself)."""
     found = set()
     for node in ast.walk(ast.parse(path.read_text())):
         if isinstance(node, ast.ImportFrom) and node.module and (node.module == "train" or node.module.startswith("train.")):
             found |= {alias.name for alias in node.names} if node.module == "train" else {node.module.split(".")[1]}
         elif isinstance(node, ast.Import):
-            found |= {alias.name.split(".")[1] for alias in node.names if alias.name.startswith("train.")}
+            found |= {(alias.name + ".").split(".")[1] or "train" for alias in node.names
+                      if alias.name == "train" or alias.name.startswith("train.")}  # "train": the package itself
     return found
 
 
