@@ -465,5 +465,5 @@ def _pursue_targets(normal, uniform, motion):  # noqa: ANN001, ANN202
     return speed, accel
 
 
-# The leaders' kernels (profile's too: the package's leaders import this module): numba's cache by content
+# Its kernels: numba's cache by content
 follow_sources(__name__)

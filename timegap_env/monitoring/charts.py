@@ -121,10 +121,9 @@ class ControlChart(OnState):
     """What every chart shares: excursions, their windowed count, run length, re-centring.
 
     A subclass names its ``kind`` (its key in :data:`CHARTS`; its limits' ``half_width`` is the kind's, in
-    :meth:`ChartRule.from_config`). How its statistic
-    moves, on which side of its limits it lies and how it restarts are the kind's branches of
-    :func:`chart_sides_env` and :func:`restart_env`, the kernels both the chart and the fused step run. A
-    statistic lives in ``statistic`` (n_envs, n_vehicles, 2), in place.
+    :meth:`ChartRule.from_config`). How its statistic moves, on which side of its limits it lies and how it
+    restarts are the kind's branches of :func:`chart_sides_env` and :func:`restart_env`, the kernels both the
+    chart and the fused step run. A statistic lives in ``statistic`` (n_envs, n_vehicles, 2), in place.
 
     Its arrays are :attr:`parts` (:class:`ChartParts`), views of ``state`` at ``path`` (its own state when None),
     changed in place. Public state, arrays (n_envs, n_vehicles): ``center`` [s], ``side``, ``alarm``,
