@@ -47,8 +47,9 @@ def number(cell: str) -> float | None:
 
 
 def bench(tree: Path, out: Path) -> None:
-    """``python -m train.bench --out out`` of the package and harness in ``tree``."""
-    command = [sys.executable, "-m", "train.bench", "--out", str(out)]
+    """``python -m train.bench --out out`` of the package and harness in ``tree`` (``out`` relative to here, not to
+    ``tree``)."""
+    command = [sys.executable, "-m", "train.bench", "--out", str(out.resolve())]
     print(f"bench_against: {tree}", flush=True)
     subprocess.run(command, cwd=tree, env={**os.environ, "PYTHONPATH": str(tree), "MPLBACKEND": "Agg"}, check=True,
                    stdout=subprocess.DEVNULL)
@@ -59,7 +60,7 @@ def first_steps(trees: dict[str, Path], work: Path, runs: int) -> dict[str, list
     trees by turns (``timegap_env.speed.cold``'s child, its own copy in each tree building that tree's wheel)."""
     sites = {}
     for side, tree in trees.items():
-        folder = work / side
+        folder = work / f"wheel_{side}"  # beside the reference's worktree, which may be work / "ref"
         folder.mkdir()
         build = ("from pathlib import Path\ntry:\n    from timegap_env.speed.cold import install_wheel\n"
                  "except ImportError:  # a tree from before the speed code moved into the package\n"

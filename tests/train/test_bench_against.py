@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import types
 from pathlib import Path
 
 import pytest
@@ -41,3 +42,30 @@ def test_the_comparison_runs_both_trees_by_turns(tmp_path: Path, monkeypatch: py
     assert single.endswith("| 1.000 |") and "0.55x" in single  # (0.55 + 0.45) / (0.50 + 0.50)
     assert sorted(path.name for path in tmp_path.iterdir()) == ["against.ref1.md", "against.ref2.md", "against.this1.md",
                                                                 "against.this2.md"]
+
+
+def test_a_relative_out_is_written_here_not_in_the_tree(tmp_path: Path, monkeypatch: pytest.MonkeyPatch):
+    commands = []
+    monkeypatch.setattr(bench_against.subprocess, "run", lambda command, **kwargs: commands.append((command, kwargs)))
+    monkeypatch.chdir(tmp_path)
+    bench_against.bench(tmp_path / "ref", Path("runs/against.ref1.md"))
+    (command, kwargs), = commands
+    assert command[command.index("--out") + 1] == str(tmp_path / "runs" / "against.ref1.md")
+    assert kwargs["cwd"] == tmp_path / "ref"
+
+
+def test_first_steps_build_each_wheel_beside_the_worktree(tmp_path: Path, monkeypatch: pytest.MonkeyPatch):
+    (tmp_path / "ref").mkdir()  # compare's worktree of the reference lives in the same folder
+    builds = []
+    monkeypatch.setattr(bench_against.subprocess, "run", lambda command, **kwargs: builds.append(kwargs["cwd"]))
+    sites = []
+
+    def fake_first_step(env_id, check, config, site, after):
+        sites.append(site)
+        return types.SimpleNamespace(cpu_seconds=float(len(sites)))
+
+    monkeypatch.setattr(bench_against.cold, "first_step", fake_first_step)
+    seconds = bench_against.first_steps({"ref": tmp_path / "ref", "this": bench_against.ROOT}, tmp_path, 2)
+    assert builds == [tmp_path / "ref", bench_against.ROOT]
+    assert seconds == {"ref": [1.0, 3.0], "this": [2.0, 4.0]}  # by turns
+    assert sites == [tmp_path / "wheel_ref" / "site", tmp_path / "wheel_this" / "site"] * 2
