@@ -24,7 +24,7 @@ import dataclasses
 import functools
 import math
 from collections.abc import Mapping, Sequence
-from typing import Any, NoReturn
+from typing import TYPE_CHECKING, Any, NoReturn
 
 import numpy as np
 
@@ -272,6 +272,10 @@ class DegradationTable:
         self.nominal = {name: lever.nominal(config, sensors) for name, lever in LEVERS.items()}  # while nothing acts
         self.levers: dict[str, np.ndarray] = {name: np.zeros(shape, dtype=lever.dtype)
                                               for name, lever in LEVERS.items()}
+        clash = sorted(set(self.levers) & set(vars(self)))
+        if clash:
+            raise ValueError(f"config.LEVERS: lever {clash[0]!r} has the name of a DegradationTable attribute")
+        vars(self).update(self.levers)  # table.lag is table.levers["lag"]
         # the smallest string-stable setting [s], nominal / degraded parameters, V2V up / down (found when truth() asks)
         self.stable = {(degraded, up): np.zeros(shape) for degraded in (False, True) for up in (False, True)}
         # what truth() reports: fixed per episode, and the true parameters while it acts / otherwise
@@ -282,12 +286,8 @@ class DegradationTable:
         self.descriptions: list[tuple[Degradation, ...]] = [() for _ in range(n_envs)]
         self.set_many(np.arange(n_envs), [()] * n_envs)
 
-    def __getattr__(self, name: str) -> np.ndarray:
-        """The array of the lever ``name`` (``table.lag``)."""
-        levers: dict[str, np.ndarray] = self.__dict__.get("levers", {})
-        if name not in levers:
-            raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
-        return levers[name]
+    if TYPE_CHECKING:  # each lever is also an attribute (set in __init__: a plain attribute reads fastest)
+        def __getattr__(self, name: str) -> np.ndarray: ...
 
     def set(self, env: int, degradations: Sequence[Degradation]) -> None:
         """Env ``env``'s followers take ``degradations`` (from :func:`parse_degradations`); the others are nominal."""
