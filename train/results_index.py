@@ -39,8 +39,9 @@ RESULTS: dict[str, tuple[str, str]] = {
     "sumo": ("python -m train.sumo_report --chart-step-tuning results/rule/tuning.csv --backend processes --out "
              "results/sumo", "sumo_report"),
     "bench.md": ("python -m train.bench --out results/bench.md", "bench"),
-    "bench_against": ("python -m train.bench_against --ref 8fffc68 --rounds 2 --out "
-                      "results/bench_against/issue40_state.md (issue 40's state against the code before it)",
+    "bench_against": ("python -m train.bench_against --ref 8fffc68 --rounds 2 [--first-steps 10] --out "
+                      "results/bench_against/<name>.md (issue40_state: the state's allocation; issue40_at_67c52ab, "
+                      "issue40_whole: the whole issue, --first-steps 10; each against the code before issue 40)",
                       "bench_against"),
     "ppo_v1": ("python -m train.train_ppo --out results/ppo_v1 (make train)", "train_ppo"),
     "ppo_v1_nomonitor": ("python -m train.train_ppo --hide-features monitor --out results/ppo_v1_nomonitor (make train)",
