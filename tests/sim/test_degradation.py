@@ -1,6 +1,9 @@
 """Degradations: described and checked, drawn, acting in the physics exactly as the equivalent nominal platoon, and
 reported as ground truth."""
 
+import copy
+import pickle
+
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -232,3 +235,9 @@ def test_the_levers_records_drive_the_table_the_faults_and_the_truth():
     np.testing.assert_allclose(truth["v2v_delay"][1], [platoon.v2v_delay] * 2 + [platoon.v2v_delay + 0.3])
     with pytest.raises(AttributeError, match="no attribute 'brake_fade'"):
         table.brake_fade  # noqa: B018
+
+
+def test_a_lever_attribute_is_its_array_in_levers_also_in_a_copy():
+    table = DegradationTable(PlatoonConfig(), 2)
+    for each in (table, copy.deepcopy(table), pickle.loads(pickle.dumps(table))):
+        assert all(getattr(each, name) is each.levers[name] for name in LEVERS)
